@@ -1,0 +1,72 @@
+//! The `sray` command line.
+
+mod bar;
+mod convert;
+mod gen_cmd;
+mod info_cmd;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "sray",
+    version,
+    about = "Breadth-first ray tracing for scene databases larger than memory",
+    long_about = "sray renders NFF scenes and the Standard Procedural Databases, depth-first in memory \
+                  or breadth-first from an object database on disk (Nakamaru & Ohno), on one machine or a cluster."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
+    Gen(gen_cmd::GenArgs),
+    /// Convert a scene (.nff, .sdb or spd:NAME:SIZE) to an object database or NFF
+    Convert(convert::ConvertArgs),
+    /// Describe a scene file (.nff or .sdb)
+    Info(info_cmd::InfoArgs),
+}
+
+/// Runs the command line; errors are printed and turned into exit code 1.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Gen(a) => gen_cmd::run(a),
+        Command::Convert(a) => convert::run(a),
+        Command::Info(a) => info_cmd::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("sray: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Output kinds chosen by file extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum OutputKind {
+    Database,
+    Nff,
+}
+
+pub(crate) fn output_kind(path: &std::path::Path) -> anyhow::Result<OutputKind> {
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("sdb") => Ok(OutputKind::Database),
+        Some("nff") => Ok(OutputKind::Nff),
+        _ => anyhow::bail!(
+            "{}: the output must end in .sdb (object database) or .nff (NFF text)",
+            path.display()
+        ),
+    }
+}
+
+/// `--compress` values.
+pub(crate) fn parse_compression(s: &str) -> Result<sray_engine::sdb::Compression, String> {
+    sray_engine::sdb::Compression::parse(s)
+}

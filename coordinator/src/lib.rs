@@ -1,0 +1,3 @@
+//! The coordinator: drives renders and hosts the `sray` command line.
+
+pub mod cli;

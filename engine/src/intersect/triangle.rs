@@ -1,0 +1,93 @@
+use super::RayQ;
+use crate::math::{Real, V3};
+
+/// A triangle hit: distance and barycentric weights of the three vertices.
+#[derive(Clone, Copy, Debug)]
+pub struct TriHit<R> {
+    pub t: R,
+    pub w: [R; 3],
+}
+
+/// Edge functions of the watertight test: the ray's view of the triangle
+/// after shearing the ray direction onto +z.
+#[inline(always)]
+fn edges<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>) -> ([R; 3], [R; 3]) {
+    let (kx, ky, kz) = (ray.kx as usize, ray.ky as usize, ray.kz as usize);
+    let a = V3::<R>::from_f32(v0) - ray.o;
+    let b = V3::<R>::from_f32(v1) - ray.o;
+    let c = V3::<R>::from_f32(v2) - ray.o;
+    let ax = a[kx] - ray.sx * a[kz];
+    let ay = a[ky] - ray.sy * a[kz];
+    let bx = b[kx] - ray.sx * b[kz];
+    let by = b[ky] - ray.sy * b[kz];
+    let cx = c[kx] - ray.sx * c[kz];
+    let cy = c[ky] - ray.sy * c[kz];
+    let u = cx * by - cy * bx;
+    let v = ax * cy - ay * cx;
+    let w = bx * ay - by * ax;
+    ([u, v, w], [ray.sz * a[kz], ray.sz * b[kz], ray.sz * c[kz]])
+}
+
+/// Watertight ray/triangle test: a ray through a shared edge or vertex hits
+/// at least one of the triangles sharing it, so meshes have no cracks.
+#[inline]
+pub fn intersect<R: Real>(
+    v0: [f32; 3],
+    v1: [f32; 3],
+    v2: [f32; 3],
+    ray: &RayQ<R>,
+    t_min: R,
+    t_max: R,
+) -> Option<TriHit<R>> {
+    let ([u, v, w], [az, bz, cz]) = edges(v0, v1, v2, ray);
+    let z = R::ZERO;
+    if (u < z || v < z || w < z) && (u > z || v > z || w > z) {
+        return None;
+    }
+    let det = u + v + w;
+    if det == z {
+        return None; // the ray lies in the triangle's plane, or it is degenerate
+    }
+    let t = (u * az + v * bz + w * cz) / det;
+    if !(t > t_min && t < t_max) {
+        return None;
+    }
+    let inv = R::ONE / det;
+    Some(TriHit {
+        t,
+        w: [u * inv, v * inv, w * inv],
+    })
+}
+
+/// Barycentric weights of the point where `ray` meets the triangle's plane,
+/// without the inside test (used to shade a hit already found).
+pub fn weights<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>) -> [R; 3] {
+    let ([u, v, w], _) = edges(v0, v1, v2, ray);
+    let det = u + v + w;
+    if det == R::ZERO {
+        let third = R::ONE / (R::ONE + R::TWO);
+        return [third; 3];
+    }
+    let inv = R::ONE / det;
+    [u * inv, v * inv, w * inv]
+}
+
+/// A polygon with vertex normals as a fan of triangles about its first
+/// vertex (the SPD writes only triangles; this also covers larger patches).
+/// Returns the nearest hit and the index of the fan triangle it is in.
+#[inline]
+pub fn intersect_fan<R: Real>(
+    v: &[[f32; 3]],
+    ray: &RayQ<R>,
+    t_min: R,
+    mut t_max: R,
+) -> Option<(TriHit<R>, usize)> {
+    let mut best = None;
+    for i in 1..v.len() - 1 {
+        if let Some(h) = intersect(v[0], v[i], v[i + 1], ray, t_min, t_max) {
+            t_max = h.t;
+            best = Some((h, i));
+        }
+    }
+    best
+}

@@ -1,0 +1,23 @@
+//! sray's engine: everything that renders, no networking.
+//!
+//! - [`scene`]: the scene model and the [`scene::SceneSink`] scene sources
+//!   stream into;
+//! - [`nff`]: the Neutral File Format, read in constant memory;
+//! - [`spd`]: generators for the Standard Procedural Databases;
+//! - [`sdb`]: the object database, read strictly front to back;
+//! - [`source`]: scene sources (`.nff`, `.sdb`, `spd:NAME:SIZE`);
+//! - [`info`]: what a scene file holds (`sray info`).
+
+pub mod error;
+pub mod fsutil;
+pub mod info;
+pub mod intersect;
+pub mod math;
+pub mod nff;
+pub mod progress;
+pub mod scene;
+pub mod sdb;
+pub mod source;
+pub mod spd;
+
+pub use error::Error;

@@ -1,0 +1,149 @@
+use super::gfmt::fmt_g;
+use crate::error::Error;
+use crate::scene::{Light, Material, SceneSink, Shape, View};
+use std::io::Write;
+use std::path::PathBuf;
+
+/// Writes a scene stream as NFF text, numbers printed as the SPD programs
+/// print them (`%g`), cones on one line as the SPD writes them.
+pub struct NffWriter<W: Write> {
+    out: W,
+    name: PathBuf,
+    line: String,
+}
+
+impl<W: Write> NffWriter<W> {
+    pub fn new(out: W, name: impl Into<PathBuf>) -> Self {
+        NffWriter {
+            out,
+            name: name.into(),
+            line: String::with_capacity(256),
+        }
+    }
+
+    pub fn into_inner(self) -> W {
+        self.out
+    }
+
+    fn num(&mut self, x: f64) {
+        if !self.line.is_empty() && !self.line.ends_with(' ') && !self.line.ends_with('\n') {
+            self.line.push(' ');
+        }
+        fmt_g(x, &mut self.line);
+    }
+
+    fn nums(&mut self, xs: &[f64]) {
+        for &x in xs {
+            self.num(x);
+        }
+    }
+
+    fn word(&mut self, w: &str) {
+        self.line.push_str(w);
+    }
+
+    fn end_line(&mut self) {
+        self.line.push('\n');
+    }
+
+    fn flush_line(&mut self) -> Result<(), Error> {
+        let r = self.out.write_all(self.line.as_bytes());
+        self.line.clear();
+        r.map_err(|e| Error::io(&self.name, e))
+    }
+}
+
+fn f3(a: [f32; 3]) -> [f64; 3] {
+    [a[0] as f64, a[1] as f64, a[2] as f64]
+}
+
+impl<W: Write> SceneSink for NffWriter<W> {
+    fn background(&mut self, rgb: [f32; 3]) -> Result<(), Error> {
+        self.word("b");
+        self.nums(&f3(rgb));
+        self.end_line();
+        self.flush_line()
+    }
+
+    fn view(&mut self, v: &View) -> Result<(), Error> {
+        self.word("v\nfrom");
+        self.nums(&v.from);
+        self.word("\nat");
+        self.nums(&v.at);
+        self.word("\nup");
+        self.nums(&v.up);
+        self.word("\nangle");
+        self.num(v.angle);
+        self.word("\nhither");
+        self.num(v.hither);
+        self.word(&format!(
+            "\nresolution {} {}\n",
+            v.resolution[0], v.resolution[1]
+        ));
+        self.flush_line()
+    }
+
+    fn light(&mut self, l: &Light) -> Result<(), Error> {
+        self.word("l");
+        self.nums(&l.position);
+        if let Some(c) = l.color {
+            self.nums(&f3(c));
+        }
+        self.end_line();
+        self.flush_line()
+    }
+
+    fn material(&mut self, m: &Material) -> Result<(), Error> {
+        self.word("f");
+        self.nums(&f3(m.color));
+        self.nums(&[
+            m.kd as f64,
+            m.ks as f64,
+            m.shine as f64,
+            m.t as f64,
+            m.ior as f64,
+        ]);
+        self.end_line();
+        self.flush_line()
+    }
+
+    fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
+        match *shape {
+            Shape::Sphere { center, radius } => {
+                self.word("s");
+                self.nums(&f3(center));
+                self.num(radius as f64);
+                self.end_line();
+            }
+            Shape::Cone {
+                base,
+                base_radius,
+                apex,
+                apex_radius,
+            } => {
+                self.word("c");
+                self.nums(&f3(base));
+                self.num(base_radius as f64);
+                self.nums(&f3(apex));
+                self.num(apex_radius as f64);
+                self.end_line();
+            }
+            Shape::Polygon { vertices } => {
+                self.word(&format!("p {}\n", vertices.len()));
+                for v in vertices {
+                    self.nums(&f3(*v));
+                    self.end_line();
+                }
+            }
+            Shape::Patch { vertices, normals } => {
+                self.word(&format!("pp {}\n", vertices.len()));
+                for (v, n) in vertices.iter().zip(normals) {
+                    self.nums(&f3(*v));
+                    self.nums(&f3(*n));
+                    self.end_line();
+                }
+            }
+        }
+        self.flush_line()
+    }
+}

@@ -1,0 +1,171 @@
+//! On-disk structures of the object database.
+
+use crate::scene::ShapeKind;
+use bytemuck::{Pod, Zeroable};
+
+#[cfg(not(target_endian = "little"))]
+compile_error!("the object database format is little-endian; big-endian targets are not supported");
+
+pub const MAGIC: [u8; 8] = *b"SRAYSDB\0";
+pub const VERSION: u32 = 1;
+pub const HEADER_BYTES: usize = 256;
+pub const BLOCK_MAGIC: [u8; 4] = *b"SBLK";
+pub const BLOCK_HEADER_BYTES: usize = 32;
+/// Largest uncompressed block payload.
+pub const MAX_BLOCK_RAW: usize = 1 << 20;
+/// Words before a record's geometry: kind/vertex count, material, bbox.
+pub const RECORD_HEADER_WORDS: usize = 8;
+/// Limits on the tables, so that a corrupt count cannot ask for memory.
+pub const MAX_LIGHTS: usize = 1 << 16;
+pub const MAX_MATERIALS: usize = 1 << 22;
+
+/// How block payloads are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Compression {
+    None,
+    /// zstd at the given level (1-22; 3 is zstd's default).
+    Zstd(i32),
+}
+
+impl Compression {
+    pub fn name(self) -> &'static str {
+        match self {
+            Compression::None => "none",
+            Compression::Zstd(_) => "zstd",
+        }
+    }
+
+    /// Parses `none`, `zstd` or `zstd:LEVEL`.
+    pub fn parse(s: &str) -> Result<Compression, String> {
+        match s.split_once(':') {
+            None if s == "none" => Ok(Compression::None),
+            None if s == "zstd" => Ok(Compression::Zstd(3)),
+            Some(("zstd", level)) => {
+                let l: i32 = level
+                    .parse()
+                    .map_err(|_| format!("zstd level '{level}' is not a number"))?;
+                if !(1..=22).contains(&l) {
+                    return Err(format!("zstd level {l} is outside 1..=22"));
+                }
+                Ok(Compression::Zstd(l))
+            }
+            _ => Err(format!(
+                "unknown compression '{s}' (expected none, zstd or zstd:LEVEL)"
+            )),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Pod, Zeroable)]
+#[repr(C)]
+pub struct RawHeader {
+    pub magic: [u8; 8],
+    pub version: u32,
+    pub header_bytes: u32,
+    /// 0 = none, 1 = zstd.
+    pub compression: u32,
+    pub compression_level: i32,
+    pub block_raw_max: u32,
+    pub reserved0: u32,
+    pub object_count: u64,
+    /// Per [`ShapeKind`]: sphere, polygon, patch, cone.
+    pub counts: [u64; 4],
+    pub block_count: u64,
+    /// `f` statements seen (materials are stored deduplicated).
+    pub material_statements: u64,
+    pub tables_offset: u64,
+    pub tables_len: u64,
+    /// Sum of uncompressed block payload bytes.
+    pub raw_bytes: u64,
+    pub bbox: [f32; 6],
+    pub tables_crc: u32,
+    pub reserved: [u32; 28],
+    /// CRC-32 of the 252 bytes before it.
+    pub header_crc: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<RawHeader>() == HEADER_BYTES);
+
+impl RawHeader {
+    pub fn compute_crc(&self) -> u32 {
+        crc32fast::hash(&bytemuck::bytes_of(self)[..HEADER_BYTES - 4])
+    }
+}
+
+#[derive(Clone, Copy, Pod, Zeroable)]
+#[repr(C)]
+pub struct RawBlockHeader {
+    pub magic: [u8; 4],
+    pub index: u32,
+    pub first_object: u64,
+    pub object_count: u32,
+    pub raw_len: u32,
+    pub stored_len: u32,
+    /// CRC-32 of this header (with `crc` zero) followed by the payload.
+    pub crc: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<RawBlockHeader>() == BLOCK_HEADER_BYTES);
+
+impl RawBlockHeader {
+    pub fn compute_crc(&self, payload: &[u8]) -> u32 {
+        let mut h = *self;
+        h.crc = 0;
+        let mut c = crc32fast::Hasher::new();
+        c.update(bytemuck::bytes_of(&h));
+        c.update(payload);
+        c.finalize()
+    }
+}
+
+/// Words of geometry after the record header.
+pub fn payload_words(kind: ShapeKind, nverts: usize) -> usize {
+    match kind {
+        ShapeKind::Sphere => 4,
+        ShapeKind::Cone => 8,
+        ShapeKind::Polygon => 3 * nverts,
+        ShapeKind::Patch => 6 * nverts,
+    }
+}
+
+/// Little-endian encoder for the tables.
+#[derive(Default)]
+pub struct Enc(pub Vec<u8>);
+
+impl Enc {
+    pub fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    pub fn f32(&mut self, v: f32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    pub fn f64(&mut self, v: f64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// Bounds-checked little-endian decoder for the tables.
+pub struct Dec<'a> {
+    pub buf: &'a [u8],
+    pub pos: usize,
+}
+
+impl Dec<'_> {
+    fn take<const N: usize>(&mut self) -> Option<[u8; N]> {
+        let s = self.buf.get(self.pos..self.pos + N)?;
+        self.pos += N;
+        s.try_into().ok()
+    }
+    pub fn u32(&mut self) -> Option<u32> {
+        self.take::<4>().map(u32::from_le_bytes)
+    }
+    pub fn f32(&mut self) -> Option<f32> {
+        self.take::<4>().map(f32::from_le_bytes)
+    }
+    pub fn f64(&mut self) -> Option<f64> {
+        self.take::<8>().map(f64::from_le_bytes)
+    }
+    pub fn remaining(&self) -> usize {
+        self.buf.len() - self.pos
+    }
+}

@@ -1,0 +1,27 @@
+//! The object database (`.sdb`): the paper's binary preprocessed scene.
+//!
+//! Layout (all little-endian):
+//!
+//! ```text
+//! header   256 bytes: magic, version, compression, counts, scene bounds,
+//!          where the tables are; CRC-32 over all of it
+//! block 0  32-byte block header + payload (records, or their zstd frame)
+//! block 1  ...
+//! tables   view, background, lights, materials; CRC-32 in the header
+//! ```
+//!
+//! A block holds whole records, at most [`MAX_BLOCK_RAW`] bytes of them,
+//! objects in id order; each block's CRC-32 covers its header and payload.
+//! A record is 4-byte words: kind and vertex count, material index, bounding
+//! box (six `f32`), then the geometry. The bounding box lets the grid be
+//! built without decoding geometry. Tables sit at the end because a streamed
+//! scene (NFF, SPD) only knows its lights and materials once it has ended;
+//! readers fetch them at open and then read blocks strictly front to back.
+
+mod format;
+mod reader;
+mod writer;
+
+pub use format::{Compression, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub use reader::{Block, Database, DbStats, ObjectRef, Scan};
+pub use writer::{DbWriter, WriteSummary};

@@ -1,0 +1,517 @@
+//! Opens an object database and reads its blocks strictly front to back,
+//! decoding records in place: no allocation per object.
+
+use super::format::*;
+use crate::error::{Error, IoContext};
+use crate::scene::{Aabb, Light, Material, SceneHeader, Shape, ShapeCounts, ShapeKind, View};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+/// An open object database: header and tables in memory, objects on disk.
+#[derive(Clone, Debug)]
+pub struct Database {
+    path: PathBuf,
+    scene: SceneHeader,
+    counts: ShapeCounts,
+    object_count: u64,
+    bbox: Aabb,
+    compression: Compression,
+    block_count: u64,
+    material_statements: u64,
+    tables_offset: u64,
+    raw_bytes: u64,
+    file_bytes: u64,
+}
+
+/// Counters of one scan.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DbStats {
+    pub bytes_read: u64,
+    pub blocks_read: u64,
+}
+
+impl Database {
+    pub fn open(path: &Path) -> Result<Database, Error> {
+        let mut f = File::open(path).at(path)?;
+        let file_bytes = f.metadata().at(path)?.len();
+        let err = |location: &str, message: String| Error::Database {
+            file: path.to_path_buf(),
+            location: location.into(),
+            message,
+        };
+        let mut hb = [0u8; HEADER_BYTES];
+        let got = read_up_to(&mut f, &mut hb).at(path)?;
+        if got < 8 || hb[..8] != MAGIC {
+            return Err(err(
+                "header",
+                "not an sray object database (wrong magic)".into(),
+            ));
+        }
+        if got < HEADER_BYTES {
+            return Err(err(
+                "header",
+                format!("file is truncated: {got} bytes, the header alone is {HEADER_BYTES}"),
+            ));
+        }
+        let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
+        if h.version != VERSION {
+            return Err(err(
+                "header",
+                format!(
+                    "database version {} is not supported (this sray reads version {VERSION}); regenerate it with `sray convert` or `sray gen`",
+                    h.version
+                ),
+            ));
+        }
+        if h.header_crc != h.compute_crc() {
+            return Err(err(
+                "header",
+                "checksum mismatch: the header is corrupt".into(),
+            ));
+        }
+        let compression = match (h.compression, h.compression_level) {
+            (0, _) => Compression::None,
+            (1, l) => Compression::Zstd(l),
+            (c, _) => return Err(err("header", format!("unknown compression code {c}"))),
+        };
+        if h.header_bytes as usize != HEADER_BYTES || h.block_raw_max as usize > MAX_BLOCK_RAW {
+            return Err(err("header", "unsupported header or block size".into()));
+        }
+        let tables_end = h.tables_offset.checked_add(h.tables_len);
+        if h.tables_offset < HEADER_BYTES as u64 || tables_end.is_none() {
+            return Err(err("header", "tables offset is out of range".into()));
+        }
+        if tables_end != Some(file_bytes) {
+            return Err(err(
+                "header",
+                format!(
+                    "file is truncated or has trailing bytes: it is {file_bytes} bytes, the header says {}",
+                    h.tables_offset + h.tables_len
+                ),
+            ));
+        }
+        if h.tables_len > (64 << 20) + 64 * MAX_MATERIALS as u64 {
+            return Err(err("header", "tables are implausibly large".into()));
+        }
+        if h.counts.iter().sum::<u64>() != h.object_count || h.object_count > u32::MAX as u64 {
+            return Err(err("header", "object counts are inconsistent".into()));
+        }
+        let mut tables = vec![0u8; h.tables_len as usize];
+        f.seek(SeekFrom::Start(h.tables_offset)).at(path)?;
+        f.read_exact(&mut tables).at(path)?;
+        if crc32fast::hash(&tables) != h.tables_crc {
+            return Err(err(
+                "tables",
+                "checksum mismatch: the tables are corrupt".into(),
+            ));
+        }
+        let scene =
+            decode_tables(&tables).ok_or_else(|| err("tables", "malformed tables".into()))?;
+        let bbox = Aabb::from_array(h.bbox);
+        Ok(Database {
+            path: path.to_path_buf(),
+            scene,
+            counts: ShapeCounts {
+                sphere: h.counts[0],
+                polygon: h.counts[1],
+                patch: h.counts[2],
+                cone: h.counts[3],
+            },
+            object_count: h.object_count,
+            bbox,
+            compression,
+            block_count: h.block_count,
+            material_statements: h.material_statements,
+            tables_offset: h.tables_offset,
+            raw_bytes: h.raw_bytes,
+            file_bytes,
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+    pub fn scene(&self) -> &SceneHeader {
+        &self.scene
+    }
+    pub fn counts(&self) -> ShapeCounts {
+        self.counts
+    }
+    pub fn object_count(&self) -> u64 {
+        self.object_count
+    }
+    /// Bounds of all objects (empty for a scene of none).
+    pub fn bbox(&self) -> Aabb {
+        self.bbox
+    }
+    pub fn compression(&self) -> Compression {
+        self.compression
+    }
+    pub fn block_count(&self) -> u64 {
+        self.block_count
+    }
+    pub fn material_statements(&self) -> u64 {
+        self.material_statements
+    }
+    pub fn file_bytes(&self) -> u64 {
+        self.file_bytes
+    }
+    /// Uncompressed size of all records.
+    pub fn raw_bytes(&self) -> u64 {
+        self.raw_bytes
+    }
+
+    /// Starts a sequential scan of the objects.
+    pub fn scan(&self) -> Result<Scan<'_>, Error> {
+        let mut file = File::open(&self.path).at(&self.path)?;
+        file.seek(SeekFrom::Start(HEADER_BYTES as u64))
+            .at(&self.path)?;
+        let decompressor = match self.compression {
+            Compression::None => None,
+            Compression::Zstd(_) => Some(zstd::bulk::Decompressor::new().at(&self.path)?),
+        };
+        Ok(Scan {
+            db: self,
+            file,
+            decompressor,
+            words: Vec::with_capacity(MAX_BLOCK_RAW / 4),
+            stored: Vec::new(),
+            next_index: 0,
+            next_object: 0,
+            offset: HEADER_BYTES as u64,
+            stats: DbStats::default(),
+        })
+    }
+}
+
+fn read_up_to(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
+    let mut n = 0;
+    while n < buf.len() {
+        match f.read(&mut buf[n..]) {
+            Ok(0) => break,
+            Ok(k) => n += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(n)
+}
+
+fn decode_tables(buf: &[u8]) -> Option<SceneHeader> {
+    let mut d = Dec { buf, pos: 0 };
+    let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
+    let from = v3(&mut d)?;
+    let at = v3(&mut d)?;
+    let up = v3(&mut d)?;
+    let view = View {
+        from,
+        at,
+        up,
+        angle: d.f64()?,
+        hither: d.f64()?,
+        resolution: [d.u32()?, d.u32()?],
+    };
+    let background = [d.f32()?, d.f32()?, d.f32()?];
+    let nl = d.u32()? as usize;
+    if nl > MAX_LIGHTS || nl * 40 > d.remaining() {
+        return None;
+    }
+    let mut lights = Vec::with_capacity(nl);
+    for _ in 0..nl {
+        let position = v3(&mut d)?;
+        let has = d.u32()?;
+        let c = [d.f32()?, d.f32()?, d.f32()?];
+        lights.push(Light {
+            position,
+            color: (has != 0).then_some(c),
+        });
+    }
+    let nm = d.u32()? as usize;
+    if nm > MAX_MATERIALS || nm * 32 != d.remaining() {
+        return None;
+    }
+    let mut materials = Vec::with_capacity(nm);
+    for _ in 0..nm {
+        let mut m = [0f32; 8];
+        for x in &mut m {
+            *x = d.f32()?;
+        }
+        materials.push(Material {
+            color: [m[0], m[1], m[2]],
+            kd: m[3],
+            ks: m[4],
+            shine: m[5],
+            t: m[6],
+            ior: m[7],
+        });
+    }
+    Some(SceneHeader {
+        view,
+        background,
+        lights,
+        materials,
+    })
+}
+
+/// A front-to-back pass over the objects of a [`Database`].
+pub struct Scan<'d> {
+    db: &'d Database,
+    file: File,
+    decompressor: Option<zstd::bulk::Decompressor<'static>>,
+    /// The decoded block, as 4-byte words.
+    words: Vec<u32>,
+    stored: Vec<u8>,
+    next_index: u64,
+    next_object: u64,
+    offset: u64,
+    stats: DbStats,
+}
+
+/// One decoded, validated block.
+pub struct Block<'a> {
+    pub index: u64,
+    pub first_object: u64,
+    pub object_count: u32,
+    words: &'a [u32],
+}
+
+/// One object of a block, borrowing its geometry from the block buffer.
+#[derive(Clone, Copy, Debug)]
+pub struct ObjectRef<'a> {
+    pub id: u32,
+    pub material: u32,
+    pub bbox: Aabb,
+    pub shape: Shape<'a>,
+}
+
+impl Scan<'_> {
+    pub fn stats(&self) -> DbStats {
+        self.stats
+    }
+
+    fn err(&self, message: impl Into<String>) -> Error {
+        Error::Database {
+            file: self.db.path.clone(),
+            location: format!("block {} (byte {})", self.next_index, self.offset),
+            message: message.into(),
+        }
+    }
+
+    fn read_exact_or_err(&mut self, buf_is_words: bool, len: usize) -> Result<(), Error> {
+        let r = if buf_is_words {
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
+            self.file.read_exact(&mut bytes[..len])
+        } else {
+            self.file.read_exact(&mut self.stored[..len])
+        };
+        r.map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                self.err("file ends inside this block (truncated)")
+            } else {
+                Error::io(&self.db.path, e)
+            }
+        })
+    }
+
+    /// The next block, or `None` after the last one.
+    pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
+        if self.next_index == self.db.block_count {
+            if self.next_object != self.db.object_count || self.offset != self.db.tables_offset {
+                return Err(self.err(format!(
+                    "blocks hold {} objects ending at byte {}, the header says {} objects ending at byte {}",
+                    self.next_object, self.offset, self.db.object_count, self.db.tables_offset
+                )));
+            }
+            return Ok(None);
+        }
+        if self.offset + BLOCK_HEADER_BYTES as u64 > self.db.tables_offset {
+            return Err(self.err("block runs into the tables (corrupt block count)"));
+        }
+        let mut hb = [0u8; BLOCK_HEADER_BYTES];
+        self.file.read_exact(&mut hb).map_err(|e| {
+            if e.kind() == std::io::ErrorKind::UnexpectedEof {
+                self.err("file ends inside this block (truncated)")
+            } else {
+                Error::io(&self.db.path, e)
+            }
+        })?;
+        let h: RawBlockHeader = bytemuck::pod_read_unaligned(&hb);
+        if h.magic != BLOCK_MAGIC {
+            return Err(self.err("bad block magic: the block is corrupt"));
+        }
+        let raw_len = h.raw_len as usize;
+        let stored_len = h.stored_len as usize;
+        if raw_len > MAX_BLOCK_RAW || raw_len % 4 != 0 || stored_len > MAX_BLOCK_RAW + 4096 {
+            return Err(self.err("block lengths are out of range: the block is corrupt"));
+        }
+        let end = self.offset + (BLOCK_HEADER_BYTES + stored_len) as u64;
+        if end > self.db.tables_offset {
+            return Err(self.err("block runs into the tables: the block is corrupt"));
+        }
+        self.words.resize(raw_len.div_ceil(4).max(1), 0);
+        let compressed = self.decompressor.is_some();
+        if compressed {
+            self.stored.resize(stored_len, 0);
+            self.read_exact_or_err(false, stored_len)?;
+            if h.compute_crc(&self.stored[..stored_len]) != h.crc {
+                return Err(self.err("checksum mismatch: the block is corrupt"));
+            }
+            let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
+            let n = self
+                .decompressor
+                .as_mut()
+                .expect("compressed")
+                .decompress_to_buffer(&self.stored[..stored_len], &mut dst[..raw_len])
+                .map_err(|e| self.err(format!("zstd: {e}")))?;
+            if n != raw_len {
+                return Err(self.err("decompressed size differs from the block header"));
+            }
+        } else {
+            if stored_len != raw_len {
+                return Err(self.err("stored and raw lengths differ in an uncompressed block"));
+            }
+            self.read_exact_or_err(true, raw_len)?;
+            let bytes: &[u8] = bytemuck::cast_slice(&self.words[..]);
+            if h.compute_crc(&bytes[..raw_len]) != h.crc {
+                return Err(self.err("checksum mismatch: the block is corrupt"));
+            }
+        }
+        if h.index as u64 != self.next_index || h.first_object != self.next_object {
+            return Err(self.err("block is out of sequence"));
+        }
+        self.words.truncate(raw_len / 4);
+        validate_records(&self.words, h.object_count, self.db.scene.materials.len())
+            .map_err(|m| self.err(m))?;
+        self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
+        self.stats.blocks_read += 1;
+        self.offset = end;
+        let index = self.next_index;
+        self.next_index += 1;
+        let first = self.next_object;
+        self.next_object += h.object_count as u64;
+        if self.next_object > self.db.object_count {
+            return Err(self.err("blocks hold more objects than the header says"));
+        }
+        Ok(Some(Block {
+            index,
+            first_object: first,
+            object_count: h.object_count,
+            words: &self.words,
+        }))
+    }
+}
+
+/// Checks every record of a decoded block so that iteration cannot fail.
+fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), String> {
+    let mut pos = 0usize;
+    for i in 0..count {
+        let head = words
+            .get(pos..pos + RECORD_HEADER_WORDS)
+            .ok_or_else(|| format!("record {i} is cut off"))?;
+        let kind = ShapeKind::from_u8((head[0] & 0xff) as u8)
+            .ok_or_else(|| format!("record {i} has unknown kind {}", head[0] & 0xff))?;
+        let nverts = (head[0] >> 8) as usize;
+        let ok_verts = match kind {
+            ShapeKind::Sphere | ShapeKind::Cone => nverts == 0,
+            _ => (3..=crate::scene::MAX_POLYGON_VERTICES).contains(&nverts),
+        };
+        if !ok_verts {
+            return Err(format!("record {i} has an invalid vertex count {nverts}"));
+        }
+        if head[1] as usize >= materials {
+            return Err(format!(
+                "record {i} refers to material {} of {materials}",
+                head[1]
+            ));
+        }
+        let n = RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        let rec = words
+            .get(pos..pos + n)
+            .ok_or_else(|| format!("record {i} is cut off"))?;
+        if rec[2..].iter().any(|w| (w & 0x7f80_0000) == 0x7f80_0000) {
+            return Err(format!("record {i} has a non-finite number"));
+        }
+        pos += n;
+    }
+    if pos != words.len() {
+        return Err("block has bytes after its last record".into());
+    }
+    Ok(())
+}
+
+impl<'a> Block<'a> {
+    /// The objects of the block, in id order.
+    pub fn objects(&self) -> ObjectIter<'a> {
+        ObjectIter {
+            words: self.words,
+            pos: 0,
+            id: self.first_object as u32,
+            left: self.object_count,
+        }
+    }
+
+    /// Uncompressed payload bytes of this block.
+    pub fn raw_bytes(&self) -> usize {
+        self.words.len() * 4
+    }
+}
+
+pub struct ObjectIter<'a> {
+    words: &'a [u32],
+    pos: usize,
+    id: u32,
+    left: u32,
+}
+
+impl<'a> Iterator for ObjectIter<'a> {
+    type Item = ObjectRef<'a>;
+
+    #[inline]
+    fn next(&mut self) -> Option<ObjectRef<'a>> {
+        if self.left == 0 {
+            return None;
+        }
+        // Records were validated when the block was read.
+        let w = &self.words[self.pos..];
+        let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
+        let nverts = (w[0] >> 8) as usize;
+        let f: &[f32] =
+            bytemuck::cast_slice(&w[2..RECORD_HEADER_WORDS + payload_words(kind, nverts)]);
+        let bbox = Aabb {
+            min: [f[0], f[1], f[2]],
+            max: [f[3], f[4], f[5]],
+        };
+        let g = &f[6..];
+        let p3 = |i: usize| [g[i], g[i + 1], g[i + 2]];
+        let shape = match kind {
+            ShapeKind::Sphere => Shape::Sphere {
+                center: p3(0),
+                radius: g[3],
+            },
+            ShapeKind::Cone => Shape::Cone {
+                base: p3(0),
+                base_radius: g[3],
+                apex: p3(4),
+                apex_radius: g[7],
+            },
+            ShapeKind::Polygon => Shape::Polygon {
+                vertices: bytemuck::cast_slice(&g[..3 * nverts]),
+            },
+            ShapeKind::Patch => Shape::Patch {
+                vertices: bytemuck::cast_slice(&g[..3 * nverts]),
+                normals: bytemuck::cast_slice(&g[3 * nverts..6 * nverts]),
+            },
+        };
+        let obj = ObjectRef {
+            id: self.id,
+            material: w[1],
+            bbox,
+            shape,
+        };
+        self.pos += RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        self.id = self.id.wrapping_add(1);
+        self.left -= 1;
+        Some(obj)
+    }
+}

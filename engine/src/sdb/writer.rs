@@ -1,0 +1,331 @@
+//! Streams a scene into an object database, atomically: the file appears
+//! under its name only once it is complete.
+
+use super::format::*;
+use crate::error::{Error, IoContext};
+use crate::scene::{
+    Aabb, Light, Material, SceneHeader, SceneSink, Shape, ShapeCounts, ShapeKind, View,
+};
+use std::collections::HashMap;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+/// What a finished database holds.
+#[derive(Clone, Debug)]
+pub struct WriteSummary {
+    pub path: PathBuf,
+    pub objects: u64,
+    pub counts: ShapeCounts,
+    pub bbox: Aabb,
+    pub file_bytes: u64,
+    pub raw_bytes: u64,
+    pub blocks: u64,
+}
+
+/// A [`SceneSink`] that writes an object database. Call
+/// [`DbWriter::finish`]; dropping it unfinished leaves no file behind.
+pub struct DbWriter {
+    path: PathBuf,
+    out: Option<BufWriter<tempfile::NamedTempFile>>,
+    compression: Compression,
+    compressor: Option<zstd::bulk::Compressor<'static>>,
+    /// Records of the block being filled.
+    block: Vec<u32>,
+    block_first: u64,
+    block_objects: u32,
+    stored: Vec<u8>,
+    offset: u64,
+    blocks: u64,
+    raw_bytes: u64,
+    objects: u64,
+    counts: ShapeCounts,
+    bbox: Aabb,
+    view: Option<View>,
+    background: [f32; 3],
+    lights: Vec<Light>,
+    materials: Vec<Material>,
+    material_index: HashMap<[u32; 8], u32>,
+    current_material: Option<u32>,
+    material_statements: u64,
+}
+
+impl DbWriter {
+    /// Starts a database at `path` (written to a temporary file beside it).
+    pub fn create(path: &Path, compression: Compression) -> Result<DbWriter, Error> {
+        let tmp = crate::fsutil::temp_beside(path)?;
+        let mut out = BufWriter::with_capacity(4 << 20, tmp);
+        out.write_all(&[0u8; HEADER_BYTES]).at(path)?;
+        let compressor = match compression {
+            Compression::None => None,
+            Compression::Zstd(level) => Some(zstd::bulk::Compressor::new(level).at(path)?),
+        };
+        Ok(DbWriter {
+            path: path.to_path_buf(),
+            out: Some(out),
+            compression,
+            compressor,
+            block: Vec::with_capacity(MAX_BLOCK_RAW / 4),
+            block_first: 0,
+            block_objects: 0,
+            stored: Vec::new(),
+            offset: HEADER_BYTES as u64,
+            blocks: 0,
+            raw_bytes: 0,
+            objects: 0,
+            counts: ShapeCounts::default(),
+            bbox: Aabb::EMPTY,
+            view: None,
+            background: [0.0; 3],
+            lights: Vec::new(),
+            materials: Vec::new(),
+            material_index: HashMap::new(),
+            current_material: None,
+            material_statements: 0,
+        })
+    }
+
+    pub fn objects_written(&self) -> u64 {
+        self.objects
+    }
+
+    fn out(&mut self) -> &mut BufWriter<tempfile::NamedTempFile> {
+        self.out.as_mut().expect("writer used after finish")
+    }
+
+    fn flush_block(&mut self) -> Result<(), Error> {
+        if self.block_objects == 0 {
+            return Ok(());
+        }
+        let raw: &[u8] = bytemuck::cast_slice(&self.block);
+        let (payload, stored_len): (&[u8], usize) = match self.compressor.as_mut() {
+            None => (raw, raw.len()),
+            Some(c) => {
+                self.stored.clear();
+                self.stored
+                    .reserve(zstd::zstd_safe::compress_bound(raw.len()));
+                let n = c
+                    .compress_to_buffer(raw, &mut self.stored)
+                    .map_err(|e| Error::io(&self.path, e))?;
+                (&self.stored[..], n)
+            }
+        };
+        let mut h = RawBlockHeader {
+            magic: BLOCK_MAGIC,
+            index: u32::try_from(self.blocks)
+                .map_err(|_| Error::Scene("more than 2^32 blocks".into()))?,
+            first_object: self.block_first,
+            object_count: self.block_objects,
+            raw_len: raw.len() as u32,
+            stored_len: stored_len as u32,
+            crc: 0,
+        };
+        h.crc = h.compute_crc(&payload[..stored_len]);
+        let raw_len = raw.len() as u64;
+        let out = self.out.as_mut().expect("writer used after finish");
+        out.write_all(bytemuck::bytes_of(&h)).at(&self.path)?;
+        out.write_all(&payload[..stored_len]).at(&self.path)?;
+        self.offset += (BLOCK_HEADER_BYTES + stored_len) as u64;
+        self.raw_bytes += raw_len;
+        self.blocks += 1;
+        self.block.clear();
+        self.block_first = self.objects;
+        self.block_objects = 0;
+        Ok(())
+    }
+
+    fn tables(&self) -> Vec<u8> {
+        let mut e = Enc::default();
+        let v = self.view.expect("checked in finish");
+        for x in v.from.iter().chain(&v.at).chain(&v.up) {
+            e.f64(*x);
+        }
+        e.f64(v.angle);
+        e.f64(v.hither);
+        e.u32(v.resolution[0]);
+        e.u32(v.resolution[1]);
+        for c in self.background {
+            e.f32(c);
+        }
+        e.u32(self.lights.len() as u32);
+        for l in &self.lights {
+            for p in l.position {
+                e.f64(p);
+            }
+            e.u32(l.color.is_some() as u32);
+            for c in l.color.unwrap_or([0.0; 3]) {
+                e.f32(c);
+            }
+        }
+        e.u32(self.materials.len() as u32);
+        for m in &self.materials {
+            for x in [
+                m.color[0], m.color[1], m.color[2], m.kd, m.ks, m.shine, m.t, m.ior,
+            ] {
+                e.f32(x);
+            }
+        }
+        e.0
+    }
+
+    /// Completes the file and moves it into place.
+    pub fn finish(mut self) -> Result<WriteSummary, Error> {
+        if self.view.is_none() {
+            return Err(Error::Scene("the scene has no view ('v')".into()));
+        }
+        self.flush_block()?;
+        let tables = self.tables();
+        let tables_offset = self.offset;
+        self.out().write_all(&tables).at(&self.path.clone())?;
+        let c = self.counts;
+        let mut h = RawHeader {
+            magic: MAGIC,
+            version: VERSION,
+            header_bytes: HEADER_BYTES as u32,
+            compression: match self.compression {
+                Compression::None => 0,
+                Compression::Zstd(_) => 1,
+            },
+            compression_level: match self.compression {
+                Compression::None => 0,
+                Compression::Zstd(l) => l,
+            },
+            block_raw_max: MAX_BLOCK_RAW as u32,
+            reserved0: 0,
+            object_count: self.objects,
+            counts: [c.sphere, c.polygon, c.patch, c.cone],
+            block_count: self.blocks,
+            material_statements: self.material_statements,
+            tables_offset,
+            tables_len: tables.len() as u64,
+            raw_bytes: self.raw_bytes,
+            bbox: self.bbox.to_array(),
+            tables_crc: crc32fast::hash(&tables),
+            reserved: [0; 28],
+            header_crc: 0,
+        };
+        h.header_crc = h.compute_crc();
+        let path = self.path.clone();
+        let mut out = self.out.take().expect("finish runs once");
+        out.seek(SeekFrom::Start(0)).at(&path)?;
+        out.write_all(bytemuck::bytes_of(&h)).at(&path)?;
+        let tmp = out
+            .into_inner()
+            .map_err(|e| Error::io(&path, e.into_error()))?;
+        let file_bytes = tables_offset + tables.len() as u64;
+        crate::fsutil::persist(tmp, &path)?;
+        Ok(WriteSummary {
+            path,
+            objects: self.objects,
+            counts: self.counts,
+            bbox: self.bbox,
+            file_bytes,
+            raw_bytes: self.raw_bytes,
+            blocks: self.blocks,
+        })
+    }
+
+    /// The scene header as it stands (for callers that render what they
+    /// just wrote).
+    pub fn header(&self) -> Option<SceneHeader> {
+        Some(SceneHeader {
+            view: self.view?,
+            background: self.background,
+            lights: self.lights.clone(),
+            materials: self.materials.clone(),
+        })
+    }
+}
+
+impl SceneSink for DbWriter {
+    fn background(&mut self, rgb: [f32; 3]) -> Result<(), Error> {
+        self.background = rgb;
+        Ok(())
+    }
+
+    fn view(&mut self, view: &View) -> Result<(), Error> {
+        self.view = Some(*view);
+        Ok(())
+    }
+
+    fn light(&mut self, light: &Light) -> Result<(), Error> {
+        if self.lights.len() >= MAX_LIGHTS {
+            return Err(Error::Scene(format!("more than {MAX_LIGHTS} lights")));
+        }
+        self.lights.push(*light);
+        Ok(())
+    }
+
+    fn material(&mut self, m: &Material) -> Result<(), Error> {
+        self.material_statements += 1;
+        let next = self.materials.len() as u32;
+        let idx = *self.material_index.entry(m.key()).or_insert(next);
+        if idx == next {
+            if self.materials.len() >= MAX_MATERIALS {
+                return Err(Error::Scene(format!(
+                    "more than {MAX_MATERIALS} distinct materials"
+                )));
+            }
+            self.materials.push(*m);
+        }
+        self.current_material = Some(idx);
+        Ok(())
+    }
+
+    fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
+        if self.objects >= u32::MAX as u64 {
+            return Err(Error::Scene(format!("more than {} objects", u32::MAX)));
+        }
+        let material = match self.current_material {
+            Some(m) => m,
+            None => {
+                // Objects before any `f` get the default material.
+                self.material(&Material::DEFAULT)?;
+                self.material_statements -= 1;
+                self.current_material.expect("just set")
+            }
+        };
+        let kind = shape.kind();
+        let nverts = match shape {
+            Shape::Polygon { vertices } | Shape::Patch { vertices, .. } => vertices.len(),
+            _ => 0,
+        };
+        let words = RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        if (self.block.len() + words) * 4 > MAX_BLOCK_RAW {
+            self.flush_block()?;
+        }
+        let bbox = shape.bounds();
+        self.bbox.union(&bbox);
+        let b = &mut self.block;
+        b.push(kind as u32 | ((nverts as u32) << 8));
+        b.push(material);
+        b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
+        let push3 = |b: &mut Vec<u32>, p: &[f32; 3]| b.extend(p.iter().map(|f| f.to_bits()));
+        match shape {
+            Shape::Sphere { center, radius } => {
+                push3(b, center);
+                b.push(radius.to_bits());
+            }
+            Shape::Cone {
+                base,
+                base_radius,
+                apex,
+                apex_radius,
+            } => {
+                push3(b, base);
+                b.push(base_radius.to_bits());
+                push3(b, apex);
+                b.push(apex_radius.to_bits());
+            }
+            Shape::Polygon { vertices } => vertices.iter().for_each(|v| push3(b, v)),
+            Shape::Patch { vertices, normals } => {
+                vertices.iter().for_each(|v| push3(b, v));
+                normals.iter().for_each(|n| push3(b, n));
+            }
+        }
+        self.counts.add(kind, 1);
+        self.objects += 1;
+        self.block_objects += 1;
+        debug_assert!(kind == ShapeKind::from_u8(kind as u8).unwrap());
+        Ok(())
+    }
+}

@@ -1,0 +1,1 @@
+//! The gRPC contract (filled in by the cluster work).

@@ -1,0 +1,1 @@
+//! A worker node (filled in by the cluster work).
