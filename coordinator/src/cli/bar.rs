@@ -5,7 +5,7 @@ use sray_engine::progress::Progress;
 use std::time::Duration;
 
 /// A progress bar on stderr; invisible when stderr is not a terminal.
-pub struct Bar(ProgressBar);
+pub struct Bar(pub ProgressBar);
 
 impl Bar {
     pub fn new(prefix: &str, unit: &str) -> Bar {

@@ -4,6 +4,7 @@ mod bar;
 mod convert;
 mod gen_cmd;
 mod info_cmd;
+mod verify;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -29,6 +30,8 @@ enum Command {
     Convert(convert::ConvertArgs),
     /// Describe a scene file (.nff or .sdb)
     Info(info_cmd::InfoArgs),
+    /// Read a whole object database, checking every block, and report the read speed
+    Verify(verify::VerifyArgs),
 }
 
 /// Runs the command line; errors are printed and turned into exit code 1.
@@ -38,6 +41,7 @@ pub fn main() -> ExitCode {
         Command::Gen(a) => gen_cmd::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Info(a) => info_cmd::run(a),
+        Command::Verify(a) => verify::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -30,14 +30,11 @@ pub fn intersect<R: Real>(shape: &Shape<'_>, ray: &RayQ<R>, t_min: R, t_max: R) 
         Shape::Polygon { vertices } => {
             if vertices.len() == 3 {
                 triangle::intersect(vertices[0], vertices[1], vertices[2], ray, t_min, t_max)
-                    .map(|h| h.t)
             } else {
                 polygon::intersect(vertices, ray, t_min, t_max)
             }
         }
-        Shape::Patch { vertices, .. } => {
-            triangle::intersect_fan(vertices, ray, t_min, t_max).map(|(h, _)| h.t)
-        }
+        Shape::Patch { vertices, .. } => triangle::intersect_fan(vertices, ray, t_min, t_max),
         Shape::Cone {
             base,
             base_radius,

@@ -102,9 +102,10 @@ fn zero_radius_sphere_is_never_hit() {
 fn triangle_hits_and_barycentrics() {
     let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let r = ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]);
-    let h = triangle::intersect(v[0], v[1], v[2], &r, 0.0, f64::INFINITY).unwrap();
-    assert!(close(h.t, 1.0));
-    assert!(close(h.w[0], 0.5) && close(h.w[1], 0.25) && close(h.w[2], 0.25));
+    let t = triangle::intersect(v[0], v[1], v[2], &r, 0.0, f64::INFINITY).unwrap();
+    assert!(close(t, 1.0));
+    let w = triangle::weights(v[0], v[1], v[2], &r);
+    assert!(close(w[0], 0.5) && close(w[1], 0.25) && close(w[2], 0.25));
     // From below and from the side of the back face: both sides count.
     assert!(
         hit(

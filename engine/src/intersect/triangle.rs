@@ -1,13 +1,6 @@
 use super::RayQ;
 use crate::math::{Real, V3};
 
-/// A triangle hit: distance and barycentric weights of the three vertices.
-#[derive(Clone, Copy, Debug)]
-pub struct TriHit<R> {
-    pub t: R,
-    pub w: [R; 3],
-}
-
 /// Edge functions of the watertight test: the ray's view of the triangle
 /// after shearing the ray direction onto +z.
 #[inline(always)]
@@ -38,7 +31,7 @@ pub fn intersect<R: Real>(
     ray: &RayQ<R>,
     t_min: R,
     t_max: R,
-) -> Option<TriHit<R>> {
+) -> Option<R> {
     let ([u, v, w], [az, bz, cz]) = edges(v0, v1, v2, ray);
     let z = R::ZERO;
     if (u < z || v < z || w < z) && (u > z || v > z || w > z) {
@@ -49,14 +42,7 @@ pub fn intersect<R: Real>(
         return None; // the ray lies in the triangle's plane, or it is degenerate
     }
     let t = (u * az + v * bz + w * cz) / det;
-    if !(t > t_min && t < t_max) {
-        return None;
-    }
-    let inv = R::ONE / det;
-    Some(TriHit {
-        t,
-        w: [u * inv, v * inv, w * inv],
-    })
+    (t > t_min && t < t_max).then_some(t)
 }
 
 /// Barycentric weights of the point where `ray` meets the triangle's plane,
@@ -74,19 +60,13 @@ pub fn weights<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>)
 
 /// A polygon with vertex normals as a fan of triangles about its first
 /// vertex (the SPD writes only triangles; this also covers larger patches).
-/// Returns the nearest hit and the index of the fan triangle it is in.
 #[inline]
-pub fn intersect_fan<R: Real>(
-    v: &[[f32; 3]],
-    ray: &RayQ<R>,
-    t_min: R,
-    mut t_max: R,
-) -> Option<(TriHit<R>, usize)> {
+pub fn intersect_fan<R: Real>(v: &[[f32; 3]], ray: &RayQ<R>, t_min: R, mut t_max: R) -> Option<R> {
     let mut best = None;
     for i in 1..v.len() - 1 {
-        if let Some(h) = intersect(v[0], v[i], v[i + 1], ray, t_min, t_max) {
-            t_max = h.t;
-            best = Some((h, i));
+        if let Some(t) = intersect(v[0], v[i], v[i + 1], ray, t_min, t_max) {
+            t_max = t;
+            best = Some(t);
         }
     }
     best

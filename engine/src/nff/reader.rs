@@ -448,7 +448,7 @@ impl<R: BufRead> Parser<R> {
                     "hither" => hither = Some(numbers::<_, 1>(&self.lines, toks, "'hither'")?[0]),
                     "resolution" => {
                         let r = numbers::<_, 2>(&self.lines, toks, "'resolution'")?;
-                        let ok = |v: f64| v >= 1.0 && v <= 65_536.0 && v.fract() == 0.0;
+                        let ok = |v: f64| (1.0..=65_536.0).contains(&v) && v.fract() == 0.0;
                         if !ok(r[0]) || !ok(r[1]) {
                             return Err(self
                                 .lines

@@ -3,6 +3,7 @@
 //! scene sources (the NFF reader, the SPD generators) stream into.
 
 mod aabb;
+pub mod record;
 mod shape;
 mod sink;
 

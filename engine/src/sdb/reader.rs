@@ -342,7 +342,10 @@ impl Scan<'_> {
         }
         let raw_len = h.raw_len as usize;
         let stored_len = h.stored_len as usize;
-        if raw_len > MAX_BLOCK_RAW || raw_len % 4 != 0 || stored_len > MAX_BLOCK_RAW + 4096 {
+        if raw_len > MAX_BLOCK_RAW
+            || !raw_len.is_multiple_of(4)
+            || stored_len > MAX_BLOCK_RAW + 4096
+        {
             return Err(self.err("block lengths are out of range: the block is corrupt"));
         }
         let end = self.offset + (BLOCK_HEADER_BYTES + stored_len) as u64;
@@ -425,17 +428,24 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
                 head[1]
             ));
         }
-        let n = RECORD_HEADER_WORDS + payload_words(kind, nverts);
-        let rec = words
-            .get(pos..pos + n)
-            .ok_or_else(|| format!("record {i} is cut off"))?;
-        if rec[2..].iter().any(|w| (w & 0x7f80_0000) == 0x7f80_0000) {
-            return Err(format!("record {i} has a non-finite number"));
+        pos += RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        if pos > words.len() {
+            return Err(format!("record {i} is cut off"));
         }
-        pos += n;
     }
     if pos != words.len() {
         return Err("block has bytes after its last record".into());
+    }
+    // No number may be NaN or infinite. The integer words (kind and vertex
+    // count, material index) are far below the pattern once checked above,
+    // so one pass over every word (which vectorizes) covers all the floats.
+    const _: () = assert!(MAX_MATERIALS <= 1 << 23);
+    const _: () = assert!(crate::scene::MAX_POLYGON_VERTICES < 1 << 15);
+    let bad = words.iter().fold(0u32, |acc, w| {
+        acc | ((w & 0x7f80_0000) == 0x7f80_0000) as u32
+    });
+    if bad != 0 {
+        return Err("a record has a non-finite number".into());
     }
     Ok(())
 }

@@ -175,7 +175,8 @@ impl DbWriter {
         self.flush_block()?;
         let tables = self.tables();
         let tables_offset = self.offset;
-        self.out().write_all(&tables).at(&self.path.clone())?;
+        let path = self.path.clone();
+        self.out().write_all(&tables).at(path)?;
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,

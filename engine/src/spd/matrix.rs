@@ -4,7 +4,8 @@
 
 pub type Mat4 = [[f64; 4]; 4];
 
-pub const PI: f64 = 3.141592653589793;
+/// The SPD's `PI`, 3.141592653589793, which is exactly this constant.
+pub const PI: f64 = std::f64::consts::PI;
 
 pub fn zero() -> Mat4 {
     [[0.0; 4]; 4]

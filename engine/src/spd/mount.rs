@@ -130,6 +130,8 @@ impl Grower<'_, '_> {
         let right = (lr + ur) / 2.0 + rise * r(llx + width, lly + half);
         let upper = (ur + ul) / 2.0 + rise * r(llx + half, lly + width);
         let left = (ul + ll) / 2.0 + rise * r(llx, lly + half);
+        // The SPD's literal, not sqrt(2) to full precision.
+        #[allow(clippy::approx_constant)]
         let middle = (ll + lr + ur + ul) / 4.0 + 1.4142136 * rise * r(llx + half, lly + half);
         self.grow(half, llx, lly, [ll, lower, middle, left])?;
         self.grow(half, llx + half, lly, [lower, lr, right, middle])?;

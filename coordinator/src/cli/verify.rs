@@ -1,0 +1,60 @@
+//! `sray verify`: read every block of an object database front to back,
+//! checking every checksum, and report the sequential read speed.
+
+use super::bar::Bar;
+use clap::Args;
+use sray_engine::sdb::Database;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Debug)]
+pub struct VerifyArgs {
+    /// An .sdb file
+    pub file: PathBuf,
+    /// Print one JSON object on stdout
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
+    let db = Database::open(&a.file)?;
+    let bar = Bar::bytes("verify");
+    bar.0.set_length(db.file_bytes());
+    let start = Instant::now();
+    let mut scan = db.scan()?;
+    let mut objects = 0u64;
+    let mut raw = 0u64;
+    while let Some(block) = scan.next_block()? {
+        objects += block.object_count as u64;
+        raw += block.raw_bytes() as u64;
+        bar.0.set_position(scan.stats().bytes_read);
+    }
+    let secs = start.elapsed().as_secs_f64();
+    bar.finish();
+    let read = scan.stats().bytes_read;
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "objects": objects,
+                "blocks": scan.stats().blocks_read,
+                "bytes_read": read,
+                "raw_bytes": raw,
+                "seconds": secs,
+                "read_mib_per_s": mib(read) / secs,
+                "decoded_mib_per_s": mib(raw) / secs,
+            })
+        );
+    } else {
+        println!(
+            "{}: ok, {objects} objects in {} blocks; read {:.1} MiB in {secs:.3} s ({:.0} MiB/s stored, {:.0} MiB/s decoded)",
+            a.file.display(),
+            scan.stats().blocks_read,
+            mib(read),
+            mib(read) / secs,
+            mib(raw) / secs
+        );
+    }
+    Ok(())
+}
