@@ -1,3 +1,4 @@
 //! The coordinator: drives renders and hosts the `sray` command line.
 
 pub mod cli;
+pub mod job;

@@ -8,16 +8,21 @@
 //! - [`source`]: scene sources (`.nff`, `.sdb`, `spd:NAME:SIZE`);
 //! - [`info`]: what a scene file holds (`sray info`).
 
+pub mod df;
 pub mod error;
 pub mod fsutil;
+pub mod grid;
 pub mod info;
 pub mod intersect;
 pub mod math;
 pub mod nff;
+pub mod objects;
 pub mod progress;
+pub mod render;
 pub mod scene;
 pub mod sdb;
 pub mod source;
 pub mod spd;
+pub mod sys;
 
 pub use error::Error;

@@ -4,6 +4,7 @@ mod bar;
 mod convert;
 mod gen_cmd;
 mod info_cmd;
+mod render;
 mod verify;
 
 use clap::{Parser, Subcommand};
@@ -24,6 +25,8 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Render a scene (.nff, .sdb or spd:NAME:SIZE) to a PNG
+    Render(render::RenderArgs),
     /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
     Gen(gen_cmd::GenArgs),
     /// Convert a scene (.nff, .sdb or spd:NAME:SIZE) to an object database or NFF
@@ -38,6 +41,7 @@ enum Command {
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Render(a) => render::run(a),
         Command::Gen(a) => gen_cmd::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Info(a) => info_cmd::run(a),

@@ -3,7 +3,8 @@ use crate::math::{Real, V3};
 
 /// The frame of an open cone: base point, unit axis, length, base radius
 /// and the radius's change per unit length.
-pub(crate) struct ConeFrame<R> {
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ConeFrame<R> {
     pub base: V3<R>,
     pub axis: V3<R>,
     pub len: R,
@@ -12,12 +13,7 @@ pub(crate) struct ConeFrame<R> {
 }
 
 #[inline]
-pub(crate) fn frame<R: Real>(
-    base: [f32; 3],
-    r0: f32,
-    apex: [f32; 3],
-    r1: f32,
-) -> Option<ConeFrame<R>> {
+pub fn frame<R: Real>(base: [f32; 3], r0: f32, apex: [f32; 3], r1: f32) -> Option<ConeFrame<R>> {
     let b = V3::<R>::from_f32(base);
     let along = V3::<R>::from_f32(apex) - b;
     let len = along.length();
@@ -35,18 +31,22 @@ pub(crate) fn frame<R: Real>(
 }
 
 /// Open cone or cylinder between two discs, no caps: points whose distance
-/// from the axis is r0 + slope * s at height s in [0, len].
+/// from the axis is r0 + slope * s at height s in [0, len]. The frame is
+/// computed once per cone, in double precision.
 #[inline]
 pub fn intersect<R: Real>(
-    base: [f32; 3],
-    r0: f32,
-    apex: [f32; 3],
-    r1: f32,
+    f64frame: &ConeFrame<f64>,
     ray: &RayQ<R>,
     t_min: R,
     t_max: R,
 ) -> Option<R> {
-    let f = frame::<R>(base, r0, apex, r1)?;
+    let f = ConeFrame::<R> {
+        base: f64frame.base.cast(),
+        axis: f64frame.axis.cast(),
+        len: R::from_f64(f64frame.len),
+        r0: R::from_f64(f64frame.r0),
+        slope: R::from_f64(f64frame.slope),
+    };
     let w = ray.o - f.base;
     let wa = w.dot(f.axis);
     let da = ray.d.dot(f.axis);

@@ -20,27 +20,90 @@ pub use ray::RayQ;
 pub use surface::{Surface, surface_at};
 
 use crate::math::Real;
-use crate::scene::Shape;
+use crate::scene::{Aabb, Shape};
 
-/// Nearest `t` in `(t_min, t_max)` at which `ray` meets `shape`.
-#[inline]
-pub fn intersect<R: Real>(shape: &Shape<'_>, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
+/// What an intersection test can compute once per object and reuse for
+/// every ray: the plane of a many-sided polygon, the frame of a cone. One
+/// function computes it, so a tracer that keeps it and one that recomputes
+/// it per pass test alike, bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Prepared {
+    /// Nothing worth keeping (spheres, triangles, patches).
+    Plain,
+    Polygon(polygon::PolygonPlane),
+    Cone(cone::ConeFrame<f64>),
+    /// A degenerate primitive (zero-length cone): never hit.
+    Never,
+}
+
+pub use cone::ConeFrame;
+pub use polygon::PolygonPlane;
+
+/// The reusable part of `shape`'s intersection test.
+pub fn prepare(shape: &Shape<'_>) -> Prepared {
     match *shape {
-        Shape::Sphere { center, radius } => sphere::intersect(center, radius, ray, t_min, t_max),
-        Shape::Polygon { vertices } => {
-            if vertices.len() == 3 {
-                triangle::intersect(vertices[0], vertices[1], vertices[2], ray, t_min, t_max)
-            } else {
-                polygon::intersect(vertices, ray, t_min, t_max)
-            }
+        Shape::Polygon { vertices } if vertices.len() > 3 => {
+            Prepared::Polygon(polygon::plane(vertices))
         }
-        Shape::Patch { vertices, .. } => triangle::intersect_fan(vertices, ray, t_min, t_max),
         Shape::Cone {
             base,
             base_radius,
             apex,
             apex_radius,
-        } => cone::intersect(base, base_radius, apex, apex_radius, ray, t_min, t_max),
+        } => match cone::frame::<f64>(base, base_radius, apex, apex_radius) {
+            Some(f) => Prepared::Cone(f),
+            None => Prepared::Never,
+        },
+        _ => Prepared::Plain,
+    }
+}
+
+/// Nearest `t` in `(t_min, t_max)` at which `ray` meets `shape`, whose
+/// bounding box is `bbox`.
+#[inline]
+pub fn intersect<R: Real>(
+    shape: &Shape<'_>,
+    bbox: &Aabb,
+    ray: &RayQ<R>,
+    t_min: R,
+    t_max: R,
+) -> Option<R> {
+    intersect_prepared(shape, &prepare(shape), bbox, ray, t_min, t_max)
+}
+
+/// As [`intersect`], with `prep = prepare(shape)` computed beforehand.
+/// Costly kinds (cones, many-sided polygons) are first culled against the
+/// box.
+#[inline]
+pub fn intersect_prepared<R: Real>(
+    shape: &Shape<'_>,
+    prep: &Prepared,
+    bbox: &Aabb,
+    ray: &RayQ<R>,
+    t_min: R,
+    t_max: R,
+) -> Option<R> {
+    match (*shape, prep) {
+        (Shape::Sphere { center, radius }, _) => {
+            sphere::intersect(center, radius, ray, t_min, t_max)
+        }
+        (Shape::Polygon { vertices }, Prepared::Polygon(pl)) => {
+            if vertices.len() > 4 && !ray.may_hit_box(bbox, t_min, t_max) {
+                return None;
+            }
+            polygon::intersect(vertices, pl, ray, t_min, t_max)
+        }
+        (Shape::Polygon { vertices }, _) => {
+            triangle::intersect(vertices[0], vertices[1], vertices[2], ray, t_min, t_max)
+        }
+        (Shape::Patch { vertices, .. }, _) => triangle::intersect_fan(vertices, ray, t_min, t_max),
+        (Shape::Cone { .. }, Prepared::Cone(f)) => {
+            if !ray.may_hit_box(bbox, t_min, t_max) {
+                return None;
+            }
+            cone::intersect(f, ray, t_min, t_max)
+        }
+        (Shape::Cone { .. }, _) => None,
     }
 }
 

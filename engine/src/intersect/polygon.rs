@@ -23,13 +23,42 @@ pub fn normal<R: Real>(v: &[[f32; 3]]) -> V3<R> {
     m
 }
 
+/// What a polygon test needs beyond the vertices: the plane normal and
+/// the two axes of the projection that drops the normal's largest one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PolygonPlane {
+    pub n: [f64; 3],
+    pub iu: u8,
+    pub iv: u8,
+}
+
+pub fn plane(v: &[[f32; 3]]) -> PolygonPlane {
+    let n = normal::<f64>(v);
+    let (iu, iv) = match n.max_axis() {
+        0 => (1, 2),
+        1 => (2, 0),
+        _ => (0, 1),
+    };
+    PolygonPlane {
+        n: n.to_array(),
+        iu,
+        iv,
+    }
+}
+
 /// Planar polygon, convex or not: the plane hit, then the crossings test
 /// (Haines, Graphics Gems IV) in the projection that drops the normal's
 /// largest axis. Edges count half-open in the projected v direction, so a
 /// point on a vertex is decided consistently.
 #[inline]
-pub fn intersect<R: Real>(v: &[[f32; 3]], ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
-    let n = normal::<R>(v);
+pub fn intersect<R: Real>(
+    v: &[[f32; 3]],
+    pl: &PolygonPlane,
+    ray: &RayQ<R>,
+    t_min: R,
+    t_max: R,
+) -> Option<R> {
+    let n = V3::<R>::from_f64(pl.n);
     let denom = n.dot(ray.d);
     if denom == R::ZERO {
         return None; // parallel to the plane (or no area)
@@ -40,12 +69,7 @@ pub fn intersect<R: Real>(v: &[[f32; 3]], ray: &RayQ<R>, t_min: R, t_max: R) -> 
         return None;
     }
     let p = ray.at(t);
-    let drop = n.max_axis();
-    let (iu, iv) = match drop {
-        0 => (1, 2),
-        1 => (2, 0),
-        _ => (0, 1),
-    };
+    let (iu, iv) = (pl.iu as usize, pl.iv as usize);
     let (pu, pv) = (p[iu], p[iv]);
     let mut inside = false;
     let last = v[v.len() - 1];

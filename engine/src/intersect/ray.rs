@@ -13,28 +13,45 @@ pub struct RayQ<R> {
     pub(crate) sx: R,
     pub(crate) sy: R,
     pub(crate) sz: R,
+    /// 1 / d per axis (infinite where d is 0), for box tests.
+    pub(crate) inv: V3<R>,
+    /// d . d and its reciprocal.
+    pub(crate) a: R,
+    pub(crate) inv_a: R,
 }
 
 impl<R: Real> RayQ<R> {
     /// `d` must be non-zero (it need not be unit length).
     #[inline]
     pub fn new(o: V3<R>, d: V3<R>) -> Self {
+        let inv = V3::new(R::ONE / d.x, R::ONE / d.y, R::ONE / d.z);
+        Self::with_inverse(o, d, inv)
+    }
+
+    /// As [`RayQ::new`], given `inv` = 1/d per axis (which the caller may
+    /// already have for its grid walk).
+    #[inline]
+    pub fn with_inverse(o: V3<R>, d: V3<R>, inv: V3<R>) -> Self {
         let kz = d.max_axis();
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if d[kz] < R::ZERO {
             std::mem::swap(&mut kx, &mut ky);
         }
-        let dz = d[kz];
+        let sz = inv[kz];
+        let a = d.dot(d);
         RayQ {
             o,
             d,
             kx: kx as u8,
             ky: ky as u8,
             kz: kz as u8,
-            sx: d[kx] / dz,
-            sy: d[ky] / dz,
-            sz: R::ONE / dz,
+            sx: d[kx] * sz,
+            sy: d[ky] * sz,
+            sz,
+            inv,
+            a,
+            inv_a: R::ONE / a,
         }
     }
 
@@ -46,5 +63,35 @@ impl<R: Real> RayQ<R> {
     #[inline]
     pub fn at(&self, t: R) -> V3<R> {
         self.o + self.d * t
+    }
+
+    /// Whether the ray may meet the box within `(t_min, t_max)`. Never
+    /// rejects a box the ray touches: the interval is widened by a few ulps
+    /// of the distances involved.
+    #[inline(always)]
+    pub fn may_hit_box(&self, b: &crate::scene::Aabb, t_min: R, t_max: R) -> bool {
+        let (mut t0, mut t1) = (t_min, t_max);
+        for i in 0..3 {
+            let (lo, hi) = (R::from_f32(b.min[i]), R::from_f32(b.max[i]));
+            let o = self.o[i];
+            if self.d[i] == R::ZERO {
+                if o < lo || o > hi {
+                    return false;
+                }
+                continue;
+            }
+            let inv = self.inv[i];
+            let (mut a, mut z) = ((lo - o) * inv, (hi - o) * inv);
+            if a > z {
+                std::mem::swap(&mut a, &mut z);
+            }
+            let slack = (a.abs().max(z.abs())) * R::EPSILON * R::from_f32(16.0);
+            t0 = t0.max(a - slack);
+            t1 = t1.min(z + slack);
+            if t0 > t1 {
+                return false;
+            }
+        }
+        true
     }
 }

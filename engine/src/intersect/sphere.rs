@@ -23,21 +23,23 @@ pub fn intersect<R: Real>(
     }
     let oc = ray.o - c;
     let d = ray.d;
-    let a = d.dot(d);
     let b = oc.dot(d); // half of the linear coefficient
-    let f = oc - d * (b / a); // from the centre to the ray's closest point
     let r2 = r * r;
-    let disc = a * (r2 - f.dot(f));
+    let cc = oc.dot(oc) - r2;
+    if cc > R::ZERO && b > R::ZERO {
+        return None; // outside, and the sphere lies behind the ray
+    }
+    let f = oc - d * (b * ray.inv_a); // from the centre to the ray's closest point
+    let disc = ray.a * (r2 - f.dot(f));
     if disc < R::ZERO {
         return None;
     }
     let sq = disc.sqrt();
     let q = if b >= R::ZERO { -(b + sq) } else { sq - b };
-    let cc = oc.dot(oc) - r2;
     let (mut t0, mut t1) = if q == R::ZERO {
         (R::ZERO, R::ZERO)
     } else {
-        (q / a, cc / q)
+        (q * ray.inv_a, cc / q)
     };
     if t0 > t1 {
         std::mem::swap(&mut t0, &mut t1);

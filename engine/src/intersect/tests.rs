@@ -9,7 +9,7 @@ fn ray(o: [f64; 3], d: [f64; 3]) -> RayQ<f64> {
 }
 
 fn hit(shape: &Shape<'_>, o: [f64; 3], d: [f64; 3]) -> Option<f64> {
-    intersect(shape, &ray(o, d), 1e-9, f64::INFINITY)
+    intersect(shape, &shape.bounds(), &ray(o, d), 1e-9, f64::INFINITY)
 }
 
 fn close(a: f64, b: f64) -> bool {
@@ -82,6 +82,7 @@ fn small_sphere_far_away_keeps_precision() {
     // Single precision: the discriminant trick still finds it.
     let t32 = intersect(
         &s,
+        &s.bounds(),
         &ray([0.0, 0.0, 0.0], [0.0, 1.0, 0.0]).cast::<f32>(),
         0.0,
         f32::INFINITY,
@@ -305,7 +306,7 @@ fn patch_interpolates_vertex_normals() {
         normals: &n,
     };
     let r = ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]);
-    let t = intersect(&s, &r, 0.0, f64::INFINITY).unwrap();
+    let t = intersect(&s, &s.bounds(), &r, 0.0, f64::INFINITY).unwrap();
     let surf = surface_at(&s, &r, t);
     let expect = V3::new(0.25, 0.25, 0.5).try_normalize().unwrap();
     assert!((surf.ns - expect).length() < 1e-9);
@@ -349,8 +350,8 @@ fn single_precision_agrees_on_easy_cases() {
     ];
     for s in &shapes {
         let r = ray([0.1, 0.2, 4.0], [0.05, -0.02, -1.0]);
-        let a = intersect(s, &r, 0.0, f64::INFINITY);
-        let b = intersect(s, &r.cast::<f32>(), 0.0, f32::INFINITY);
+        let a = intersect(s, &s.bounds(), &r, 0.0, f64::INFINITY);
+        let b = intersect(s, &s.bounds(), &r.cast::<f32>(), 0.0, f32::INFINITY);
         match (a, b) {
             (Some(a), Some(b)) => assert!((a - b as f64).abs() < 1e-5),
             (None, None) => {}

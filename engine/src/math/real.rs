@@ -33,6 +33,8 @@ pub trait Real:
     fn sqrt(self) -> Self;
     fn abs(self) -> Self;
     fn is_finite(self) -> bool;
+    /// The smallest number greater than `self`.
+    fn next_up(self) -> Self;
 
     #[inline]
     fn max(self, o: Self) -> Self {
@@ -76,6 +78,10 @@ macro_rules! impl_real {
             #[inline(always)]
             fn is_finite(self) -> bool {
                 <$t>::is_finite(self)
+            }
+            #[inline(always)]
+            fn next_up(self) -> Self {
+                <$t>::next_up(self)
             }
         }
     };

@@ -6,10 +6,12 @@ mod aabb;
 pub mod record;
 mod shape;
 mod sink;
+mod sizes;
 
 pub use aabb::Aabb;
 pub use shape::{MAX_POLYGON_VERTICES, Shape, ShapeKind};
 pub use sink::{SceneSink, ShapeCounts};
+pub use sizes::{SIZE_CLASSES, SizeClass, SizeSummary, size_class};
 
 use serde::Serialize;
 

@@ -142,6 +142,9 @@ impl Enc {
     pub fn f64(&mut self, v: f64) {
         self.0.extend_from_slice(&v.to_le_bytes());
     }
+    pub fn u64(&mut self, v: u64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
 }
 
 /// Bounds-checked little-endian decoder for the tables.
@@ -164,6 +167,9 @@ impl Dec<'_> {
     }
     pub fn f64(&mut self) -> Option<f64> {
         self.take::<8>().map(f64::from_le_bytes)
+    }
+    pub fn u64(&mut self) -> Option<u64> {
+        self.take::<8>().map(u64::from_le_bytes)
     }
     pub fn remaining(&self) -> usize {
         self.buf.len() - self.pos

@@ -23,5 +23,6 @@ mod reader;
 mod writer;
 
 pub use format::{Compression, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub(crate) use reader::decode_record;
 pub use reader::{Block, Database, DbStats, ObjectRef, Scan};
 pub use writer::{DbWriter, WriteSummary};

@@ -3,7 +3,10 @@
 
 use super::format::*;
 use crate::error::{Error, IoContext};
-use crate::scene::{Aabb, Light, Material, SceneHeader, Shape, ShapeCounts, ShapeKind, View};
+use crate::scene::{
+    Aabb, Light, Material, SIZE_CLASSES, SceneHeader, Shape, ShapeCounts, ShapeKind, SizeSummary,
+    View,
+};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -13,6 +16,7 @@ use std::path::{Path, PathBuf};
 pub struct Database {
     path: PathBuf,
     scene: SceneHeader,
+    sizes: SizeSummary,
     counts: ShapeCounts,
     object_count: u64,
     bbox: Aabb,
@@ -106,12 +110,19 @@ impl Database {
                 "checksum mismatch: the tables are corrupt".into(),
             ));
         }
-        let scene =
+        let (scene, sizes) =
             decode_tables(&tables).ok_or_else(|| err("tables", "malformed tables".into()))?;
+        if sizes.total() != h.object_count {
+            return Err(err(
+                "tables",
+                "size summary disagrees with the object count".into(),
+            ));
+        }
         let bbox = Aabb::from_array(h.bbox);
         Ok(Database {
             path: path.to_path_buf(),
             scene,
+            sizes,
             counts: ShapeCounts {
                 sphere: h.counts[0],
                 polygon: h.counts[1],
@@ -137,6 +148,10 @@ impl Database {
     }
     pub fn counts(&self) -> ShapeCounts {
         self.counts
+    }
+    /// Object counts and bounds per size class.
+    pub fn sizes(&self) -> &SizeSummary {
+        &self.sizes
     }
     pub fn object_count(&self) -> u64 {
         self.object_count
@@ -198,7 +213,7 @@ fn read_up_to(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(n)
 }
 
-fn decode_tables(buf: &[u8]) -> Option<SceneHeader> {
+fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
     let mut d = Dec { buf, pos: 0 };
     let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
     let from = v3(&mut d)?;
@@ -228,7 +243,7 @@ fn decode_tables(buf: &[u8]) -> Option<SceneHeader> {
         });
     }
     let nm = d.u32()? as usize;
-    if nm > MAX_MATERIALS || nm * 32 != d.remaining() {
+    if nm > MAX_MATERIALS || nm * 32 > d.remaining() {
         return None;
     }
     let mut materials = Vec::with_capacity(nm);
@@ -246,12 +261,31 @@ fn decode_tables(buf: &[u8]) -> Option<SceneHeader> {
             ior: m[7],
         });
     }
-    Some(SceneHeader {
-        view,
-        background,
-        lights,
-        materials,
-    })
+    let mut sizes = SizeSummary::default();
+    let nc = d.u32()? as usize;
+    if nc > SIZE_CLASSES || nc * 36 != d.remaining() {
+        return None;
+    }
+    for _ in 0..nc {
+        let i = d.u32()? as usize;
+        let count = d.u64()?;
+        let mut b = [0f32; 6];
+        for x in &mut b {
+            *x = d.f32()?;
+        }
+        let c = sizes.classes.get_mut(i)?;
+        c.count = count;
+        c.bounds = Aabb::from_array(b);
+    }
+    Some((
+        SceneHeader {
+            view,
+            background,
+            lights,
+            materials,
+        },
+        sizes,
+    ))
 }
 
 /// A front-to-back pass over the objects of a [`Database`].
@@ -461,6 +495,11 @@ impl<'a> Block<'a> {
         }
     }
 
+    /// The block's records, as words (see the module documentation).
+    pub fn words(&self) -> &'a [u32] {
+        self.words
+    }
+
     /// Uncompressed payload bytes of this block.
     pub fn raw_bytes(&self) -> usize {
         self.words.len() * 4
@@ -483,45 +522,54 @@ impl<'a> Iterator for ObjectIter<'a> {
             return None;
         }
         // Records were validated when the block was read.
-        let w = &self.words[self.pos..];
-        let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
-        let nverts = (w[0] >> 8) as usize;
-        let f: &[f32] =
-            bytemuck::cast_slice(&w[2..RECORD_HEADER_WORDS + payload_words(kind, nverts)]);
-        let bbox = Aabb {
-            min: [f[0], f[1], f[2]],
-            max: [f[3], f[4], f[5]],
-        };
-        let g = &f[6..];
-        let p3 = |i: usize| [g[i], g[i + 1], g[i + 2]];
-        let shape = match kind {
-            ShapeKind::Sphere => Shape::Sphere {
-                center: p3(0),
-                radius: g[3],
-            },
-            ShapeKind::Cone => Shape::Cone {
-                base: p3(0),
-                base_radius: g[3],
-                apex: p3(4),
-                apex_radius: g[7],
-            },
-            ShapeKind::Polygon => Shape::Polygon {
-                vertices: bytemuck::cast_slice(&g[..3 * nverts]),
-            },
-            ShapeKind::Patch => Shape::Patch {
-                vertices: bytemuck::cast_slice(&g[..3 * nverts]),
-                normals: bytemuck::cast_slice(&g[3 * nverts..6 * nverts]),
-            },
-        };
-        let obj = ObjectRef {
-            id: self.id,
-            material: w[1],
-            bbox,
-            shape,
-        };
-        self.pos += RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        let (obj, len) = decode_record(&self.words[self.pos..], self.id)?;
+        self.pos += len;
         self.id = self.id.wrapping_add(1);
         self.left -= 1;
         Some(obj)
     }
+}
+
+/// Decodes the record at the start of `w` (already validated) as object
+/// `id`; returns it and its length in words.
+#[inline(always)]
+pub(crate) fn decode_record(w: &[u32], id: u32) -> Option<(ObjectRef<'_>, usize)> {
+    let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
+    let nverts = (w[0] >> 8) as usize;
+    let len = RECORD_HEADER_WORDS + payload_words(kind, nverts);
+    let f: &[f32] = bytemuck::cast_slice(&w[2..len]);
+    let bbox = Aabb {
+        min: [f[0], f[1], f[2]],
+        max: [f[3], f[4], f[5]],
+    };
+    let g = &f[6..];
+    let p3 = |i: usize| [g[i], g[i + 1], g[i + 2]];
+    let shape = match kind {
+        ShapeKind::Sphere => Shape::Sphere {
+            center: p3(0),
+            radius: g[3],
+        },
+        ShapeKind::Cone => Shape::Cone {
+            base: p3(0),
+            base_radius: g[3],
+            apex: p3(4),
+            apex_radius: g[7],
+        },
+        ShapeKind::Polygon => Shape::Polygon {
+            vertices: bytemuck::cast_slice(&g[..3 * nverts]),
+        },
+        ShapeKind::Patch => Shape::Patch {
+            vertices: bytemuck::cast_slice(&g[..3 * nverts]),
+            normals: bytemuck::cast_slice(&g[3 * nverts..6 * nverts]),
+        },
+    };
+    Some((
+        ObjectRef {
+            id,
+            material: w[1],
+            bbox,
+            shape,
+        },
+        len,
+    ))
 }

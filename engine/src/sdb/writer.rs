@@ -4,7 +4,7 @@
 use super::format::*;
 use crate::error::{Error, IoContext};
 use crate::scene::{
-    Aabb, Light, Material, SceneHeader, SceneSink, Shape, ShapeCounts, ShapeKind, View,
+    Aabb, Light, Material, SceneHeader, SceneSink, Shape, ShapeCounts, ShapeKind, SizeSummary, View,
 };
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -40,6 +40,7 @@ pub struct DbWriter {
     objects: u64,
     counts: ShapeCounts,
     bbox: Aabb,
+    sizes: SizeSummary,
     view: Option<View>,
     background: [f32; 3],
     lights: Vec<Light>,
@@ -74,6 +75,7 @@ impl DbWriter {
             objects: 0,
             counts: ShapeCounts::default(),
             bbox: Aabb::EMPTY,
+            sizes: SizeSummary::default(),
             view: None,
             background: [0.0; 3],
             lights: Vec::new(),
@@ -161,6 +163,18 @@ impl DbWriter {
             for x in [
                 m.color[0], m.color[1], m.color[2], m.kd, m.ks, m.shine, m.t, m.ior,
             ] {
+                e.f32(x);
+            }
+        }
+        let used: Vec<_> = (0..self.sizes.classes.len())
+            .filter(|&i| self.sizes.classes[i].count > 0)
+            .collect();
+        e.u32(used.len() as u32);
+        for i in used {
+            let c = &self.sizes.classes[i];
+            e.u32(i as u32);
+            e.u64(c.count);
+            for x in c.bounds.to_array() {
                 e.f32(x);
             }
         }
@@ -296,6 +310,7 @@ impl SceneSink for DbWriter {
         }
         let bbox = shape.bounds();
         self.bbox.union(&bbox);
+        self.sizes.add(&bbox);
         let b = &mut self.block;
         b.push(kind as u32 | ((nverts as u32) << 8));
         b.push(material);

@@ -1,0 +1,87 @@
+//! `sray render`: a scene to a PNG.
+
+use super::bar::Bar;
+use crate::job::{RenderRequest, Stages, render, write_outputs};
+use clap::Args;
+use sray_engine::progress::Progress;
+use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
+use sray_engine::source::SceneSource;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// The scene: an .nff file, an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
+    pub scene: String,
+    /// Output image (PNG)
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Tracer: df (depth-first, in memory), bf (breadth-first) or auto
+    #[arg(long, default_value = "auto")]
+    pub mode: Mode,
+    /// Image width in pixels
+    #[arg(long, default_value_t = 512)]
+    pub width: u32,
+    /// Image height in pixels
+    #[arg(long, default_value_t = 512)]
+    pub height: u32,
+    /// Maximum depth of the ray tree (the eye ray is depth 1)
+    #[arg(long, default_value_t = 5)]
+    pub depth: u8,
+    /// Grid resolution: auto, N (per axis) or NxMxK
+    #[arg(long, default_value = "auto")]
+    pub grid_res: GridRes,
+    /// Grids: auto (set huge objects apart in their own grid) or 1
+    #[arg(long, default_value = "auto", value_parser = parse_grids)]
+    pub grids: bool,
+    /// Worker threads (default: all cores)
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Intersection arithmetic: double or single
+    #[arg(long, default_value = "double")]
+    pub precision: Precision,
+    /// Write statistics as JSON to this file
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Directory for temporary files (default: the system's)
+    #[arg(long)]
+    pub tmp_dir: Option<PathBuf>,
+}
+
+fn parse_grids(s: &str) -> Result<bool, String> {
+    match s {
+        "auto" => Ok(true),
+        "1" => Ok(false),
+        _ => Err(format!("--grids takes auto or 1, not '{s}'")),
+    }
+}
+
+struct BarStages;
+
+impl Stages for BarStages {
+    fn stage(&self, name: &str) -> Box<dyn Progress + '_> {
+        Box::new(Bar::new(name, ""))
+    }
+}
+
+pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    if a.threads == Some(0) {
+        anyhow::bail!("--threads must be at least 1");
+    }
+    let req = RenderRequest {
+        scene: SceneSource::parse(&a.scene)?,
+        options: RenderOptions {
+            width: a.width,
+            height: a.height,
+            max_depth: a.depth,
+            threads: a.threads.unwrap_or(0),
+            grid_res: a.grid_res,
+            multiple_grids: a.grids,
+            precision: a.precision,
+        },
+        mode: a.mode,
+        tmp_dir: a.tmp_dir,
+    };
+    let result = render(&req, &BarStages)?;
+    write_outputs(&result, &a.output, a.stats.as_deref())?;
+    Ok(())
+}

@@ -1,0 +1,116 @@
+//! One render, start to finish: resolve the scene into an object database,
+//! pick the tracer, trace, write the image and statistics.
+
+use anyhow::{Context, bail};
+use sray_engine::df;
+use sray_engine::progress::Progress;
+use sray_engine::render::{Frame, Mode, RenderOptions, RenderStats};
+use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::source::SceneSource;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What to render and how.
+#[derive(Clone, Debug)]
+pub struct RenderRequest {
+    pub scene: SceneSource,
+    pub options: RenderOptions,
+    pub mode: Mode,
+    /// Where temporary databases go (default: the system's temp dir).
+    pub tmp_dir: Option<PathBuf>,
+}
+
+pub struct RenderResult {
+    pub frame: Frame,
+    pub stats: RenderStats,
+}
+
+/// Progress for the stages of a render.
+pub trait Stages {
+    /// A new stage begins; the returned progress reports within it.
+    fn stage(&self, name: &str) -> Box<dyn Progress + '_>;
+}
+
+/// A scene as an object database, and the temporary directory holding it
+/// when it had to be made (removed when this is dropped).
+pub struct PreparedScene {
+    pub db: Database,
+    _tmp: Option<tempfile::TempDir>,
+    pub convert_seconds: f64,
+}
+
+/// Opens a database directly, or streams an NFF file or an SPD generator
+/// into a temporary one.
+pub fn prepare(
+    scene: &SceneSource,
+    tmp_dir: Option<&Path>,
+    stages: &dyn Stages,
+) -> anyhow::Result<PreparedScene> {
+    if let SceneSource::Database(p) = scene {
+        return Ok(PreparedScene {
+            db: Database::open(p)?,
+            _tmp: None,
+            convert_seconds: 0.0,
+        });
+    }
+    let t = Instant::now();
+    let dir = match tmp_dir {
+        Some(d) => tempfile::Builder::new().prefix("sray-").tempdir_in(d),
+        None => tempfile::Builder::new().prefix("sray-").tempdir(),
+    }
+    .context("cannot create a temporary directory for the scene database")?;
+    let path = dir.path().join("scene.sdb");
+    let progress = stages.stage("preparing scene");
+    let mut w = DbWriter::create(&path, Compression::None)?;
+    scene.stream_into(&mut w, &*progress)?;
+    w.finish()?;
+    drop(progress);
+    Ok(PreparedScene {
+        db: Database::open(&path)?,
+        _tmp: Some(dir),
+        convert_seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Renders a request.
+pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<RenderResult> {
+    let t0 = Instant::now();
+    req.options.validate()?;
+    let scene = prepare(&req.scene, req.tmp_dir.as_deref(), stages)?;
+    let (mode, reason) = match req.mode {
+        Mode::Df => ("df", "requested with --mode df".to_string()),
+        Mode::Auto => (
+            "df",
+            "auto: the depth-first tracer is the only one built so far".to_string(),
+        ),
+        Mode::Bf => bail!("the breadth-first tracer is not available yet"),
+    };
+    let _ = mode;
+    let progress = stages.stage("rendering");
+    let out = df::render(&scene.db, &req.options, &*progress)?;
+    drop(progress);
+    let mut stats = out.stats;
+    stats.mode_reason = reason;
+    stats.convert_seconds = scene.convert_seconds;
+    stats.total_seconds = t0.elapsed().as_secs_f64();
+    Ok(RenderResult {
+        frame: out.frame,
+        stats,
+    })
+}
+
+/// Writes the image and, if asked, the statistics (each atomically).
+pub fn write_outputs(
+    result: &RenderResult,
+    image: &Path,
+    stats: Option<&Path>,
+) -> anyhow::Result<()> {
+    result.frame.write_png(image)?;
+    if let Some(p) = stats {
+        let tmp = sray_engine::fsutil::temp_beside(p)?;
+        serde_json::to_writer_pretty(tmp.as_file(), &result.stats)
+            .with_context(|| p.display().to_string())?;
+        sray_engine::fsutil::persist(tmp, p)?;
+    }
+    Ok(())
+}

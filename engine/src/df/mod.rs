@@ -1,0 +1,176 @@
+//! The depth-first tracer: the classical in-memory ray tracer over uniform
+//! grids (3D-DDA, mailboxing, early termination), one ray tree at a time.
+//! It is the reference the breadth-first tracer is checked against, and the
+//! fast path for scenes that fit in memory.
+
+mod object_grid;
+mod trace;
+
+pub use object_grid::ObjectGrid;
+
+use crate::error::Error;
+use crate::grid::{GridStat, choose_resolution, plan_groups};
+use crate::intersect::{Prepared, prepare};
+use crate::objects::ObjectTable;
+use crate::progress::Progress;
+use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
+use crate::scene::{Aabb, Material, Shape};
+use crate::sdb::Database;
+use std::time::Instant;
+
+/// `prep_of` entry of objects without prepared data.
+const PLAIN: u32 = u32::MAX;
+
+/// Voxels per object of the automatic grid resolution.
+pub const GRID_DENSITY: f64 = 2.0;
+/// Most voxels a depth-first grid may have.
+pub const MAX_CELLS: u64 = 1 << 24;
+
+/// A scene ready for depth-first tracing, borrowing its objects' geometry
+/// from an [`ObjectTable`].
+pub struct DfScene<'t> {
+    /// Each object's shape, decoded once.
+    pub shapes: Vec<Shape<'t>>,
+    pub bboxes: Vec<Aabb>,
+    /// Index into `preps` of each object's prepared test data, or
+    /// `PLAIN` for objects with none (spheres, triangles).
+    pub prep_of: Vec<u32>,
+    pub preps: Vec<Prepared>,
+    pub material_of: Vec<u32>,
+    pub materials: Vec<Material>,
+    /// One grid per object group; the last holds the large objects, if any.
+    pub grids: Vec<ObjectGrid>,
+    pub shade: ShadeScene,
+    pub camera: Camera,
+}
+
+/// Memory the depth-first tracer needs for `db`, roughly.
+pub fn estimate_bytes(db: &Database) -> u64 {
+    let n = db.object_count();
+    let cells = (n as f64 * GRID_DENSITY).min(MAX_CELLS as f64) as u64;
+    // Records and offsets; decoded shapes, boxes and materials; voxel
+    // starts and about two voxel entries per object; a mailbox per thread.
+    ObjectTable::estimate_bytes(db)
+        + (std::mem::size_of::<Shape<'_>>() + std::mem::size_of::<Aabb>() + 8) as u64 * n
+        + 4 * cells
+        + 8 * n
+        + 4 * n * crate::sys::cpus() as u64
+}
+
+impl<'t> DfScene<'t> {
+    /// Decodes the objects and builds the grids (the preprocess).
+    pub fn new(
+        db: &Database,
+        objects: &'t ObjectTable,
+        opts: &RenderOptions,
+    ) -> Result<DfScene<'t>, Error> {
+        opts.validate()?;
+        let n = objects.len();
+        let mut shapes = Vec::with_capacity(n);
+        let mut bboxes = Vec::with_capacity(n);
+        let mut material_of = Vec::with_capacity(n);
+        let mut prep_of = Vec::with_capacity(n);
+        let mut preps = Vec::new();
+        for id in 0..n as u32 {
+            let o = objects.get(id);
+            shapes.push(o.shape);
+            bboxes.push(o.bbox);
+            material_of.push(o.material);
+            match prepare(&o.shape) {
+                Prepared::Plain => prep_of.push(PLAIN),
+                p => {
+                    prep_of.push(preps.len() as u32);
+                    preps.push(p);
+                }
+            }
+        }
+        let plan = plan_groups(db.sizes(), opts.multiple_grids);
+        let mut grids = Vec::with_capacity(plan.bounds.len());
+        for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
+            let res = match (g, opts.grid_res) {
+                (0, GridRes::Fixed(r)) => r,
+                _ => choose_resolution(bounds, count, GRID_DENSITY, MAX_CELLS),
+            };
+            grids.push(ObjectGrid::build(&bboxes, bounds, res, |b| {
+                plan.partition.group(b) == g
+            })?);
+        }
+        let header = db.scene();
+        let eps = epsilon(&db.bbox(), opts.precision);
+        Ok(DfScene {
+            shapes,
+            bboxes,
+            prep_of,
+            preps,
+            material_of,
+            materials: header.materials.clone(),
+            grids,
+            shade: ShadeScene::new(header, opts.max_depth, eps),
+            camera: Camera::new(&header.view, opts.width, opts.height)?,
+        })
+    }
+
+    /// Prepared test data of object `id`.
+    #[inline(always)]
+    pub fn prep(&self, id: u32) -> &Prepared {
+        match self.prep_of[id as usize] {
+            PLAIN => &Prepared::Plain,
+            i => &self.preps[i as usize],
+        }
+    }
+
+    pub fn grid_stats(&self) -> Vec<GridStat> {
+        self.grids
+            .iter()
+            .map(|g| GridStat {
+                objects: g.objects,
+                resolution: g.spec.res,
+                lo: g.spec.lo,
+                hi: g.spec.hi,
+            })
+            .collect()
+    }
+}
+
+/// A depth-first render: the frame and the statistics.
+pub struct DfOutput {
+    pub frame: Frame,
+    pub stats: RenderStats,
+}
+
+/// Renders `db` depth-first.
+pub fn render(
+    db: &Database,
+    opts: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<DfOutput, Error> {
+    let t0 = Instant::now();
+    progress.set_message("loading objects, building grids");
+    let objects = ObjectTable::load(db, progress)?;
+    let scene = DfScene::new(db, &objects, opts)?;
+    let preprocess = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let (frame, rays, tests) = trace::render(&scene, opts, progress)?;
+    let trace_seconds = t1.elapsed().as_secs_f64();
+    let grids = scene.grid_stats();
+    let stats = RenderStats {
+        mode: "df".into(),
+        objects: db.object_count(),
+        width: opts.width,
+        height: opts.height,
+        depth: opts.max_depth,
+        threads: trace::thread_count(opts),
+        precision: format!("{:?}", opts.precision).to_lowercase(),
+        epsilon: scene.shade.eps,
+        rays,
+        intersection_tests: tests.total(),
+        intersection_tests_by_kind: tests,
+        grid_res: grids[0].resolution,
+        grids,
+        preprocess_seconds: preprocess,
+        trace_seconds,
+        peak_rss_bytes: crate::sys::peak_rss_bytes(),
+        ..Default::default()
+    };
+    Ok(DfOutput { frame, stats })
+}

@@ -1,0 +1,322 @@
+//! Tracing ray trees, one corner row per task.
+
+use super::DfScene;
+use crate::error::Error;
+use crate::grid::Dda;
+use crate::intersect::{RayQ, intersect_prepared, surface_at};
+use crate::math::{Real, Vec3};
+use crate::progress::Progress;
+use crate::render::{
+    Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
+};
+use rayon::prelude::*;
+
+/// Per-thread state: the mailbox (the last ray that tested each object),
+/// the shadow cache, and counters.
+struct Scratch {
+    mail: Vec<u32>,
+    stamp: u32,
+    /// Last blocker found per (light, depth): tested first by the next
+    /// shadow ray toward that light from that depth (Haines' shadow cache).
+    /// Cleared at the start of every row, so what a row does never depends
+    /// on which rows the same thread did before: counts are the same for
+    /// any number of threads.
+    shadow_cache: Vec<u32>,
+    tests: KindCounts,
+    rays: RayCounts,
+}
+
+const NO_OBJECT: u32 = u32::MAX;
+
+impl Scratch {
+    fn new(objects: usize, cache_slots: usize) -> Scratch {
+        Scratch {
+            mail: vec![0; objects],
+            stamp: 0,
+            shadow_cache: vec![NO_OBJECT; cache_slots],
+            tests: KindCounts::default(),
+            rays: RayCounts::default(),
+        }
+    }
+
+    /// A stamp no object's mailbox holds.
+    #[inline]
+    fn next_stamp(&mut self) -> u32 {
+        if self.stamp == u32::MAX {
+            self.mail.fill(0);
+            self.stamp = 0;
+        }
+        self.stamp += 1;
+        self.stamp
+    }
+}
+
+pub fn thread_count(opts: &RenderOptions) -> usize {
+    if opts.threads == 0 {
+        crate::sys::cpus()
+    } else {
+        opts.threads
+    }
+}
+
+pub fn render(
+    scene: &DfScene,
+    opts: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<(Frame, RayCounts, KindCounts), Error> {
+    match opts.precision {
+        Precision::Double => render_in::<f64>(scene, opts, progress),
+        Precision::Single => render_in::<f32>(scene, opts, progress),
+    }
+}
+
+fn render_in<R: Real>(
+    scene: &DfScene,
+    opts: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<(Frame, RayCounts, KindCounts), Error> {
+    let cam = &scene.camera;
+    let mut frame = Frame::new(cam.width, cam.height);
+    let row_len = cam.width as usize + 1;
+    let cache_slots = scene.shade.lights.len() * scene.shade.max_depth as usize;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(thread_count(opts))
+        .build()
+        .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
+    progress.set_total(cam.height as u64 + 1);
+    progress.set_message("tracing");
+    let per_row: Vec<(RayCounts, KindCounts)> = pool.install(|| {
+        frame
+            .corners
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .map_init(
+                || Scratch::new(scene.shapes.len(), cache_slots),
+                |sc, (row, out)| {
+                    sc.shadow_cache.fill(NO_OBJECT);
+                    for col in 0..row_len {
+                        let d = cam.direction(col as u32, row as u32);
+                        sc.rays.eye_rays += 1;
+                        let mut add = |c: [f32; 3]| {
+                            let f = to_fixed(c);
+                            for k in 0..3 {
+                                out[col][k] = out[col][k].saturating_add(f[k]);
+                            }
+                        };
+                        trace::<R>(scene, sc, cam.eye, d, 0.0, 1, 1.0, &mut add);
+                    }
+                    progress.inc(1);
+                    (std::mem::take(&mut sc.rays), std::mem::take(&mut sc.tests))
+                },
+            )
+            .collect()
+    });
+    let mut rays = RayCounts::default();
+    let mut tests = KindCounts::default();
+    for (r, t) in per_row {
+        rays += r;
+        tests += t;
+    }
+    Ok((frame, rays, tests))
+}
+
+/// 1/d per axis.
+#[inline(always)]
+fn recip(d: Vec3) -> Vec3 {
+    Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z)
+}
+
+/// Follows one ray and everything it spawns, adding colour through `add`.
+#[allow(clippy::too_many_arguments)]
+fn trace<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch,
+    o: Vec3,
+    d: Vec3,
+    t_min: f64,
+    depth: u8,
+    weight: f32,
+    add: &mut impl FnMut([f32; 3]),
+) {
+    let Some((t, id)) = nearest::<R>(s, sc, o, d, t_min) else {
+        add(s.shade.background(weight));
+        return;
+    };
+    if depth == 1 {
+        sc.rays.eye_hit_rays += 1;
+    }
+    let surf = surface_at(&s.shapes[id as usize], &RayQ::new(o, d), t);
+    let mat = &s.materials[s.material_of[id as usize] as usize];
+    let eps = s.shade.eps;
+    let max_depth = s.shade.max_depth as usize;
+    shade(
+        &s.shade,
+        d,
+        depth,
+        weight,
+        &surf,
+        mat,
+        &mut |spawn| match spawn {
+            Spawn::Shadow {
+                light,
+                dir,
+                dist,
+                color,
+            } => {
+                sc.rays.shadow_rays += 1;
+                let slot = light as usize * max_depth + depth as usize - 1;
+                if !occluded::<R>(s, sc, slot, surf.p, dir, eps, dist) {
+                    add(color);
+                }
+            }
+            Spawn::Reflect { dir, weight } => {
+                sc.rays.reflect_rays += 1;
+                trace::<R>(s, sc, surf.p, dir, eps, depth + 1, weight, add);
+            }
+            Spawn::Refract { dir, weight } => {
+                sc.rays.refract_rays += 1;
+                trace::<R>(s, sc, surf.p, dir, eps, depth + 1, weight, add);
+            }
+        },
+    );
+}
+
+/// The nearest hit beyond `t_min`: smallest distance, ties to the smaller
+/// object id. Grids are walked voxel by voxel and left as soon as the best
+/// hit lies before the current voxel's far side.
+#[inline]
+fn nearest<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch,
+    o: Vec3,
+    d: Vec3,
+    t_min: f64,
+) -> Option<(f64, u32)> {
+    let inv = recip(d);
+    let q = RayQ::<R>::with_inverse(o.cast(), d.cast(), inv.cast());
+    let stamp = sc.next_stamp();
+    let rmin = R::from_f64(t_min);
+    let mut best_t = f64::INFINITY;
+    let mut best_id = NO_OBJECT;
+    // The large objects' grid first: one ground polygon found early prunes
+    // the walk through the main grid.
+    let test = |sc: &mut Scratch, id: u32, best_t: &mut f64, best_id: &mut u32| {
+        let m = &mut sc.mail[id as usize];
+        if *m == stamp {
+            return;
+        }
+        *m = stamp;
+        let shape = &s.shapes[id as usize];
+        sc.tests.add(shape.kind());
+        let upper = if best_t.is_finite() {
+            R::from_f64(*best_t).next_up()
+        } else {
+            R::INFINITY
+        };
+        if let Some(t) =
+            intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], &q, rmin, upper)
+        {
+            let t = t.to_f64();
+            if t < *best_t || (t == *best_t && id < *best_id) {
+                *best_t = t;
+                *best_id = id;
+            }
+        }
+    };
+    for g in s.grids.iter().rev() {
+        if g.single_cell() {
+            // A one-voxel grid (a few large objects): no walk needed.
+            for &id in g.cell(0) {
+                test(sc, id, &mut best_t, &mut best_id);
+            }
+            continue;
+        }
+        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best_t.next_up()) else {
+            continue;
+        };
+        loop {
+            for &id in g.cell(g.spec.index(w.cell)) {
+                test(sc, id, &mut best_t, &mut best_id);
+            }
+            if best_t < w.t_exit() || !w.advance(&g.spec) {
+                break;
+            }
+        }
+    }
+    (best_id != NO_OBJECT).then_some((best_t, best_id))
+}
+
+/// Whether anything lies between `t_min` and `t_max` along the ray; tries
+/// the cached blocker of `slot` first and stops at the first blocker.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn occluded<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch,
+    slot: usize,
+    o: Vec3,
+    d: Vec3,
+    t_min: f64,
+    t_max: f64,
+) -> bool {
+    let inv = recip(d);
+    let q = RayQ::<R>::with_inverse(o.cast(), d.cast(), inv.cast());
+    let stamp = sc.next_stamp();
+    let (rmin, rmax) = (R::from_f64(t_min), R::from_f64(t_max));
+    let cached = sc.shadow_cache[slot];
+    if cached != NO_OBJECT {
+        sc.mail[cached as usize] = stamp;
+        let shape = &s.shapes[cached as usize];
+        sc.tests.add(shape.kind());
+        if intersect_prepared(
+            shape,
+            s.prep(cached),
+            &s.bboxes[cached as usize],
+            &q,
+            rmin,
+            rmax,
+        )
+        .is_some()
+        {
+            return true;
+        }
+    }
+    let blocks = |sc: &mut Scratch, id: u32| -> bool {
+        let m = &mut sc.mail[id as usize];
+        if *m == stamp {
+            return false;
+        }
+        *m = stamp;
+        let shape = &s.shapes[id as usize];
+        sc.tests.add(shape.kind());
+        if intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], &q, rmin, rmax).is_some() {
+            sc.shadow_cache[slot] = id;
+            return true;
+        }
+        false
+    };
+    for g in s.grids.iter().rev() {
+        if g.single_cell() {
+            for &id in g.cell(0) {
+                if blocks(sc, id) {
+                    return true;
+                }
+            }
+            continue;
+        }
+        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, t_max) else {
+            continue;
+        };
+        loop {
+            for &id in g.cell(g.spec.index(w.cell)) {
+                if blocks(sc, id) {
+                    return true;
+                }
+            }
+            if !w.advance(&g.spec) {
+                break;
+            }
+        }
+    }
+    false
+}

@@ -1,0 +1,85 @@
+use super::GridSpec;
+use crate::math::Vec3;
+
+/// The 3D-DDA walk of a ray through the voxels of a grid (Amanatides and
+/// Woo), in order of distance. Plain data, so a breadth-first tracer can
+/// keep it with the ray between passes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dda {
+    pub cell: [u32; 3],
+    /// Distance at which the ray enters the current voxel.
+    pub t_enter: f64,
+    /// Distance to the next voxel face on each axis.
+    t_next: [f64; 3],
+    t_delta: [f64; 3],
+    /// Where the walk ends (the grid's far side, or the ray's end).
+    pub t_end: f64,
+    step: [i8; 3],
+}
+
+impl Dda {
+    /// Starts the walk at the ray's entry into the grid, or `None` if the
+    /// ray misses the grid within `[t_min, t_max]`. `inv` is 1/d per axis.
+    #[inline]
+    pub fn start(g: &GridSpec, o: Vec3, d: Vec3, inv: Vec3, t_min: f64, t_max: f64) -> Option<Dda> {
+        let (t0, t1) = g.clip(o, d, inv, t_min, t_max)?;
+        let cell = g.cell_of(o + d * t0);
+        let cs = g.cell_size();
+        let mut t_next = [f64::INFINITY; 3];
+        let mut t_delta = [f64::INFINITY; 3];
+        let mut step = [0i8; 3];
+        for i in 0..3 {
+            if d[i] > 0.0 {
+                step[i] = 1;
+                t_next[i] = (g.lo[i] + (cell[i] + 1) as f64 * cs[i] - o[i]) * inv[i];
+                t_delta[i] = cs[i] * inv[i];
+            } else if d[i] < 0.0 {
+                step[i] = -1;
+                t_next[i] = (g.lo[i] + cell[i] as f64 * cs[i] - o[i]) * inv[i];
+                t_delta[i] = -cs[i] * inv[i];
+            }
+        }
+        Some(Dda {
+            cell,
+            t_enter: t0,
+            t_next,
+            t_delta,
+            t_end: t1,
+            step,
+        })
+    }
+
+    /// Distance at which the ray leaves the current voxel.
+    #[inline(always)]
+    pub fn t_exit(&self) -> f64 {
+        self.t_next[0]
+            .min(self.t_next[1])
+            .min(self.t_next[2])
+            .min(self.t_end)
+    }
+
+    /// Moves to the next voxel; `false` when the walk has left the grid or
+    /// passed its end.
+    #[inline]
+    pub fn advance(&mut self, g: &GridSpec) -> bool {
+        let axis = if self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2] {
+            0
+        } else if self.t_next[1] <= self.t_next[2] {
+            1
+        } else {
+            2
+        };
+        let t = self.t_next[axis];
+        if t >= self.t_end || self.step[axis] == 0 {
+            return false;
+        }
+        let c = self.cell[axis] as i64 + self.step[axis] as i64;
+        if c < 0 || c >= g.res[axis] as i64 {
+            return false;
+        }
+        self.cell[axis] = c as u32;
+        self.t_enter = t;
+        self.t_next[axis] += self.t_delta[axis];
+        true
+    }
+}

@@ -1,0 +1,148 @@
+//! Uniform spatial subdivision: the grid geometry, conservative voxel
+//! ranges of bounding boxes, the 3D-DDA walk of a ray, the choice of
+//! resolution, and the split of a scene into groups (one grid each) when a
+//! few huge objects would ruin one grid (the paper's Section 2.4).
+//!
+//! Both tracers use this module, so they agree on which voxels a ray
+//! crosses and which voxels an object occupies.
+
+mod dda;
+mod partition;
+
+pub use dda::Dda;
+pub use partition::{GridStat, GroupPlan, Partition, choose_resolution, plan_groups};
+
+use crate::math::Vec3;
+use crate::scene::Aabb;
+use serde::Serialize;
+
+/// Margin, in voxels, added around a box before it is voxelized, so that an
+/// object touching a voxel face (within rounding) is listed on both sides.
+const VOXEL_MARGIN: f64 = 1e-6;
+
+/// A uniform grid over a box.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct GridSpec {
+    pub lo: [f64; 3],
+    pub hi: [f64; 3],
+    pub res: [u32; 3],
+    #[serde(skip)]
+    cell: [f64; 3],
+    #[serde(skip)]
+    inv_cell: [f64; 3],
+}
+
+impl GridSpec {
+    /// A grid of `res` voxels over `bounds`. An axis of zero extent gets a
+    /// small thickness so every voxel has volume.
+    pub fn new(bounds: &Aabb, res: [u32; 3]) -> GridSpec {
+        let mut lo = [0.0; 3];
+        let mut hi = [1.0; 3];
+        if !bounds.is_empty() {
+            let e = bounds.extent();
+            let big = e[0].max(e[1]).max(e[2]);
+            let pad = if big > 0.0 {
+                big * 1e-6
+            } else {
+                1e-6 * bounds.max_abs_coord().max(1.0)
+            };
+            for i in 0..3 {
+                lo[i] = bounds.min[i] as f64;
+                hi[i] = bounds.max[i] as f64;
+                if hi[i] - lo[i] < pad {
+                    lo[i] -= pad;
+                    hi[i] += pad;
+                }
+            }
+        }
+        let res = res.map(|r| r.max(1));
+        let mut cell = [0.0; 3];
+        let mut inv_cell = [0.0; 3];
+        for i in 0..3 {
+            cell[i] = (hi[i] - lo[i]) / res[i] as f64;
+            inv_cell[i] = res[i] as f64 / (hi[i] - lo[i]);
+        }
+        GridSpec {
+            lo,
+            hi,
+            res,
+            cell,
+            inv_cell,
+        }
+    }
+
+    pub fn cells(&self) -> usize {
+        self.res.iter().map(|&r| r as usize).product()
+    }
+
+    #[inline(always)]
+    pub fn index(&self, c: [u32; 3]) -> usize {
+        c[0] as usize
+            + self.res[0] as usize * (c[1] as usize + self.res[1] as usize * c[2] as usize)
+    }
+
+    /// Inclusive voxel ranges along each axis that a box overlaps, widened
+    /// by a tiny margin; `None` if the box is empty.
+    #[inline]
+    pub fn cell_range(&self, b: &Aabb) -> Option<([u32; 3], [u32; 3])> {
+        if b.is_empty() {
+            return None;
+        }
+        let mut lo = [0u32; 3];
+        let mut hi = [0u32; 3];
+        for i in 0..3 {
+            let top = (self.res[i] - 1) as f64;
+            let a = (b.min[i] as f64 - self.lo[i]) * self.inv_cell[i] - VOXEL_MARGIN;
+            let z = (b.max[i] as f64 - self.lo[i]) * self.inv_cell[i] + VOXEL_MARGIN;
+            if z < 0.0 || a >= top + 1.0 {
+                return None; // outside the grid
+            }
+            // Clamped to [0, top], truncation is the floor (and cheaper than
+            // the libm call on baseline x86-64).
+            lo[i] = a.clamp(0.0, top) as u32;
+            hi[i] = z.clamp(0.0, top) as u32;
+        }
+        Some((lo, hi))
+    }
+
+    /// The entry and exit distances of a ray through the grid's box, within
+    /// `[t_min, t_max]`; `inv` is 1/d per axis.
+    #[inline]
+    pub fn clip(&self, o: Vec3, d: Vec3, inv: Vec3, t_min: f64, t_max: f64) -> Option<(f64, f64)> {
+        let (mut t0, mut t1) = (t_min, t_max);
+        for i in 0..3 {
+            if d[i] == 0.0 {
+                if o[i] < self.lo[i] || o[i] > self.hi[i] {
+                    return None;
+                }
+                continue;
+            }
+            let mut a = (self.lo[i] - o[i]) * inv[i];
+            let mut b = (self.hi[i] - o[i]) * inv[i];
+            if a > b {
+                std::mem::swap(&mut a, &mut b);
+            }
+            t0 = t0.max(a);
+            t1 = t1.min(b);
+        }
+        (t0 <= t1).then_some((t0, t1))
+    }
+
+    /// The voxel containing a point, clamped to the grid.
+    #[inline]
+    pub fn cell_of(&self, p: Vec3) -> [u32; 3] {
+        let mut c = [0u32; 3];
+        for i in 0..3 {
+            let f = (p[i] - self.lo[i]) * self.inv_cell[i];
+            c[i] = f.clamp(0.0, (self.res[i] - 1) as f64) as u32;
+        }
+        c
+    }
+
+    pub fn cell_size(&self) -> [f64; 3] {
+        self.cell
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,120 @@
+use crate::error::Error;
+use crate::fsutil::{persist, temp_beside};
+use std::io::BufWriter;
+use std::path::Path;
+
+/// One in the frame buffer's fixed point: colours are summed as integers
+/// in units of 2^-32, so a pixel is the same whatever order its
+/// contributions arrive in (threads, workers, passes).
+pub const FIXED_ONE: f64 = 4_294_967_296.0;
+
+/// A colour contribution in fixed point (saturating far outside any real
+/// colour).
+#[inline]
+pub fn to_fixed(c: [f32; 3]) -> [i64; 3] {
+    // Round half away from zero; the cast truncates and saturates.
+    c.map(|x| {
+        let v = x as f64 * FIXED_ONE;
+        (v + 0.5f64.copysign(v)) as i64
+    })
+}
+
+/// Accumulated colour at each pixel corner.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, (width + 1) x (height + 1).
+    pub corners: Vec<[i64; 3]>,
+}
+
+impl Frame {
+    pub fn new(width: u32, height: u32) -> Frame {
+        Frame {
+            width,
+            height,
+            corners: vec![[0; 3]; (width as usize + 1) * (height as usize + 1)],
+        }
+    }
+
+    #[inline]
+    pub fn add(&mut self, corner: u32, c: [i64; 3]) {
+        let s = &mut self.corners[corner as usize];
+        for k in 0..3 {
+            s[k] = s[k].saturating_add(c[k]);
+        }
+    }
+
+    /// 8-bit RGB: each pixel the average of its four corners, clamped to
+    /// [0, 1], scaled to 255 and rounded; no gamma.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut out = Vec::with_capacity(w * h * 3);
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * (w + 1) + x;
+                let q = [i, i + 1, i + w + 1, i + w + 2];
+                for k in 0..3 {
+                    let sum: i128 = q.iter().map(|&j| self.corners[j][k] as i128).sum();
+                    let v = (sum as f64 / (4.0 * FIXED_ONE)).clamp(0.0, 1.0);
+                    out.push((v * 255.0 + 0.5) as u8);
+                }
+            }
+        }
+        out
+    }
+
+    /// Writes a PNG, atomically.
+    pub fn write_png(&self, path: &Path) -> Result<(), Error> {
+        write_png(path, self.width, self.height, &self.to_rgb8())
+    }
+}
+
+/// Writes 8-bit RGB pixels as a PNG, atomically.
+pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), Error> {
+    let tmp = temp_beside(path)?;
+    {
+        let mut enc = png::Encoder::new(BufWriter::new(tmp.as_file()), width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let err = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
+        let mut w = enc.write_header().map_err(err)?;
+        w.write_image_data(rgb).map_err(err)?;
+        w.finish().map_err(err)?;
+    }
+    persist(tmp, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixels_average_four_corners() {
+        let mut f = Frame::new(2, 1);
+        // Corners of row 0: 0 1 2; row 1: 3 4 5.
+        for c in [0, 1, 3, 4] {
+            f.add(c, to_fixed([1.0, 0.5, 0.0]));
+        }
+        f.add(2, to_fixed([2.0, 0.0, 0.0]));
+        let rgb = f.to_rgb8();
+        assert_eq!(&rgb[..3], &[255, 128, 0]);
+        // Second pixel: corners 1, 2, 4, 5 = (1 + 2 + 1 + 0) / 4 = 1 -> 255.
+        assert_eq!(rgb[3], 255);
+        assert_eq!(rgb[4], 64);
+    }
+
+    #[test]
+    fn order_does_not_matter() {
+        let cs = [[0.1f32, 0.2, 0.3], [1e-7, 3.3, 0.7], [0.25, 0.125, 1e-3]];
+        let mut a = Frame::new(1, 1);
+        let mut b = Frame::new(1, 1);
+        for c in cs {
+            a.add(0, to_fixed(c));
+        }
+        for c in cs.iter().rev() {
+            b.add(0, to_fixed(*c));
+        }
+        assert_eq!(a.corners, b.corners);
+    }
+}

@@ -1,0 +1,138 @@
+use crate::error::Error;
+use serde::Serialize;
+
+/// Which tracer runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// In memory, a ray tree at a time (the fast path for scenes that fit).
+    Df,
+    /// Rays in memory, objects streamed from disk (Nakamaru and Ohno).
+    Bf,
+    /// Depth-first when the scene fits in the memory budget, else
+    /// breadth-first (the paper's Fig. 1).
+    Auto,
+}
+
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Mode, String> {
+        match s {
+            "df" => Ok(Mode::Df),
+            "bf" => Ok(Mode::Bf),
+            "auto" => Ok(Mode::Auto),
+            _ => Err(format!("unknown mode '{s}' (expected df, bf or auto)")),
+        }
+    }
+}
+
+/// Arithmetic of the intersection tests.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    Single,
+    Double,
+}
+
+impl std::str::FromStr for Precision {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Precision, String> {
+        match s {
+            "single" | "f32" => Ok(Precision::Single),
+            "double" | "f64" => Ok(Precision::Double),
+            _ => Err(format!(
+                "unknown precision '{s}' (expected single or double)"
+            )),
+        }
+    }
+}
+
+/// Grid resolution: chosen from the scene, or given.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum GridRes {
+    Auto,
+    Fixed([u32; 3]),
+}
+
+impl std::str::FromStr for GridRes {
+    type Err = String;
+    /// `auto`, `N` (N per axis) or `NxMxK`.
+    fn from_str(s: &str) -> Result<GridRes, String> {
+        if s == "auto" {
+            return Ok(GridRes::Auto);
+        }
+        let parts: Vec<&str> = s.split('x').collect();
+        let nums: Result<Vec<u32>, _> = parts.iter().map(|p| p.parse::<u32>()).collect();
+        let bad = || format!("grid resolution '{s}' must be auto, N or NxMxK with 1 <= N <= 4096");
+        let nums = nums.map_err(|_| bad())?;
+        if nums.iter().any(|&n| n == 0 || n > 4096) {
+            return Err(bad());
+        }
+        match nums[..] {
+            [n] => Ok(GridRes::Fixed([n, n, n])),
+            [a, b, c] => Ok(GridRes::Fixed([a, b, c])),
+            _ => Err(bad()),
+        }
+    }
+}
+
+/// Everything that shapes a render besides the scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    /// Maximum depth of the ray tree; the eye ray is depth 1.
+    pub max_depth: u8,
+    /// Worker threads (0 = all cores).
+    pub threads: usize,
+    pub grid_res: GridRes,
+    /// Allow the scene to be split into several grids (`--grids 1` = no).
+    pub multiple_grids: bool,
+    pub precision: Precision,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            width: 512,
+            height: 512,
+            max_depth: 5,
+            threads: 0,
+            grid_res: GridRes::Auto,
+            multiple_grids: true,
+            precision: Precision::Double,
+        }
+    }
+}
+
+/// Largest image side accepted.
+pub const MAX_IMAGE_SIDE: u32 = 32_768;
+/// Deepest ray tree accepted.
+pub const MAX_DEPTH: u8 = 64;
+
+impl RenderOptions {
+    pub fn validate(&self) -> Result<(), Error> {
+        if self.width == 0
+            || self.height == 0
+            || self.width > MAX_IMAGE_SIDE
+            || self.height > MAX_IMAGE_SIDE
+        {
+            return Err(Error::Invalid(format!(
+                "image size {}x{} is out of range (1..={MAX_IMAGE_SIDE} per side)",
+                self.width, self.height
+            )));
+        }
+        if self.max_depth == 0 || self.max_depth > MAX_DEPTH {
+            return Err(Error::Invalid(format!(
+                "depth {} is out of range 1..={MAX_DEPTH} (the eye ray is depth 1)",
+                self.max_depth
+            )));
+        }
+        Ok(())
+    }
+
+    /// Number of pixel corners, hence of eye rays.
+    pub fn corners(&self) -> u64 {
+        (self.width as u64 + 1) * (self.height as u64 + 1)
+    }
+}

@@ -1,0 +1,86 @@
+use crate::scene::ShapeKind;
+use serde::Serialize;
+use std::ops::AddAssign;
+
+/// Ray/primitive tests by primitive kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct KindCounts {
+    pub sphere: u64,
+    pub polygon: u64,
+    pub patch: u64,
+    pub cone: u64,
+}
+
+impl KindCounts {
+    #[inline(always)]
+    pub fn add(&mut self, k: ShapeKind) {
+        match k {
+            ShapeKind::Sphere => self.sphere += 1,
+            ShapeKind::Polygon => self.polygon += 1,
+            ShapeKind::Patch => self.patch += 1,
+            ShapeKind::Cone => self.cone += 1,
+        }
+    }
+    pub fn total(&self) -> u64 {
+        self.sphere + self.polygon + self.patch + self.cone
+    }
+}
+
+impl AddAssign for KindCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.sphere += o.sphere;
+        self.polygon += o.polygon;
+        self.patch += o.patch;
+        self.cone += o.cone;
+    }
+}
+
+/// The SPD's statistics: the same for every tracer on the same scene.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct RayCounts {
+    pub eye_rays: u64,
+    pub eye_hit_rays: u64,
+    pub reflect_rays: u64,
+    pub refract_rays: u64,
+    pub shadow_rays: u64,
+}
+
+impl AddAssign for RayCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.eye_rays += o.eye_rays;
+        self.eye_hit_rays += o.eye_hit_rays;
+        self.reflect_rays += o.reflect_rays;
+        self.refract_rays += o.refract_rays;
+        self.shadow_rays += o.shadow_rays;
+    }
+}
+
+/// Everything `--stats` reports. Fields that only one tracer has are
+/// omitted for the other.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RenderStats {
+    pub mode: String,
+    pub mode_reason: String,
+    pub objects: u64,
+    pub width: u32,
+    pub height: u32,
+    pub depth: u8,
+    pub threads: usize,
+    pub precision: String,
+    pub epsilon: f64,
+    #[serde(flatten)]
+    pub rays: RayCounts,
+    pub intersection_tests: u64,
+    pub intersection_tests_by_kind: KindCounts,
+    /// Resolution of the main grid.
+    pub grid_res: [u32; 3],
+    /// Every grid: objects, resolution, bounds.
+    pub grids: Vec<crate::grid::GridStat>,
+    pub convert_seconds: f64,
+    pub preprocess_seconds: f64,
+    pub trace_seconds: f64,
+    pub total_seconds: f64,
+    pub peak_rss_bytes: u64,
+    #[serde(flatten)]
+    pub breadth_first: Option<serde_json::Value>,
+}
