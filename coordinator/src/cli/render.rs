@@ -30,6 +30,9 @@ pub struct RenderArgs {
     /// Grid resolution: auto, N (per axis) or NxMxK
     #[arg(long, default_value = "auto")]
     pub grid_res: GridRes,
+    /// Voxels per object when the grid resolution is auto
+    #[arg(long, default_value_t = sray_engine::df::GRID_DENSITY)]
+    pub grid_density: f64,
     /// Grids: auto (set huge objects apart in their own grid) or 1
     #[arg(long, default_value = "auto", value_parser = parse_grids)]
     pub grids: bool,
@@ -75,6 +78,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             max_depth: a.depth,
             threads: a.threads.unwrap_or(0),
             grid_res: a.grid_res,
+            grid_density: a.grid_density,
             multiple_grids: a.grids,
             precision: a.precision,
         },

@@ -89,7 +89,7 @@ impl<'t> DfScene<'t> {
         for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
             let res = match (g, opts.grid_res) {
                 (0, GridRes::Fixed(r)) => r,
-                _ => choose_resolution(bounds, count, GRID_DENSITY, MAX_CELLS),
+                _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
             grids.push(ObjectGrid::build(&bboxes, bounds, res, |b| {
                 plan.partition.group(b) == g

@@ -181,6 +181,14 @@ fn trace<R: Real>(
     );
 }
 
+/// The best hit so far, and the bound a test must beat: just above the
+/// best distance, so that an exact tie is seen and goes to the smaller id.
+struct Best<R> {
+    t: f64,
+    id: u32,
+    upper: R,
+}
+
 /// The nearest hit beyond `t_min`: smallest distance, ties to the smaller
 /// object id. Grids are walked voxel by voxel and left as soon as the best
 /// hit lies before the current voxel's far side.
@@ -196,54 +204,70 @@ fn nearest<R: Real>(
     let q = RayQ::<R>::with_inverse(o.cast(), d.cast(), inv.cast());
     let stamp = sc.next_stamp();
     let rmin = R::from_f64(t_min);
-    let mut best_t = f64::INFINITY;
-    let mut best_id = NO_OBJECT;
+    let mut best = Best {
+        t: f64::INFINITY,
+        id: NO_OBJECT,
+        upper: R::INFINITY,
+    };
     // The large objects' grid first: one ground polygon found early prunes
     // the walk through the main grid.
-    let test = |sc: &mut Scratch, id: u32, best_t: &mut f64, best_id: &mut u32| {
-        let m = &mut sc.mail[id as usize];
-        if *m == stamp {
-            return;
-        }
-        *m = stamp;
-        let shape = &s.shapes[id as usize];
-        sc.tests.add(shape.kind());
-        let upper = if best_t.is_finite() {
-            R::from_f64(*best_t).next_up()
-        } else {
-            R::INFINITY
-        };
-        if let Some(t) =
-            intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], &q, rmin, upper)
-        {
-            let t = t.to_f64();
-            if t < *best_t || (t == *best_t && id < *best_id) {
-                *best_t = t;
-                *best_id = id;
-            }
-        }
-    };
     for g in s.grids.iter().rev() {
         if g.single_cell() {
             // A one-voxel grid (a few large objects): no walk needed.
             for &id in g.cell(0) {
-                test(sc, id, &mut best_t, &mut best_id);
+                test_nearest(s, sc, stamp, &q, rmin, id, &mut best);
             }
             continue;
         }
-        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best_t.next_up()) else {
+        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.t.next_up()) else {
             continue;
         };
         loop {
-            for &id in g.cell(g.spec.index(w.cell)) {
-                test(sc, id, &mut best_t, &mut best_id);
+            for &id in g.cell(w.index) {
+                test_nearest(s, sc, stamp, &q, rmin, id, &mut best);
             }
-            if best_t < w.t_exit() || !w.advance(&g.spec) {
+            if (best.id != NO_OBJECT && best.t < w.t_exit()) || !w.advance() {
                 break;
             }
         }
     }
-    (best_id != NO_OBJECT).then_some((best_t, best_id))
+    (best.id != NO_OBJECT).then_some((best.t, best.id))
+}
+
+/// Tests one candidate for the nearest hit, unless this ray tested it
+/// already (mailbox).
+#[inline(always)]
+fn test_nearest<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch,
+    stamp: u32,
+    q: &RayQ<R>,
+    rmin: R,
+    id: u32,
+    best: &mut Best<R>,
+) {
+    let m = &mut sc.mail[id as usize];
+    if *m == stamp {
+        return;
+    }
+    *m = stamp;
+    let shape = &s.shapes[id as usize];
+    sc.tests.add(shape.kind());
+    if let Some(t) = intersect_prepared(
+        shape,
+        s.prep(id),
+        &s.bboxes[id as usize],
+        q,
+        rmin,
+        best.upper,
+    ) {
+        let t = t.to_f64();
+        if t < best.t || (t == best.t && id < best.id) {
+            best.t = t;
+            best.id = id;
+            best.upper = R::from_f64(t).next_up();
+        }
+    }
 }
 
 /// Whether anything lies between `t_min` and `t_max` along the ray; tries
@@ -264,41 +288,14 @@ fn occluded<R: Real>(
     let stamp = sc.next_stamp();
     let (rmin, rmax) = (R::from_f64(t_min), R::from_f64(t_max));
     let cached = sc.shadow_cache[slot];
-    if cached != NO_OBJECT {
-        sc.mail[cached as usize] = stamp;
-        let shape = &s.shapes[cached as usize];
-        sc.tests.add(shape.kind());
-        if intersect_prepared(
-            shape,
-            s.prep(cached),
-            &s.bboxes[cached as usize],
-            &q,
-            rmin,
-            rmax,
-        )
-        .is_some()
-        {
-            return true;
-        }
+    if cached != NO_OBJECT && blocks(s, sc, stamp, &q, rmin, rmax, cached) {
+        return true;
     }
-    let blocks = |sc: &mut Scratch, id: u32| -> bool {
-        let m = &mut sc.mail[id as usize];
-        if *m == stamp {
-            return false;
-        }
-        *m = stamp;
-        let shape = &s.shapes[id as usize];
-        sc.tests.add(shape.kind());
-        if intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], &q, rmin, rmax).is_some() {
-            sc.shadow_cache[slot] = id;
-            return true;
-        }
-        false
-    };
     for g in s.grids.iter().rev() {
         if g.single_cell() {
             for &id in g.cell(0) {
-                if blocks(sc, id) {
+                if blocks(s, sc, stamp, &q, rmin, rmax, id) {
+                    sc.shadow_cache[slot] = id;
                     return true;
                 }
             }
@@ -308,15 +305,38 @@ fn occluded<R: Real>(
             continue;
         };
         loop {
-            for &id in g.cell(g.spec.index(w.cell)) {
-                if blocks(sc, id) {
+            for &id in g.cell(w.index) {
+                if blocks(s, sc, stamp, &q, rmin, rmax, id) {
+                    sc.shadow_cache[slot] = id;
                     return true;
                 }
             }
-            if !w.advance(&g.spec) {
+            if !w.advance() {
                 break;
             }
         }
     }
     false
+}
+
+/// Whether object `id` blocks the shadow ray, unless tested already.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn blocks<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch,
+    stamp: u32,
+    q: &RayQ<R>,
+    rmin: R,
+    rmax: R,
+    id: u32,
+) -> bool {
+    let m = &mut sc.mail[id as usize];
+    if *m == stamp {
+        return false;
+    }
+    *m = stamp;
+    let shape = &s.shapes[id as usize];
+    sc.tests.add(shape.kind());
+    intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], q, rmin, rmax).is_some()
 }

@@ -6,7 +6,9 @@ use crate::math::Vec3;
 /// keep it with the ray between passes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Dda {
-    pub cell: [u32; 3],
+    /// The current voxel and its linear index in the grid.
+    pub cell: [i32; 3],
+    pub index: usize,
     /// Distance at which the ray enters the current voxel.
     pub t_enter: f64,
     /// Distance to the next voxel face on each axis.
@@ -14,7 +16,11 @@ pub struct Dda {
     t_delta: [f64; 3],
     /// Where the walk ends (the grid's far side, or the ray's end).
     pub t_end: f64,
-    step: [i8; 3],
+    /// Voxel step per axis (-1, 0, 1), the index change it makes, and the
+    /// voxel coordinate that means "left the grid".
+    step: [i32; 3],
+    stride: [isize; 3],
+    out: [i32; 3],
 }
 
 impl Dda {
@@ -23,29 +29,41 @@ impl Dda {
     #[inline]
     pub fn start(g: &GridSpec, o: Vec3, d: Vec3, inv: Vec3, t_min: f64, t_max: f64) -> Option<Dda> {
         let (t0, t1) = g.clip(o, d, inv, t_min, t_max)?;
-        let cell = g.cell_of(o + d * t0);
+        let c = g.cell_of(o + d * t0);
         let cs = g.cell_size();
+        let strides = [
+            1isize,
+            g.res[0] as isize,
+            g.res[0] as isize * g.res[1] as isize,
+        ];
         let mut t_next = [f64::INFINITY; 3];
         let mut t_delta = [f64::INFINITY; 3];
-        let mut step = [0i8; 3];
+        let mut step = [0i32; 3];
+        let mut stride = [0isize; 3];
+        let mut out = [-1i32; 3];
         for i in 0..3 {
             if d[i] > 0.0 {
                 step[i] = 1;
-                t_next[i] = (g.lo[i] + (cell[i] + 1) as f64 * cs[i] - o[i]) * inv[i];
+                out[i] = g.res[i] as i32;
+                t_next[i] = (g.lo[i] + (c[i] + 1) as f64 * cs[i] - o[i]) * inv[i];
                 t_delta[i] = cs[i] * inv[i];
             } else if d[i] < 0.0 {
                 step[i] = -1;
-                t_next[i] = (g.lo[i] + cell[i] as f64 * cs[i] - o[i]) * inv[i];
+                t_next[i] = (g.lo[i] + c[i] as f64 * cs[i] - o[i]) * inv[i];
                 t_delta[i] = -cs[i] * inv[i];
             }
+            stride[i] = step[i] as isize * strides[i];
         }
         Some(Dda {
-            cell,
+            cell: [c[0] as i32, c[1] as i32, c[2] as i32],
+            index: g.index(c),
             t_enter: t0,
             t_next,
             t_delta,
             t_end: t1,
             step,
+            stride,
+            out,
         })
     }
 
@@ -60,8 +78,8 @@ impl Dda {
 
     /// Moves to the next voxel; `false` when the walk has left the grid or
     /// passed its end.
-    #[inline]
-    pub fn advance(&mut self, g: &GridSpec) -> bool {
+    #[inline(always)]
+    pub fn advance(&mut self) -> bool {
         let axis = if self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2] {
             0
         } else if self.t_next[1] <= self.t_next[2] {
@@ -70,16 +88,27 @@ impl Dda {
             2
         };
         let t = self.t_next[axis];
-        if t >= self.t_end || self.step[axis] == 0 {
+        if t >= self.t_end {
             return false;
         }
-        let c = self.cell[axis] as i64 + self.step[axis] as i64;
-        if c < 0 || c >= g.res[axis] as i64 {
+        let c = self.cell[axis] + self.step[axis];
+        if c == self.out[axis] {
             return false;
         }
-        self.cell[axis] = c as u32;
+        self.cell[axis] = c;
+        self.index = (self.index as isize + self.stride[axis]) as usize;
         self.t_enter = t;
         self.t_next[axis] += self.t_delta[axis];
         true
+    }
+
+    /// The current voxel's coordinates.
+    #[inline(always)]
+    pub fn voxel(&self) -> [u32; 3] {
+        [
+            self.cell[0] as u32,
+            self.cell[1] as u32,
+            self.cell[2] as u32,
+        ]
     }
 }

@@ -14,8 +14,9 @@ fn walk(g: &GridSpec, o: [f64; 3], d: [f64; 3]) -> Vec<[u32; 3]> {
     let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
     if let Some(mut w) = Dda::start(g, V3::from_f64(o), d, inv, 0.0, f64::INFINITY) {
         loop {
-            v.push(w.cell);
-            if !w.advance(g) {
+            v.push(w.voxel());
+            assert_eq!(w.index, g.index(w.voxel()));
+            if !w.advance() {
                 break;
             }
         }

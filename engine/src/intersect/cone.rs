@@ -33,7 +33,7 @@ pub fn frame<R: Real>(base: [f32; 3], r0: f32, apex: [f32; 3], r1: f32) -> Optio
 /// Open cone or cylinder between two discs, no caps: points whose distance
 /// from the axis is r0 + slope * s at height s in [0, len]. The frame is
 /// computed once per cone, in double precision.
-#[inline]
+#[inline(always)]
 pub fn intersect<R: Real>(
     f64frame: &ConeFrame<f64>,
     ray: &RayQ<R>,

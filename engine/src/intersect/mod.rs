@@ -74,7 +74,7 @@ pub fn intersect<R: Real>(
 /// As [`intersect`], with `prep = prepare(shape)` computed beforehand.
 /// Costly kinds (cones, many-sided polygons) are first culled against the
 /// box.
-#[inline]
+#[inline(always)]
 pub fn intersect_prepared<R: Real>(
     shape: &Shape<'_>,
     prep: &Prepared,
@@ -83,27 +83,27 @@ pub fn intersect_prepared<R: Real>(
     t_min: R,
     t_max: R,
 ) -> Option<R> {
-    match (*shape, prep) {
-        (Shape::Sphere { center, radius }, _) => {
-            sphere::intersect(center, radius, ray, t_min, t_max)
-        }
-        (Shape::Polygon { vertices }, Prepared::Polygon(pl)) => {
-            if vertices.len() > 4 && !ray.may_hit_box(bbox, t_min, t_max) {
-                return None;
+    match shape {
+        Shape::Sphere { center, radius } => sphere::intersect(*center, *radius, ray, t_min, t_max),
+        Shape::Polygon { vertices } => match prep {
+            Prepared::Polygon(pl) => {
+                if vertices.len() > 4 && !ray.may_hit_box(bbox, t_min, t_max) {
+                    return None;
+                }
+                polygon::intersect(vertices, pl, ray, t_min, t_max)
             }
-            polygon::intersect(vertices, pl, ray, t_min, t_max)
-        }
-        (Shape::Polygon { vertices }, _) => {
-            triangle::intersect(vertices[0], vertices[1], vertices[2], ray, t_min, t_max)
-        }
-        (Shape::Patch { vertices, .. }, _) => triangle::intersect_fan(vertices, ray, t_min, t_max),
-        (Shape::Cone { .. }, Prepared::Cone(f)) => {
-            if !ray.may_hit_box(bbox, t_min, t_max) {
-                return None;
+            _ => triangle::intersect(vertices[0], vertices[1], vertices[2], ray, t_min, t_max),
+        },
+        Shape::Patch { vertices, .. } => triangle::intersect_fan(vertices, ray, t_min, t_max),
+        Shape::Cone { .. } => match prep {
+            Prepared::Cone(f) => {
+                if !ray.may_hit_box(bbox, t_min, t_max) {
+                    return None;
+                }
+                cone::intersect(f, ray, t_min, t_max)
             }
-            cone::intersect(f, ray, t_min, t_max)
-        }
-        (Shape::Cone { .. }, _) => None,
+            _ => None,
+        },
     }
 }
 

@@ -50,7 +50,7 @@ pub fn plane(v: &[[f32; 3]]) -> PolygonPlane {
 /// (Haines, Graphics Gems IV) in the projection that drops the normal's
 /// largest axis. Edges count half-open in the projected v direction, so a
 /// point on a vertex is decided consistently.
-#[inline]
+#[inline(always)]
 pub fn intersect<R: Real>(
     v: &[[f32; 3]],
     pl: &PolygonPlane,

@@ -8,7 +8,7 @@ use crate::math::{Real, V3};
 /// Intersection", Ray Tracing Gems, 2019) so that a small sphere far away
 /// keeps its precision, and the roots are taken without cancellation, so a
 /// ray leaving the surface finds the other side and not itself.
-#[inline]
+#[inline(always)]
 pub fn intersect<R: Real>(
     center: [f32; 3],
     radius: f32,

@@ -1,14 +1,31 @@
 use super::RayQ;
-use crate::math::{Real, V3};
+use crate::math::Real;
+
+/// A point relative to the ray origin, as an array padded to four so that
+/// indexing it by an axis masked with `& 3` needs no bounds check.
+#[inline(always)]
+fn rel<R: Real>(v: [f32; 3], o: &[R; 4]) -> [R; 4] {
+    [
+        R::from_f32(v[0]) - o[0],
+        R::from_f32(v[1]) - o[1],
+        R::from_f32(v[2]) - o[2],
+        R::ZERO,
+    ]
+}
 
 /// Edge functions of the watertight test: the ray's view of the triangle
 /// after shearing the ray direction onto +z.
 #[inline(always)]
 fn edges<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>) -> ([R; 3], [R; 3]) {
-    let (kx, ky, kz) = (ray.kx as usize, ray.ky as usize, ray.kz as usize);
-    let a = V3::<R>::from_f32(v0) - ray.o;
-    let b = V3::<R>::from_f32(v1) - ray.o;
-    let c = V3::<R>::from_f32(v2) - ray.o;
+    let (kx, ky, kz) = (
+        ray.kx as usize & 3,
+        ray.ky as usize & 3,
+        ray.kz as usize & 3,
+    );
+    let o = [ray.o.x, ray.o.y, ray.o.z, R::ZERO];
+    let a = rel(v0, &o);
+    let b = rel(v1, &o);
+    let c = rel(v2, &o);
     let ax = a[kx] - ray.sx * a[kz];
     let ay = a[ky] - ray.sy * a[kz];
     let bx = b[kx] - ray.sx * b[kz];
@@ -23,7 +40,7 @@ fn edges<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>) -> ([
 
 /// Watertight ray/triangle test: a ray through a shared edge or vertex hits
 /// at least one of the triangles sharing it, so meshes have no cracks.
-#[inline]
+#[inline(always)]
 pub fn intersect<R: Real>(
     v0: [f32; 3],
     v1: [f32; 3],
@@ -60,7 +77,7 @@ pub fn weights<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>)
 
 /// A polygon with vertex normals as a fan of triangles about its first
 /// vertex (the SPD writes only triangles; this also covers larger patches).
-#[inline]
+#[inline(always)]
 pub fn intersect_fan<R: Real>(v: &[[f32; 3]], ray: &RayQ<R>, t_min: R, mut t_max: R) -> Option<R> {
     let mut best = None;
     for i in 1..v.len() - 1 {

@@ -160,7 +160,8 @@ impl<T: Real> Index<usize> for V3<T> {
         match i {
             0 => &self.x,
             1 => &self.y,
-            _ => &self.z,
+            2 => &self.z,
+            _ => panic!("V3 index {i} out of range"),
         }
     }
 }

@@ -55,8 +55,13 @@ impl Frame {
                 let i = y * (w + 1) + x;
                 let q = [i, i + 1, i + w + 1, i + w + 2];
                 for k in 0..3 {
-                    let sum: i128 = q.iter().map(|&j| self.corners[j][k] as i128).sum();
-                    let v = (sum as f64 / (4.0 * FIXED_ONE)).clamp(0.0, 1.0);
+                    // Each corner is clamped to a sane range first, so the
+                    // sum of four fits in an i64.
+                    let sum: i64 = q
+                        .iter()
+                        .map(|&j| self.corners[j][k].clamp(-(1 << 60), 1 << 60))
+                        .sum();
+                    let v = (sum as f64 * (1.0 / (4.0 * FIXED_ONE))).clamp(0.0, 1.0);
                     out.push((v * 255.0 + 0.5) as u8);
                 }
             }
@@ -77,6 +82,7 @@ pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(),
         let mut enc = png::Encoder::new(BufWriter::new(tmp.as_file()), width, height);
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
         let err = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
         let mut w = enc.write_header().map_err(err)?;
         w.write_image_data(rgb).map_err(err)?;

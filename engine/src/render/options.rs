@@ -86,6 +86,8 @@ pub struct RenderOptions {
     /// Worker threads (0 = all cores).
     pub threads: usize,
     pub grid_res: GridRes,
+    /// Voxels per object when the resolution is chosen automatically.
+    pub grid_density: f64,
     /// Allow the scene to be split into several grids (`--grids 1` = no).
     pub multiple_grids: bool,
     pub precision: Precision,
@@ -99,6 +101,7 @@ impl Default for RenderOptions {
             max_depth: 5,
             threads: 0,
             grid_res: GridRes::Auto,
+            grid_density: crate::df::GRID_DENSITY,
             multiple_grids: true,
             precision: Precision::Double,
         }
@@ -120,6 +123,12 @@ impl RenderOptions {
             return Err(Error::Invalid(format!(
                 "image size {}x{} is out of range (1..={MAX_IMAGE_SIDE} per side)",
                 self.width, self.height
+            )));
+        }
+        if !(self.grid_density > 0.0 && self.grid_density <= 1000.0) {
+            return Err(Error::Invalid(format!(
+                "grid density {} is out of range (0, 1000] voxels per object",
+                self.grid_density
             )));
         }
         if self.max_depth == 0 || self.max_depth > MAX_DEPTH {
