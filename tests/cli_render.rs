@@ -1,0 +1,167 @@
+//! `sray render` as a user runs it.
+
+mod common;
+
+use common::{fails, json, ok, shared_spd};
+
+const COUNTS: [&str; 6] = [
+    "eye_rays",
+    "eye_hit_rays",
+    "reflect_rays",
+    "refract_rays",
+    "shadow_rays",
+    "intersection_tests",
+];
+
+/// The seven shared NFF files and the same scenes generated on the fly
+/// render to identical images with identical counts.
+#[test]
+fn nff_and_spd_routes_render_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (name, size) in [
+        ("balls", 4),
+        ("gears", 4),
+        ("mount", 6),
+        ("rings", 7),
+        ("tetra", 6),
+        ("tree", 11),
+        ("teapot", 12),
+    ] {
+        let nff = shared_spd().join(format!("{name}{size}.nff"));
+        let spd = format!("spd:{name}:{size}");
+        let small = ["--width", "96", "--height", "96", "--mode", "df"];
+        let mut a = vec![
+            "render",
+            nff.to_str().unwrap(),
+            "-o",
+            "a.png",
+            "--stats",
+            "a.json",
+        ];
+        a.extend(small);
+        let mut b = vec!["render", spd.as_str(), "-o", "b.png", "--stats", "b.json"];
+        b.extend(small);
+        ok(d, &a);
+        ok(d, &b);
+        let (ia, ib) = (
+            std::fs::read(d.join("a.png")).unwrap(),
+            std::fs::read(d.join("b.png")).unwrap(),
+        );
+        assert!(ia == ib, "{name}: images differ between {nff:?} and {spd}");
+        let sa = json(&std::fs::read_to_string(d.join("a.json")).unwrap());
+        let sb = json(&std::fs::read_to_string(d.join("b.json")).unwrap());
+        for k in COUNTS {
+            assert_eq!(sa[k], sb[k], "{name}: {k}");
+        }
+        assert_eq!(sa["eye_rays"], 97 * 97);
+        assert!(
+            sa["eye_hit_rays"].as_u64().unwrap() > 0,
+            "{name}: nothing hit"
+        );
+    }
+}
+
+#[test]
+fn stats_have_the_promised_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        d,
+        &[
+            "render",
+            "spd:tetra:3",
+            "-o",
+            "t.png",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--stats",
+            "s.json",
+        ],
+    );
+    let s = json(&std::fs::read_to_string(d.join("s.json")).unwrap());
+    for k in [
+        "mode",
+        "objects",
+        "eye_rays",
+        "eye_hit_rays",
+        "reflect_rays",
+        "refract_rays",
+        "shadow_rays",
+        "intersection_tests",
+        "intersection_tests_by_kind",
+        "grid_res",
+        "preprocess_seconds",
+        "trace_seconds",
+        "total_seconds",
+        "peak_rss_bytes",
+    ] {
+        assert!(!s[k].is_null(), "missing {k}: {s}");
+    }
+    assert_eq!(s["mode"], "df");
+    assert_eq!(s["objects"], 64);
+    assert_eq!(s["grid_res"].as_array().unwrap().len(), 3);
+    let by_kind = &s["intersection_tests_by_kind"];
+    let sum: u64 = ["sphere", "polygon", "patch", "cone"]
+        .iter()
+        .map(|k| by_kind[k].as_u64().unwrap())
+        .sum();
+    assert_eq!(sum, s["intersection_tests"].as_u64().unwrap());
+    assert!(s["peak_rss_bytes"].as_u64().unwrap() > 1 << 20);
+    // The PNG is what was asked for.
+    let png = std::fs::read(d.join("t.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 32);
+}
+
+#[test]
+fn failures_leave_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("bad.nff"),
+        "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\ns 0 0 0\n",
+    )
+    .unwrap();
+    let err = fails(d, &["render", "bad.nff", "-o", "x.png"]);
+    assert!(err.contains("bad.nff:6:"), "{err}");
+    let err = fails(d, &["render", "spd:balls:1", "-o", "x.png", "--width", "0"]);
+    assert!(err.contains("image size"), "{err}");
+    let err = fails(d, &["render", "spd:balls:1", "-o", "x.png", "--depth", "0"]);
+    assert!(err.contains("depth"), "{err}");
+    let err = fails(
+        d,
+        &["render", "spd:balls:1", "-o", "x.png", "--grid-res", "0"],
+    );
+    assert!(err.contains("grid resolution"), "{err}");
+    let err = fails(
+        d,
+        &["render", "spd:balls:1", "-o", "x.png", "--threads", "0"],
+    );
+    assert!(err.contains("threads"), "{err}");
+    let err = fails(
+        d,
+        &[
+            "render",
+            "spd:balls:1",
+            "-o",
+            "/nonexistent-dir/x.png",
+            "--width",
+            "8",
+            "--height",
+            "8",
+        ],
+    );
+    assert!(err.contains("/nonexistent-dir/x.png"), "{err}");
+    let left: Vec<_> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(
+        left,
+        vec![std::ffi::OsString::from("bad.nff")],
+        "files left behind"
+    );
+}
