@@ -22,7 +22,7 @@ use std::time::Instant;
 const PLAIN: u32 = u32::MAX;
 
 /// Voxels per object of the automatic grid resolution.
-pub const GRID_DENSITY: f64 = 2.0;
+pub const GRID_DENSITY: f64 = 4.0;
 /// Most voxels a depth-first grid may have.
 pub const MAX_CELLS: u64 = 1 << 24;
 

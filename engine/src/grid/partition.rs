@@ -1,32 +1,48 @@
 //! How a scene is split into grids, and how fine each grid is.
+//!
+//! One grid suits a uniform scene. A few huge objects (a ground polygon, a
+//! wall) beside many small ones would stretch a single grid over empty
+//! space, so they get a grid of their own (the paper's Section 2.4: objects
+//! grouped into several grids, results merged per ray).
+//!
+//! Groups are ranges of size classes (see [`crate::scene::SizeSummary`]),
+//! decided from the database's size summary alone, so no scan is needed.
+//! (Grouping by size more finely, e.g. the sphereflake's big spheres apart
+//! from its tiny ones, was measured and cost more in extra grid walks than
+//! it saved; see BENCHMARKS.md.)
 
 use super::GridSpec;
 use crate::scene::{Aabb, SIZE_CLASSES, SizeSummary, size_class};
 use serde::Serialize;
 
-/// Which objects go in which grid.
+/// Which objects go in which grid: group `g` holds the objects whose size
+/// class is at least `bounds[g - 1]` and below `bounds[g]` (open-ended at
+/// both ends).
 #[derive(Clone, Debug, PartialEq)]
-pub enum Partition {
-    /// Every object in one grid.
-    One,
-    /// Objects whose size class is `threshold` or more form a second group:
-    /// the few huge objects (ground polygons, walls) that would otherwise
-    /// stretch the grid over empty space.
-    Large { threshold: u8 },
+pub struct Partition {
+    /// Ascending class boundaries; empty for a single grid.
+    pub splits: Vec<u8>,
 }
 
 impl Partition {
-    /// Group of an object: 0 for the main grid, 1 for the large objects.
+    pub fn one() -> Partition {
+        Partition { splits: Vec::new() }
+    }
+
+    /// Group of an object with bounding box `b`.
     #[inline]
     pub fn group(&self, b: &Aabb) -> usize {
-        match *self {
-            Partition::One => 0,
-            Partition::Large { threshold } => (size_class(b) >= threshold) as usize,
-        }
+        let c = size_class(b);
+        self.splits.iter().take_while(|&&s| c >= s).count()
+    }
+
+    pub fn groups(&self) -> usize {
+        self.splits.len() + 1
     }
 }
 
-/// The grids of a scene: bounds and object count per group.
+/// The grids of a scene: bounds and object count per group, smallest
+/// objects first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GroupPlan {
     pub partition: Partition,
@@ -34,32 +50,47 @@ pub struct GroupPlan {
     pub counts: Vec<u64>,
 }
 
-/// At most this share of the objects may be set apart as large.
-const MAX_LARGE_SHARE: f64 = 0.01;
+/// At most this share of the objects may be set apart as huge...
+const MAX_HUGE_SHARE: f64 = 0.01;
 /// ... or this many, for small scenes.
-const MAX_LARGE_FEW: u64 = 8;
-/// The split is worth it when the rest spans at most this fraction of the
-/// whole scene's diagonal.
+const MAX_HUGE_FEW: u64 = 8;
+/// Setting the huge objects apart is worth it when the rest spans at most
+/// this fraction of the whole scene's diagonal.
 const SHRINK: f64 = 0.5;
-
-/// Decides whether to set the largest objects apart, from the size summary:
-/// the largest size classes form the second group when they hold few
-/// objects and leaving them out shrinks the main grid's box by at least
-/// half. `allow_split = false` (`--grids 1`) keeps one grid.
+/// Plans the grids from the size summary. `allow_split = false`
+/// (`--grids 1`) keeps one grid.
 pub fn plan_groups(sizes: &SizeSummary, allow_split: bool) -> GroupPlan {
     let (total, all) = sizes.range(0, SIZE_CLASSES);
-    let one = GroupPlan {
-        partition: Partition::One,
-        bounds: vec![all],
-        counts: vec![total],
-    };
-    if !allow_split || total < 2 {
-        return one;
+    let mut splits = Vec::new();
+    if allow_split && total >= 2 {
+        if let Some(k) = huge_split(sizes, total, &all) {
+            splits.push(k);
+        }
     }
-    let limit = MAX_LARGE_FEW.max((total as f64 * MAX_LARGE_SHARE) as u64);
+    let mut edges = vec![0usize];
+    edges.extend(splits.iter().map(|&s| s as usize));
+    edges.push(SIZE_CLASSES);
+    let mut bounds = Vec::new();
+    let mut counts = Vec::new();
+    for w in edges.windows(2) {
+        let (n, b) = sizes.range(w[0], w[1]);
+        counts.push(n);
+        bounds.push(b);
+    }
+    GroupPlan {
+        partition: Partition { splits },
+        bounds,
+        counts,
+    }
+}
+
+/// The smallest size class of the huge objects, if setting them apart
+/// pays: the largest classes, few objects, and leaving them out shrinks
+/// the rest's box to at most half the scene's diagonal.
+fn huge_split(sizes: &SizeSummary, total: u64, all: &Aabb) -> Option<u8> {
+    let limit = MAX_HUGE_FEW.max((total as f64 * MAX_HUGE_SHARE) as u64);
     let full = all.diagonal();
     let mut best: Option<(f64, u8)> = None;
-    // Try setting apart classes >= k, from the largest class down.
     for k in (1..SIZE_CLASSES).rev() {
         let (large, _) = sizes.range(k, SIZE_CLASSES);
         if large == 0 {
@@ -80,18 +111,7 @@ pub fn plan_groups(sizes: &SizeSummary, allow_split: bool) -> GroupPlan {
             best = Some((d, k as u8));
         }
     }
-    match best {
-        None => one,
-        Some((_, k)) => {
-            let (nl, bl) = sizes.range(k as usize, SIZE_CLASSES);
-            let (nr, br) = sizes.range(0, k as usize);
-            GroupPlan {
-                partition: Partition::Large { threshold: k },
-                bounds: vec![br, bl],
-                counts: vec![nr, nl],
-            }
-        }
-    }
+    best.map(|(_, k)| k)
 }
 
 /// Grid resolution for `objects` objects in `bounds`: about `density`
