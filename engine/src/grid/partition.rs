@@ -62,10 +62,11 @@ const SHRINK: f64 = 0.5;
 pub fn plan_groups(sizes: &SizeSummary, allow_split: bool) -> GroupPlan {
     let (total, all) = sizes.range(0, SIZE_CLASSES);
     let mut splits = Vec::new();
-    if allow_split && total >= 2 {
-        if let Some(k) = huge_split(sizes, total, &all) {
-            splits.push(k);
-        }
+    if allow_split
+        && total >= 2
+        && let Some(k) = huge_split(sizes, total, &all)
+    {
+        splits.push(k);
     }
     let mut edges = vec![0usize];
     edges.extend(splits.iter().map(|&s| s as usize));
