@@ -1,7 +1,8 @@
 //! One render, start to finish: resolve the scene into an object database,
 //! pick the tracer, trace, write the image and statistics.
 
-use anyhow::{Context, bail};
+use anyhow::Context;
+use sray_engine::bf::{self, BfOptions, StoreNumber, fmt_bytes};
 use sray_engine::df;
 use sray_engine::progress::Progress;
 use sray_engine::render::{Frame, Mode, RenderOptions, RenderStats};
@@ -16,7 +17,11 @@ pub struct RenderRequest {
     pub scene: SceneSource,
     pub options: RenderOptions,
     pub mode: Mode,
-    /// Where temporary databases go (default: the system's temp dir).
+    /// Memory budget in bytes (default: half of the available memory).
+    pub memory: Option<u64>,
+    pub store: StoreNumber,
+    /// Where temporary databases and spilled rays go (default: the system's
+    /// temp dir).
     pub tmp_dir: Option<PathBuf>,
 }
 
@@ -72,31 +77,71 @@ pub fn prepare(
     })
 }
 
+/// Picks the tracer: as asked, or for `auto` depth-first when the scene
+/// fits in the budget (the paper's Fig. 1). Returns the mode and why.
+pub fn choose_mode(mode: Mode, db: &Database, memory: u64) -> (Mode, String) {
+    match mode {
+        Mode::Df => (Mode::Df, "requested with --mode df".into()),
+        Mode::Bf => (Mode::Bf, "requested with --mode bf".into()),
+        Mode::Auto => {
+            let need = df::estimate_bytes(db);
+            if need <= memory {
+                (
+                    Mode::Df,
+                    format!(
+                        "auto: the scene needs about {} in memory, within the budget of {}",
+                        fmt_bytes(need),
+                        fmt_bytes(memory)
+                    ),
+                )
+            } else {
+                (
+                    Mode::Bf,
+                    format!(
+                        "auto: the scene would need about {} in memory, more than the budget of {}",
+                        fmt_bytes(need),
+                        fmt_bytes(memory)
+                    ),
+                )
+            }
+        }
+    }
+}
+
 /// Renders a request.
 pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<RenderResult> {
     let t0 = Instant::now();
     req.options.validate()?;
+    let memory = req
+        .memory
+        .unwrap_or_else(sray_engine::sys::default_memory_budget);
     let scene = prepare(&req.scene, req.tmp_dir.as_deref(), stages)?;
-    let (mode, reason) = match req.mode {
-        Mode::Df => ("df", "requested with --mode df".to_string()),
-        Mode::Auto => (
-            "df",
-            "auto: the depth-first tracer is the only one built so far".to_string(),
-        ),
-        Mode::Bf => bail!("the breadth-first tracer is not available yet"),
-    };
-    let _ = mode;
+    let (mode, reason) = choose_mode(req.mode, &scene.db, memory);
     let progress = stages.stage("rendering");
-    let out = df::render(&scene.db, &req.options, &*progress)?;
+    let (frame, mut stats) = match mode {
+        Mode::Bf => {
+            let out = bf::render(
+                &scene.db,
+                &req.options,
+                &BfOptions {
+                    memory,
+                    store: req.store,
+                    spill_dir: req.tmp_dir.clone(),
+                },
+                &*progress,
+            )?;
+            (out.frame, out.stats)
+        }
+        _ => {
+            let out = df::render(&scene.db, &req.options, &*progress)?;
+            (out.frame, out.stats)
+        }
+    };
     drop(progress);
-    let mut stats = out.stats;
     stats.mode_reason = reason;
     stats.convert_seconds = scene.convert_seconds;
     stats.total_seconds = t0.elapsed().as_secs_f64();
-    Ok(RenderResult {
-        frame: out.frame,
-        stats,
-    })
+    Ok(RenderResult { frame, stats })
 }
 
 /// Writes the image and, if asked, the statistics (each atomically).

@@ -8,6 +8,7 @@
 //! - [`source`]: scene sources (`.nff`, `.sdb`, `spd:NAME:SIZE`);
 //! - [`info`]: what a scene file holds (`sray info`).
 
+pub mod bf;
 pub mod df;
 pub mod error;
 pub mod fsutil;

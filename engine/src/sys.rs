@@ -29,3 +29,20 @@ pub fn cpus() -> usize {
         .map(|n| n.get())
         .unwrap_or(1)
 }
+
+/// Memory available for new work (Linux `MemAvailable`), or `None`.
+pub fn mem_available_bytes() -> Option<u64> {
+    std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines()
+            .find(|l| l.starts_with("MemAvailable:"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<u64>().ok())
+            .map(|k| k * 1024)
+    })
+}
+
+/// The default memory budget: half of the memory available now (1 GiB if
+/// that is unknown).
+pub fn default_memory_budget() -> u64 {
+    mem_available_bytes().map_or(1 << 30, |m| (m / 2).max(64 << 20))
+}

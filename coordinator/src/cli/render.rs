@@ -3,6 +3,7 @@
 use super::bar::Bar;
 use crate::job::{RenderRequest, Stages, render, write_outputs};
 use clap::Args;
+use sray_engine::bf::StoreNumber;
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
 use sray_engine::source::SceneSource;
@@ -39,6 +40,13 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores)
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Memory budget for everything the render holds (e.g. 64MiB, 2GiB;
+    /// default: half of the available memory)
+    #[arg(long, value_parser = parse_memory)]
+    pub memory: Option<u64>,
+    /// Breadth-first store number: adaptive, or a fixed number of voxels
+    #[arg(long, default_value = "adaptive", value_parser = parse_store)]
+    pub store_number: StoreNumber,
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
@@ -48,6 +56,22 @@ pub struct RenderArgs {
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
+}
+
+fn parse_memory(s: &str) -> Result<u64, String> {
+    sray_engine::bf::parse_bytes(s)
+}
+
+fn parse_store(s: &str) -> Result<StoreNumber, String> {
+    if s == "adaptive" {
+        return Ok(StoreNumber::Adaptive);
+    }
+    match s.parse::<u32>() {
+        Ok(n) if (1..=65_536).contains(&n) => Ok(StoreNumber::Fixed(n)),
+        _ => Err(format!(
+            "--store-number takes adaptive or a number from 1 to 65536, not '{s}'"
+        )),
+    }
 }
 
 fn parse_grids(s: &str) -> Result<bool, String> {
@@ -83,6 +107,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             precision: a.precision,
         },
         mode: a.mode,
+        memory: a.memory,
+        store: a.store_number,
         tmp_dir: a.tmp_dir,
     };
     let result = render(&req, &BarStages)?;

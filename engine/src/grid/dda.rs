@@ -80,6 +80,12 @@ impl Dda {
     /// passed its end.
     #[inline(always)]
     pub fn advance(&mut self) -> bool {
+        self.advance_axis().is_some()
+    }
+
+    /// As [`Dda::advance`], returning the axis stepped along.
+    #[inline(always)]
+    pub fn advance_axis(&mut self) -> Option<usize> {
         let axis = if self.t_next[0] <= self.t_next[1] && self.t_next[0] <= self.t_next[2] {
             0
         } else if self.t_next[1] <= self.t_next[2] {
@@ -89,17 +95,76 @@ impl Dda {
         };
         let t = self.t_next[axis];
         if t >= self.t_end {
-            return false;
+            return None;
         }
         let c = self.cell[axis] + self.step[axis];
         if c == self.out[axis] {
-            return false;
+            return None;
         }
         self.cell[axis] = c;
         self.index = (self.index as isize + self.stride[axis]) as usize;
         self.t_enter = t;
         self.t_next[axis] += self.t_delta[axis];
-        true
+        Some(axis)
+    }
+
+    /// Whether the walk moves up (toward higher voxel coordinates) on `axis`.
+    #[inline(always)]
+    pub fn steps_up(&self, axis: usize) -> bool {
+        self.step[axis] > 0
+    }
+
+    /// The little a walk needs to be resumed later: current voxel, the
+    /// distances to the next faces, and where it ends.
+    #[inline]
+    pub fn save(&self) -> DdaSave {
+        DdaSave {
+            t_next: self.t_next,
+            t_end: self.t_end,
+            cell: [
+                self.cell[0] as u16,
+                self.cell[1] as u16,
+                self.cell[2] as u16,
+            ],
+        }
+    }
+
+    /// Rebuilds a walk saved by [`Dda::save`] for the same ray and grid.
+    #[inline]
+    pub fn resume(g: &GridSpec, d: Vec3, inv: Vec3, s: &DdaSave) -> Dda {
+        let cs = g.cell_size();
+        let strides = [
+            1isize,
+            g.res[0] as isize,
+            g.res[0] as isize * g.res[1] as isize,
+        ];
+        let mut t_delta = [f64::INFINITY; 3];
+        let mut step = [0i32; 3];
+        let mut stride = [0isize; 3];
+        let mut out = [-1i32; 3];
+        for i in 0..3 {
+            if d[i] > 0.0 {
+                step[i] = 1;
+                out[i] = g.res[i] as i32;
+                t_delta[i] = cs[i] * inv[i];
+            } else if d[i] < 0.0 {
+                step[i] = -1;
+                t_delta[i] = -cs[i] * inv[i];
+            }
+            stride[i] = step[i] as isize * strides[i];
+        }
+        let c = [s.cell[0] as u32, s.cell[1] as u32, s.cell[2] as u32];
+        Dda {
+            cell: [c[0] as i32, c[1] as i32, c[2] as i32],
+            index: g.index(c),
+            t_enter: f64::NEG_INFINITY,
+            t_next: s.t_next,
+            t_delta,
+            t_end: s.t_end,
+            step,
+            stride,
+            out,
+        }
     }
 
     /// The current voxel's coordinates.
@@ -110,5 +175,24 @@ impl Dda {
             self.cell[1] as u32,
             self.cell[2] as u32,
         ]
+    }
+}
+
+/// A saved 3D-DDA walk (see [`Dda::save`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DdaSave {
+    pub t_next: [f64; 3],
+    pub t_end: f64,
+    pub cell: [u16; 3],
+}
+
+impl DdaSave {
+    /// Distance at which the ray leaves the saved voxel.
+    #[inline(always)]
+    pub fn t_exit(&self) -> f64 {
+        self.t_next[0]
+            .min(self.t_next[1])
+            .min(self.t_next[2])
+            .min(self.t_end)
     }
 }

@@ -9,7 +9,7 @@
 mod dda;
 mod partition;
 
-pub use dda::Dda;
+pub use dda::{Dda, DdaSave};
 pub use partition::{GridStat, GroupPlan, Partition, choose_resolution, plan_groups};
 
 use crate::math::Vec3;

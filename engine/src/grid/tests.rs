@@ -143,3 +143,30 @@ fn uniform_scenes_keep_one_grid() {
     }
     assert_eq!(plan_groups(&s, true).partition, Partition::one());
 }
+
+#[test]
+fn a_saved_walk_resumes_where_it_stopped() {
+    let g = GridSpec::new(&unit_box(), [7, 5, 3]);
+    let o = V3::new(-0.3, 0.1, 0.2);
+    let d = V3::new(1.0, 0.77, 0.31);
+    let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    let mut a = Dda::start(&g, o, d, inv, 0.0, f64::INFINITY).unwrap();
+    let mut b = a;
+    for _ in 0..3 {
+        assert!(a.advance());
+    }
+    let mut r = Dda::resume(&g, d, inv, &a.save());
+    for _ in 0..3 {
+        b.advance();
+    }
+    assert_eq!(r.voxel(), b.voxel());
+    loop {
+        let (x, y) = (r.advance_axis(), b.advance_axis());
+        assert_eq!(x, y);
+        assert_eq!(r.voxel(), b.voxel());
+        assert_eq!(r.index, b.index);
+        if x.is_none() {
+            break;
+        }
+    }
+}

@@ -1,0 +1,338 @@
+//! Files of fixed-size records in the spill directory, and an external
+//! merge sort over them: memory-sized runs, sorted and written out, merged
+//! with one sequential read of each run.
+
+use crate::error::{Error, IoContext};
+use bytemuck::Pod;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::marker::PhantomData;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
+
+/// Buffer size of record readers and writers.
+pub const IO_BUFFER: usize = 256 << 10;
+
+/// Where temporary files go, and how many bytes have been written there.
+#[derive(Clone, Debug)]
+pub struct SpillDir {
+    dir: Arc<tempfile::TempDir>,
+    written: Arc<AtomicU64>,
+    next: Arc<AtomicU64>,
+}
+
+impl SpillDir {
+    pub fn new(parent: Option<&Path>) -> Result<SpillDir, Error> {
+        let b = {
+            let mut b = tempfile::Builder::new();
+            b.prefix("sray-spill-");
+            b
+        };
+        let dir = match parent {
+            Some(p) => b.tempdir_in(p).at(p)?,
+            None => b.tempdir().at(std::env::temp_dir())?,
+        };
+        Ok(SpillDir {
+            dir: Arc::new(dir),
+            written: Arc::new(AtomicU64::new(0)),
+            next: Arc::new(AtomicU64::new(0)),
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// A new file name in the directory.
+    pub fn fresh(&self, what: &str) -> PathBuf {
+        let n = self.next.fetch_add(1, AtomicOrdering::Relaxed);
+        self.dir.path().join(format!("{what}-{n}.bin"))
+    }
+
+    pub fn bytes_written(&self) -> u64 {
+        self.written.load(AtomicOrdering::Relaxed)
+    }
+}
+
+/// Appends records to a file.
+pub struct RecordWriter<T: Pod> {
+    out: BufWriter<File>,
+    path: PathBuf,
+    count: u64,
+    spill: SpillDir,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> RecordWriter<T> {
+    pub fn create(spill: &SpillDir, what: &str) -> Result<RecordWriter<T>, Error> {
+        let path = spill.fresh(what);
+        let f = File::create(&path).at(&path)?;
+        Ok(RecordWriter {
+            out: BufWriter::with_capacity(IO_BUFFER, f),
+            path,
+            count: 0,
+            spill: spill.clone(),
+            _t: PhantomData,
+        })
+    }
+
+    pub fn push(&mut self, r: &T) -> Result<(), Error> {
+        self.out
+            .write_all(bytemuck::bytes_of(r))
+            .map_err(|e| spill_error(&self.path, e))?;
+        self.count += 1;
+        Ok(())
+    }
+
+    pub fn extend(&mut self, rs: &[T]) -> Result<(), Error> {
+        self.out
+            .write_all(bytemuck::cast_slice(rs))
+            .map_err(|e| spill_error(&self.path, e))?;
+        self.count += rs.len() as u64;
+        Ok(())
+    }
+
+    pub fn finish(mut self) -> Result<RecordFile<T>, Error> {
+        self.out.flush().map_err(|e| spill_error(&self.path, e))?;
+        self.spill.written.fetch_add(
+            self.count * std::mem::size_of::<T>() as u64,
+            AtomicOrdering::Relaxed,
+        );
+        Ok(RecordFile {
+            path: self.path,
+            count: self.count,
+            _t: PhantomData,
+        })
+    }
+}
+
+/// A full spill disk is the commonest failure here; say so plainly.
+fn spill_error(path: &Path, e: std::io::Error) -> Error {
+    if e.raw_os_error() == Some(28) {
+        Error::Io {
+            path: path.to_path_buf(),
+            err: std::io::Error::other(
+                "no space left on the spill device (use --tmp-dir, or a larger --memory to spill less)",
+            ),
+        }
+    } else {
+        Error::io(path, e)
+    }
+}
+
+/// A finished file of records; removed when dropped.
+#[derive(Debug)]
+pub struct RecordFile<T: Pod> {
+    path: PathBuf,
+    count: u64,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> Drop for RecordFile<T> {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+impl<T: Pod> RecordFile<T> {
+    pub fn len(&self) -> u64 {
+        self.count
+    }
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+    pub fn reader(&self) -> Result<RecordReader<T>, Error> {
+        let f = File::open(&self.path).at(&self.path)?;
+        Ok(RecordReader {
+            input: BufReader::with_capacity(IO_BUFFER, f),
+            path: self.path.clone(),
+            left: self.count,
+            _t: PhantomData,
+        })
+    }
+}
+
+/// Reads records front to back.
+pub struct RecordReader<T: Pod> {
+    input: BufReader<File>,
+    path: PathBuf,
+    left: u64,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> RecordReader<T> {
+    pub fn remaining(&self) -> u64 {
+        self.left
+    }
+
+    pub fn next(&mut self) -> Result<Option<T>, Error> {
+        if self.left == 0 {
+            return Ok(None);
+        }
+        let mut r = T::zeroed();
+        self.input
+            .read_exact(bytemuck::bytes_of_mut(&mut r))
+            .at(&self.path)?;
+        self.left -= 1;
+        Ok(Some(r))
+    }
+}
+
+/// Sorts records of any number by `key`, holding at most `mem_records` in
+/// memory: sorted runs spill to files and are merged.
+pub struct ExternalSorter<T: Pod + Send, K: Ord + Copy, F: Fn(&T) -> K + Sync> {
+    buf: Vec<T>,
+    cap: usize,
+    runs: Vec<RecordFile<T>>,
+    key: F,
+    spill: SpillDir,
+    what: &'static str,
+    _k: PhantomData<K>,
+}
+
+impl<T: Pod + Send, K: Ord + Copy + Send, F: Fn(&T) -> K + Sync> ExternalSorter<T, K, F> {
+    pub fn new(spill: &SpillDir, what: &'static str, mem_records: usize, key: F) -> Self {
+        let cap = mem_records.max(16);
+        ExternalSorter {
+            buf: Vec::new(),
+            cap,
+            runs: Vec::new(),
+            key,
+            spill: spill.clone(),
+            what,
+            _k: PhantomData,
+        }
+    }
+
+    pub fn push(&mut self, r: T) -> Result<(), Error> {
+        if self.buf.len() == self.cap {
+            self.spill_run()?;
+        }
+        if self.buf.capacity() == 0 {
+            self.buf.reserve_exact(self.cap.min(1 << 16));
+        }
+        self.buf.push(r);
+        Ok(())
+    }
+
+    fn spill_run(&mut self) -> Result<(), Error> {
+        let key = &self.key;
+        {
+            use rayon::slice::ParallelSliceMut;
+            self.buf.par_sort_unstable_by_key(|r| key(r));
+        }
+        let mut w = RecordWriter::create(&self.spill, self.what)?;
+        w.extend(&self.buf)?;
+        self.runs.push(w.finish()?);
+        self.buf.clear();
+        Ok(())
+    }
+
+    /// Bytes this sorter holds in memory at most.
+    pub fn memory_bytes(&self) -> usize {
+        self.cap * std::mem::size_of::<T>()
+    }
+
+    /// All records in key order. Equal keys come in no particular order;
+    /// callers use unique keys.
+    pub fn finish(mut self) -> Result<Sorted<T, K, F>, Error> {
+        let key = &self.key;
+        {
+            use rayon::slice::ParallelSliceMut;
+            self.buf.par_sort_unstable_by_key(|r| key(r));
+        }
+        if self.runs.is_empty() {
+            return Ok(Sorted(SortedInner::Memory {
+                items: std::mem::take(&mut self.buf).into_iter(),
+            }));
+        }
+        if !self.buf.is_empty() {
+            self.spill_run()?;
+        }
+        self.buf = Vec::new();
+        let mut readers = Vec::with_capacity(self.runs.len());
+        let mut heap = BinaryHeap::with_capacity(self.runs.len());
+        for (i, run) in self.runs.iter().enumerate() {
+            let mut r = run.reader()?;
+            if let Some(x) = r.next()? {
+                heap.push(Head {
+                    key: (self.key)(&x),
+                    run: i,
+                    rec: x,
+                });
+            }
+            readers.push(r);
+        }
+        Ok(Sorted(SortedInner::Merge {
+            readers,
+            heap,
+            _runs: std::mem::take(&mut self.runs),
+            key: self.key,
+        }))
+    }
+}
+
+struct Head<T, K> {
+    key: K,
+    run: usize,
+    rec: T,
+}
+
+impl<T, K: Ord> PartialEq for Head<T, K> {
+    fn eq(&self, o: &Self) -> bool {
+        self.key == o.key && self.run == o.run
+    }
+}
+impl<T, K: Ord> Eq for Head<T, K> {}
+impl<T, K: Ord> PartialOrd for Head<T, K> {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl<T, K: Ord> Ord for Head<T, K> {
+    // Reversed: BinaryHeap is a max-heap and the merge wants the smallest.
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.key.cmp(&self.key).then(o.run.cmp(&self.run))
+    }
+}
+
+/// The output of an [`ExternalSorter`], read in key order.
+pub struct Sorted<T: Pod, K: Ord, F>(SortedInner<T, K, F>);
+
+enum SortedInner<T: Pod, K: Ord, F> {
+    Memory {
+        items: std::vec::IntoIter<T>,
+    },
+    Merge {
+        readers: Vec<RecordReader<T>>,
+        heap: BinaryHeap<Head<T, K>>,
+        _runs: Vec<RecordFile<T>>,
+        key: F,
+    },
+}
+
+impl<T: Pod, K: Ord + Copy, F: Fn(&T) -> K> Sorted<T, K, F> {
+    pub fn next(&mut self) -> Result<Option<T>, Error> {
+        match &mut self.0 {
+            SortedInner::Memory { items } => Ok(items.next()),
+            SortedInner::Merge {
+                readers, heap, key, ..
+            } => {
+                let Some(top) = heap.pop() else {
+                    return Ok(None);
+                };
+                if let Some(x) = readers[top.run].next()? {
+                    heap.push(Head {
+                        key: key(&x),
+                        run: top.run,
+                        rec: x,
+                    });
+                }
+                Ok(Some(top.rec))
+            }
+        }
+    }
+}

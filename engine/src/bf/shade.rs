@@ -1,0 +1,228 @@
+//! Shading one round (the paper's Section 2.5, Pseudocode 4): the round's
+//! rays and their results are read together in ray order; misses and
+//! shadow results go straight to the frame; hits gather in memory-sized
+//! sets, each sorted by object id and joined with one front-to-back scan of
+//! the objects, where they are shaded. The rays they spawn go to an
+//! external sort that puts the next round in a fixed order.
+
+use super::files::ExternalSorter;
+use super::records::{HitRec, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+use crate::error::Error;
+use crate::intersect::{RayQ, surface_at};
+use crate::math::Vec3;
+use crate::render::{Frame, RayCounts, ShadeScene, Spawn, shade, to_fixed};
+use crate::scene::Material;
+use crate::sdb::{Database, ObjectRef};
+use rayon::prelude::*;
+use serde::Serialize;
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ShadeStats {
+    pub hits: u64,
+    pub sets: u64,
+    pub db_scans: u64,
+    pub db_bytes_read: u64,
+}
+
+pub struct ShadeSetup<'a> {
+    pub db: &'a Database,
+    pub materials: &'a [Material],
+    pub shade: &'a ShadeScene,
+    /// Hits per set.
+    pub set_cap: usize,
+}
+
+/// Next-round rays, sorted by `key`.
+pub type NextRays = ExternalSorter<RayRec, u64, fn(&RayRec) -> u64>;
+
+pub fn ray_key(r: &RayRec) -> u64 {
+    r.key
+}
+
+/// Shades one round. `rays` yields the round's rays in id order; `results`
+/// their results in the same order.
+pub fn shade_round(
+    setup: &ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+    results: &mut dyn FnMut() -> Result<Option<ResultRec>, Error>,
+    frame: &mut Frame,
+    next: &mut NextRays,
+    counts: &mut RayCounts,
+) -> Result<ShadeStats, Error> {
+    let mut st = ShadeStats::default();
+    let mut set: Vec<HitRec> = Vec::new();
+    let mut id: u64 = 0;
+    for ray in rays {
+        let ray = ray?;
+        let res = results()?
+            .ok_or_else(|| Error::Invalid(format!("no intersection result for ray {id}")))?;
+        if res.ray != id {
+            return Err(Error::Invalid(format!(
+                "intersection results out of order: ray {id} got the result of ray {}",
+                res.ray
+            )));
+        }
+        if ray.is_shadow() {
+            if res.object == NO_HIT {
+                frame.add(ray.corner, to_fixed(ray.payload));
+            }
+        } else if res.object == NO_HIT {
+            frame.add(ray.corner, to_fixed(setup.shade.background(ray.payload[0])));
+        } else {
+            if ray.kind() == RayKind::Eye {
+                counts.eye_hit_rays += 1;
+            }
+            st.hits += 1;
+            set.push(HitRec {
+                ray,
+                id,
+                t: res.t,
+                object: res.object,
+                _pad: 0,
+            });
+            if set.len() >= setup.set_cap.max(1) {
+                shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+            }
+        }
+        id += 1;
+    }
+    if results()?.is_some() {
+        return Err(Error::Invalid("more intersection results than rays".into()));
+    }
+    if !set.is_empty() {
+        shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+    }
+    Ok(st)
+}
+
+/// Sorts a set of hits by object and shades it in one scan of the objects.
+fn shade_set(
+    setup: &ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    set: &mut Vec<HitRec>,
+    next: &mut NextRays,
+    counts: &mut RayCounts,
+    st: &mut ShadeStats,
+) -> Result<(), Error> {
+    pool.install(|| set.par_sort_unstable_by_key(|h| (h.object, h.id)));
+    st.sets += 1;
+    let mut scan = setup.db.scan()?;
+    let mut at = 0;
+    while let Some(block) = scan.next_block()? {
+        if at == set.len() {
+            break;
+        }
+        let first = block.first_object;
+        let end = first + block.object_count as u64;
+        let stop = at + set[at..].partition_point(|h| (h.object as u64) < end);
+        if stop == at {
+            continue;
+        }
+        let objects: Vec<ObjectRef<'_>> = block.objects().collect();
+        let objs = &objects;
+        let chunk = (stop - at)
+            .div_ceil(pool.current_num_threads().max(1) * 4)
+            .max(64);
+        let outs: Vec<(Vec<RayRec>, RayCounts)> = pool.install(|| {
+            set[at..stop]
+                .par_chunks(chunk)
+                .map(|hits| {
+                    let mut out = Vec::new();
+                    let mut c = RayCounts::default();
+                    for h in hits {
+                        let obj = &objs[(h.object as u64 - first) as usize];
+                        shade_hit(setup, h, obj, &mut out, &mut c);
+                    }
+                    (out, c)
+                })
+                .collect()
+        });
+        for (rays, c) in outs {
+            *counts += c;
+            for r in rays {
+                next.push(r)?;
+            }
+        }
+        at = stop;
+    }
+    st.db_scans += 1;
+    st.db_bytes_read += scan.stats().bytes_read;
+    set.clear();
+    Ok(())
+}
+
+/// Shades one hit with the shared shading code, writing the rays it spawns.
+fn shade_hit(
+    setup: &ShadeSetup<'_>,
+    h: &HitRec,
+    obj: &ObjectRef<'_>,
+    out: &mut Vec<RayRec>,
+    c: &mut RayCounts,
+) {
+    let r = &h.ray;
+    let o = Vec3::from_f64(r.o);
+    let d = Vec3::from_f64(r.d);
+    let surf = surface_at(&obj.shape, &RayQ::new(o, d), h.t);
+    let mat = &setup.materials[obj.material as usize];
+    let lights = setup.shade.lights.len() as u64;
+    let base = h.id * SPAWN_SLOTS;
+    let p = surf.p.to_array();
+    shade(
+        setup.shade,
+        d,
+        r.depth,
+        r.payload[0],
+        &surf,
+        mat,
+        &mut |s| match s {
+            Spawn::Shadow {
+                light,
+                dir,
+                dist,
+                color,
+            } => {
+                c.shadow_rays += 1;
+                out.push(RayRec {
+                    o: p,
+                    d: dir.to_array(),
+                    t_max: dist,
+                    key: base + light as u64,
+                    payload: color,
+                    corner: r.corner,
+                    depth: r.depth,
+                    kind: RayKind::Shadow as u8,
+                    _pad: [0; 6],
+                });
+            }
+            Spawn::Reflect { dir, weight } => {
+                c.reflect_rays += 1;
+                out.push(RayRec {
+                    o: p,
+                    d: dir.to_array(),
+                    t_max: f64::INFINITY,
+                    key: base + lights,
+                    payload: [weight, 0.0, 0.0],
+                    corner: r.corner,
+                    depth: r.depth + 1,
+                    kind: RayKind::Reflect as u8,
+                    _pad: [0; 6],
+                });
+            }
+            Spawn::Refract { dir, weight } => {
+                c.refract_rays += 1;
+                out.push(RayRec {
+                    o: p,
+                    d: dir.to_array(),
+                    t_max: f64::INFINITY,
+                    key: base + lights + 1,
+                    payload: [weight, 0.0, 0.0],
+                    corner: r.corner,
+                    depth: r.depth + 1,
+                    kind: RayKind::Refract as u8,
+                    _pad: [0; 6],
+                });
+            }
+        },
+    );
+}

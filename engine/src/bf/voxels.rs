@@ -1,0 +1,143 @@
+//! The breadth-first tracer's grids: per voxel one byte of flags, marked in
+//! one sequential scan of the objects (the paper's Pseudocode 3): whether
+//! any object's bounding box overlaps the voxel, and which of its six faces
+//! lie on the boundary of some object's voxel box.
+
+use crate::error::Error;
+use crate::grid::{GridSpec, GridStat, Partition};
+use crate::progress::Progress;
+use crate::sdb::{Database, DbStats};
+
+/// Some object's box overlaps the voxel.
+pub const OCCUPIED: u8 = 1;
+/// Set while a pass has rays registered in the voxel.
+pub const REGISTERED: u8 = 1 << 7;
+
+/// The flag of the voxel face on `axis`, at the low (`high = false`) or
+/// high end.
+#[inline(always)]
+pub fn face_bit(axis: usize, high: bool) -> u8 {
+    1 << (1 + 2 * axis + high as usize)
+}
+
+/// The face a ray enters a voxel through when it steps along `axis` in
+/// direction `step`: stepping up enters through the low face.
+#[inline(always)]
+pub fn entry_face(axis: usize, step_up: bool) -> u8 {
+    face_bit(axis, !step_up)
+}
+
+pub struct VoxelGrid {
+    pub spec: GridSpec,
+    pub flags: Vec<u8>,
+    pub objects: u64,
+}
+
+pub struct VoxelGrids {
+    pub grids: Vec<VoxelGrid>,
+    pub partition: Partition,
+}
+
+impl VoxelGrids {
+    /// Marks occupancy and face flags with one scan of `db`.
+    pub fn build(
+        db: &Database,
+        specs: Vec<GridSpec>,
+        partition: Partition,
+        progress: &dyn Progress,
+    ) -> Result<(VoxelGrids, DbStats), Error> {
+        let mut grids: Vec<VoxelGrid> = specs
+            .into_iter()
+            .map(|spec| VoxelGrid {
+                flags: vec![0u8; spec.cells()],
+                spec,
+                objects: 0,
+            })
+            .collect();
+        let mut scan = db.scan()?;
+        progress.set_total(db.object_count());
+        while let Some(block) = scan.next_block()? {
+            for o in block.objects() {
+                let g = &mut grids[partition.group(&o.bbox)];
+                g.objects += 1;
+                let Some((lo, hi)) = g.spec.cell_range(&o.bbox) else {
+                    continue;
+                };
+                mark_box(&g.spec, &mut g.flags, lo, hi);
+            }
+            progress.inc(block.object_count as u64);
+        }
+        Ok((VoxelGrids { grids, partition }, scan.stats()))
+    }
+
+    pub fn stats(&self) -> Vec<GridStat> {
+        self.grids
+            .iter()
+            .map(|g| GridStat {
+                objects: g.objects,
+                resolution: g.spec.res,
+                lo: g.spec.lo,
+                hi: g.spec.hi,
+            })
+            .collect()
+    }
+
+    pub fn bytes(&self) -> u64 {
+        self.grids.iter().map(|g| g.flags.len() as u64).sum()
+    }
+}
+
+/// Marks the voxels of one object's box: all occupied, and on the box's
+/// boundary the faces that are part of it.
+fn mark_box(spec: &GridSpec, flags: &mut [u8], lo: [u32; 3], hi: [u32; 3]) {
+    for z in lo[2]..=hi[2] {
+        let fz = if z == lo[2] { face_bit(2, false) } else { 0 }
+            | if z == hi[2] { face_bit(2, true) } else { 0 };
+        for y in lo[1]..=hi[1] {
+            let fy = if y == lo[1] { face_bit(1, false) } else { 0 }
+                | if y == hi[1] { face_bit(1, true) } else { 0 };
+            let row = spec.index([0, y, z]);
+            for x in lo[0]..=hi[0] {
+                let fx = if x == lo[0] { face_bit(0, false) } else { 0 }
+                    | if x == hi[0] { face_bit(0, true) } else { 0 };
+                flags[row + x as usize] |= OCCUPIED | fx | fy | fz;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Aabb;
+
+    #[test]
+    fn boxes_mark_occupancy_and_their_boundary_faces() {
+        let spec = GridSpec::new(
+            &Aabb {
+                min: [0.0; 3],
+                max: [4.0; 3],
+            },
+            [4, 4, 4],
+        );
+        let mut flags = vec![0u8; spec.cells()];
+        mark_box(&spec, &mut flags, [1, 1, 1], [2, 1, 1]);
+        let f = |x, y, z| flags[spec.index([x, y, z])];
+        assert_eq!(f(0, 1, 1), 0);
+        let left = f(1, 1, 1);
+        let right = f(2, 1, 1);
+        assert!(left & OCCUPIED != 0 && right & OCCUPIED != 0);
+        assert!(left & face_bit(0, false) != 0 && left & face_bit(0, true) == 0);
+        assert!(right & face_bit(0, true) != 0 && right & face_bit(0, false) == 0);
+        // One voxel thick in y and z: both faces are boundary.
+        for v in [left, right] {
+            for axis in [1, 2] {
+                assert!(v & face_bit(axis, false) != 0 && v & face_bit(axis, true) != 0);
+            }
+        }
+        // Stepping +x into (2,1,1) crosses its low-x face, which is inside
+        // the box: not a boundary.
+        assert_eq!(right & entry_face(0, true), 0);
+        assert_ne!(left & entry_face(0, true), 0);
+    }
+}
