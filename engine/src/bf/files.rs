@@ -182,7 +182,8 @@ impl<T: Pod> RecordReader<T> {
 }
 
 /// Sorts records of any number by `key`, holding at most `mem_records` in
-/// memory: sorted runs spill to files and are merged.
+/// memory: sorted runs spill to files and are merged. The memory buffer can
+/// be handed in and taken back, so that repeated sorts reuse it.
 pub struct ExternalSorter<T: Pod + Send, K: Ord + Copy, F: Fn(&T) -> K + Sync> {
     buf: Vec<T>,
     cap: usize,
@@ -190,19 +191,34 @@ pub struct ExternalSorter<T: Pod + Send, K: Ord + Copy, F: Fn(&T) -> K + Sync> {
     key: F,
     spill: SpillDir,
     what: &'static str,
+    scratch: super::radix::Scratch,
     _k: PhantomData<K>,
 }
 
-impl<T: Pod + Send, K: Ord + Copy + Send, F: Fn(&T) -> K + Sync> ExternalSorter<T, K, F> {
+impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
+    ExternalSorter<T, K, F>
+{
     pub fn new(spill: &SpillDir, what: &'static str, mem_records: usize, key: F) -> Self {
-        let cap = mem_records.max(16);
+        Self::with_buffer(spill, what, mem_records, key, Vec::new())
+    }
+
+    /// As [`ExternalSorter::new`], using `buf`'s memory.
+    pub fn with_buffer(
+        spill: &SpillDir,
+        what: &'static str,
+        mem_records: usize,
+        key: F,
+        mut buf: Vec<T>,
+    ) -> Self {
+        buf.clear();
         ExternalSorter {
-            buf: Vec::new(),
-            cap,
+            buf,
+            cap: mem_records.max(16),
             runs: Vec::new(),
             key,
             spill: spill.clone(),
             what,
+            scratch: Default::default(),
             _k: PhantomData,
         }
     }
@@ -211,8 +227,10 @@ impl<T: Pod + Send, K: Ord + Copy + Send, F: Fn(&T) -> K + Sync> ExternalSorter<
         if self.buf.len() == self.cap {
             self.spill_run()?;
         }
-        if self.buf.capacity() == 0 {
-            self.buf.reserve_exact(self.cap.min(1 << 16));
+        if self.buf.capacity() == self.buf.len() {
+            // Grow geometrically, but never past the memory share.
+            let want = (self.buf.capacity() * 2).clamp(1 << 12, self.cap);
+            self.buf.reserve_exact(want - self.buf.len());
         }
         self.buf.push(r);
         Ok(())
@@ -220,10 +238,7 @@ impl<T: Pod + Send, K: Ord + Copy + Send, F: Fn(&T) -> K + Sync> ExternalSorter<
 
     fn spill_run(&mut self) -> Result<(), Error> {
         let key = &self.key;
-        {
-            use rayon::slice::ParallelSliceMut;
-            self.buf.par_sort_unstable_by_key(|r| key(r));
-        }
+        super::radix::sort_by_key(&mut self.buf, |r| key(r).into(), &mut self.scratch);
         let mut w = RecordWriter::create(&self.spill, self.what)?;
         w.extend(&self.buf)?;
         self.runs.push(w.finish()?);
@@ -231,22 +246,24 @@ impl<T: Pod + Send, K: Ord + Copy + Send, F: Fn(&T) -> K + Sync> ExternalSorter<
         Ok(())
     }
 
-    /// Bytes this sorter holds in memory at most.
-    pub fn memory_bytes(&self) -> usize {
-        self.cap * std::mem::size_of::<T>()
+    /// Records pushed so far.
+    pub fn len(&self) -> u64 {
+        self.runs.iter().map(|r| r.len()).sum::<u64>() + self.buf.len() as u64
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     /// All records in key order. Equal keys come in no particular order;
     /// callers use unique keys.
     pub fn finish(mut self) -> Result<Sorted<T, K, F>, Error> {
         let key = &self.key;
-        {
-            use rayon::slice::ParallelSliceMut;
-            self.buf.par_sort_unstable_by_key(|r| key(r));
-        }
+        super::radix::sort_by_key(&mut self.buf, |r| key(r).into(), &mut self.scratch);
         if self.runs.is_empty() {
             return Ok(Sorted(SortedInner::Memory {
-                items: std::mem::take(&mut self.buf).into_iter(),
+                items: std::mem::take(&mut self.buf),
+                at: 0,
             }));
         }
         if !self.buf.is_empty() {
@@ -304,7 +321,8 @@ pub struct Sorted<T: Pod, K: Ord, F>(SortedInner<T, K, F>);
 
 enum SortedInner<T: Pod, K: Ord, F> {
     Memory {
-        items: std::vec::IntoIter<T>,
+        items: Vec<T>,
+        at: usize,
     },
     Merge {
         readers: Vec<RecordReader<T>>,
@@ -317,7 +335,11 @@ enum SortedInner<T: Pod, K: Ord, F> {
 impl<T: Pod, K: Ord + Copy, F: Fn(&T) -> K> Sorted<T, K, F> {
     pub fn next(&mut self) -> Result<Option<T>, Error> {
         match &mut self.0 {
-            SortedInner::Memory { items } => Ok(items.next()),
+            SortedInner::Memory { items, at } => {
+                let r = items.get(*at).copied();
+                *at += 1;
+                Ok(r)
+            }
             SortedInner::Merge {
                 readers, heap, key, ..
             } => {
@@ -333,6 +355,14 @@ impl<T: Pod, K: Ord + Copy, F: Fn(&T) -> K> Sorted<T, K, F> {
                 }
                 Ok(Some(top.rec))
             }
+        }
+    }
+
+    /// The whole sorted vector, if the sort never left memory.
+    pub fn into_vec(self) -> Result<Vec<T>, Self> {
+        match self.0 {
+            SortedInner::Memory { items, at: 0 } => Ok(items),
+            other => Err(Sorted(other)),
         }
     }
 }

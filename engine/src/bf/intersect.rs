@@ -105,10 +105,8 @@ struct Walk {
     state: u8,
     /// Passes in which this walk registered.
     k: u8,
-    /// The last voxel stored in, and the one of the pass before (for the
-    /// last-voxel rule); `NONE16` in [0] when there is none.
+    /// The last voxel stored in (`NONE16` in [0] when none yet).
     last: [u16; 3],
-    prev: [u16; 3],
 }
 
 const NEW_WALK: Walk = Walk {
@@ -120,14 +118,12 @@ const NEW_WALK: Walk = Walk {
     state: FRESH,
     k: 0,
     last: [NONE16; 3],
-    prev: [NONE16; 3],
 };
 
-/// A ray in memory.
-struct Slot<R> {
-    active: bool,
-    shadow: bool,
-    blocked: bool,
+/// What the scan reads for every registration it visits: small, and kept
+/// apart from the rest of the ray so that visits stay in cache.
+#[derive(Clone, Copy, Debug)]
+struct Hot<R> {
     /// The last object tested (the paper's mailbox).
     mailbox: u32,
     best_id: u32,
@@ -135,7 +131,19 @@ struct Slot<R> {
     /// Tests must find a hit below this: just above the best distance, so
     /// that an exact tie is seen and goes to the smaller id.
     upper: R,
-    q: RayQ<R>,
+    t_min: R,
+    /// Per grid, the last voxel stored in during the previous pass
+    /// (`NONE16` in [0] when none): the last-voxel rule's voxel.
+    prev: [[u16; 3]; MAX_GRIDS],
+    active: bool,
+    admitted: bool,
+    shadow: bool,
+    blocked: bool,
+}
+
+/// The rest of a ray in memory: what registration and completion need.
+#[derive(Clone, Copy, Debug)]
+struct Cold {
     walks: [Walk; MAX_GRIDS],
     id: u64,
     o: Vec3,
@@ -145,69 +153,38 @@ struct Slot<R> {
     t_max: f64,
 }
 
-impl<R: Real> Slot<R> {
-    fn empty() -> Slot<R> {
-        Slot {
-            active: false,
-            shadow: false,
-            blocked: false,
-            mailbox: NO_HIT,
-            best_id: NO_HIT,
-            best_t: f64::INFINITY,
-            upper: R::INFINITY,
-            q: RayQ::new(
-                crate::math::V3::zero(),
-                crate::math::V3::new(R::ONE, R::ZERO, R::ZERO),
-            ),
-            walks: [NEW_WALK; MAX_GRIDS],
-            id: 0,
-            o: Vec3::zero(),
-            d: Vec3::new(1.0, 0.0, 0.0),
-            inv: Vec3::new(1.0, f64::INFINITY, f64::INFINITY),
-            t_min: 0.0,
-            t_max: f64::INFINITY,
-        }
-    }
-
-    fn load(&mut self, id: u64, r: &RayRec, eps: f64) {
-        let o = Vec3::from_f64(r.o);
-        let d = Vec3::from_f64(r.d);
-        let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-        *self = Slot {
-            active: true,
-            shadow: r.is_shadow(),
-            blocked: false,
-            mailbox: NO_HIT,
-            best_id: NO_HIT,
-            best_t: f64::INFINITY,
-            upper: if r.is_shadow() {
-                R::from_f64(r.t_max)
-            } else {
-                R::INFINITY
-            },
-            q: RayQ::with_inverse(o.cast(), d.cast(), inv.cast()),
-            walks: [NEW_WALK; MAX_GRIDS],
-            id,
-            o,
-            d,
-            inv,
-            t_min: if r.kind == super::records::RayKind::Eye as u8 {
-                0.0
-            } else {
-                eps
-            },
-            t_max: r.t_max,
-        };
+fn empty_hot<R: Real>() -> Hot<R> {
+    Hot {
+        mailbox: NO_HIT,
+        best_id: NO_HIT,
+        best_t: f64::INFINITY,
+        upper: R::INFINITY,
+        t_min: R::ZERO,
+        prev: [[NONE16; 3]; MAX_GRIDS],
+        active: false,
+        admitted: false,
+        shadow: false,
+        blocked: false,
     }
 }
+
+const EMPTY_COLD: Cold = Cold {
+    walks: [NEW_WALK; MAX_GRIDS],
+    id: 0,
+    o: Vec3::new(0.0, 0.0, 0.0),
+    d: Vec3::new(1.0, 0.0, 0.0),
+    inv: Vec3::new(1.0, f64::INFINITY, f64::INFINITY),
+    t_min: 0.0,
+    t_max: f64::INFINITY,
+};
 
 /// Bytes one ray slot takes.
 pub fn slot_bytes<R: Real>() -> usize {
-    std::mem::size_of::<Slot<R>>()
+    std::mem::size_of::<Hot<R>>() + std::mem::size_of::<Cold>() + std::mem::size_of::<RayQ<R>>()
 }
 
-/// Memory per registration: its key while sorting, its slot id, and its
-/// share of the voxel table.
+/// Memory per registration: its key, its slot id, and its share of the
+/// voxel table.
 pub const REGISTRATION_BYTES: usize = 8 + 4 + 24;
 
 /// Counters of one pass.
@@ -218,19 +195,45 @@ struct PassCounts {
     skipped_last_voxel: u64,
 }
 
-impl std::ops::AddAssign for PassCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.tests += o.tests;
-        self.skipped_mailbox += o.skipped_mailbox;
-        self.skipped_last_voxel += o.skipped_last_voxel;
+/// Voxel box holding every registration of a pass, per grid.
+#[derive(Clone, Copy, Debug)]
+struct Region {
+    lo: [u32; 3],
+    hi: [u32; 3],
+}
+
+const NO_REGION: Region = Region {
+    lo: [u32::MAX; 3],
+    hi: [0; 3],
+};
+
+impl Region {
+    fn add(&mut self, c: [u32; 3]) {
+        for i in 0..3 {
+            self.lo[i] = self.lo[i].min(c[i]);
+            self.hi[i] = self.hi[i].max(c[i]);
+        }
+    }
+    fn union(&mut self, o: &Region) {
+        for i in 0..3 {
+            self.lo[i] = self.lo[i].min(o.lo[i]);
+            self.hi[i] = self.hi[i].max(o.hi[i]);
+        }
+    }
+    #[inline]
+    fn overlaps(&self, lo: [u32; 3], hi: [u32; 3]) -> bool {
+        (0..3).all(|i| lo[i] <= self.hi[i] && hi[i] >= self.lo[i])
     }
 }
 
 /// One thread's rays and their registrations.
 struct Shard<R> {
-    slots: Vec<Slot<R>>,
+    hot: Vec<Hot<R>>,
+    q: Vec<RayQ<R>>,
+    cold: Vec<Cold>,
     keys: [Vec<u64>; MAX_GRIDS],
     regs: [RegMap; MAX_GRIDS],
+    region: [Region; MAX_GRIDS],
     counts: PassCounts,
     done: Vec<ResultRec>,
 }
@@ -262,33 +265,105 @@ pub struct IntersectSetup<'a> {
     pub slots: usize,
     /// Registrations per pass, at most.
     pub registrations: usize,
-    pub threads: usize,
     pub eps: f64,
+}
+
+/// The ray slots, kept from round to round so that their memory is
+/// allocated once.
+pub struct Slots<R> {
+    shards: Vec<Shard<R>>,
+}
+
+impl<R: Real> Slots<R> {
+    pub fn new(threads: usize) -> Slots<R> {
+        Slots {
+            shards: (0..threads.max(1))
+                .map(|_| Shard {
+                    hot: Vec::new(),
+                    q: Vec::new(),
+                    cold: Vec::new(),
+                    keys: Default::default(),
+                    regs: Default::default(),
+                    region: [NO_REGION; MAX_GRIDS],
+                    counts: PassCounts::default(),
+                    done: Vec::new(),
+                })
+                .collect(),
+        }
+    }
+
+    /// Makes room for `n` rays in all, split evenly over the shards.
+    fn ensure(&mut self, n: usize) {
+        let per = n.div_ceil(self.shards.len()).max(1);
+        let q0 = RayQ::new(
+            crate::math::V3::zero(),
+            crate::math::V3::new(R::ONE, R::ZERO, R::ZERO),
+        );
+        for sh in self.shards.iter_mut() {
+            sh.hot.clear();
+            sh.hot.resize(per, empty_hot());
+            sh.q.resize(per, q0);
+            sh.cold.resize(per, EMPTY_COLD);
+            sh.q.truncate(per);
+            sh.cold.truncate(per);
+        }
+    }
+}
+
+/// Puts a ray into a slot.
+fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
+    let o = Vec3::from_f64(r.o);
+    let d = Vec3::from_f64(r.d);
+    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    let t_min = if r.kind == super::records::RayKind::Eye as u8 {
+        0.0
+    } else {
+        eps
+    };
+    let shadow = r.is_shadow();
+    sh.hot[i] = Hot {
+        mailbox: NO_HIT,
+        best_id: NO_HIT,
+        best_t: f64::INFINITY,
+        upper: if shadow {
+            R::from_f64(r.t_max)
+        } else {
+            R::INFINITY
+        },
+        t_min: R::from_f64(t_min),
+        prev: [[NONE16; 3]; MAX_GRIDS],
+        active: true,
+        admitted: false,
+        shadow,
+        blocked: false,
+    };
+    sh.q[i] = RayQ::with_inverse(o.cast(), d.cast(), inv.cast());
+    sh.cold[i] = Cold {
+        walks: [NEW_WALK; MAX_GRIDS],
+        id,
+        o,
+        d,
+        inv,
+        t_min,
+        t_max: r.t_max,
+    };
 }
 
 /// Intersects every ray `rays` yields (with ids `0, 1, ...` in order),
 /// passing each ray's result to `emit` in completion order.
+#[allow(clippy::too_many_arguments)]
 pub fn intersect_rays<R: Real>(
     setup: &mut IntersectSetup<'_>,
     pool: &rayon::ThreadPool,
+    slots: &mut Slots<R>,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
     total: u64,
     emit: &mut dyn FnMut(ResultRec) -> Result<(), Error>,
     progress: &dyn Progress,
 ) -> Result<IntersectStats, Error> {
-    let threads = setup.threads.max(1);
     // No more slots than rays.
-    let slots = (setup.slots as u64).min(total).max(1) as usize;
-    let per = slots.div_ceil(threads).max(1);
-    let mut shards: Vec<Shard<R>> = (0..threads)
-        .map(|_| Shard {
-            slots: (0..per).map(|_| Slot::empty()).collect(),
-            keys: Default::default(),
-            regs: Default::default(),
-            counts: PassCounts::default(),
-            done: Vec::new(),
-        })
-        .collect();
+    slots.ensure((setup.slots as u64).min(total).max(1) as usize);
+    let shards = &mut slots.shards;
     let ngrids = setup.grids.grids.len();
     let mut st = IntersectStats {
         rays: total,
@@ -297,18 +372,20 @@ pub fn intersect_rays<R: Real>(
     let mut next_id: u64 = 0;
     let mut exhausted = false;
     let mut finished: u64 = 0;
+    let mut active: u64 = 0;
     loop {
         // Fill empty slots, in slot order.
         if !exhausted {
             'fill: for sh in shards.iter_mut() {
-                for s in sh.slots.iter_mut() {
-                    if s.active {
+                for i in 0..sh.hot.len() {
+                    if sh.hot[i].active {
                         continue;
                     }
                     match rays.next() {
                         Some(r) => {
-                            s.load(next_id, &r?, setup.eps);
+                            load(sh, i, next_id, &r?, setup.eps);
                             next_id += 1;
+                            active += 1;
                         }
                         None => {
                             exhausted = true;
@@ -318,10 +395,6 @@ pub fn intersect_rays<R: Real>(
                 }
             }
         }
-        let active: u64 = shards
-            .iter()
-            .map(|sh| sh.slots.iter().filter(|s| s.active).count() as u64)
-            .sum();
         if active == 0 {
             break;
         }
@@ -336,28 +409,24 @@ pub fn intersect_rays<R: Real>(
         // Admit rays in slot order while their registrations fit.
         let cap = setup.registrations.max(setup.store.worst(ngrids) as usize) as u64;
         let mut budget = cap;
-        let mut admitted: Vec<Vec<bool>> = Vec::with_capacity(shards.len());
         let (mut s_sum, mut s_n) = (0u64, 0u64);
-        for sh in &shards {
-            let mut a = Vec::with_capacity(sh.slots.len());
-            for s in &sh.slots {
-                let need: u64 = if s.active && !s.blocked {
-                    (0..ngrids)
-                        .filter(|&g| s.walks[g].state != DONE)
-                        .map(|g| setup.store.store(g, s.walks[g].k) as u64)
-                        .sum()
-                } else {
-                    0
-                };
-                let ok = need > 0 && need <= budget;
-                if ok {
+        for sh in shards.iter_mut() {
+            for (h, c) in sh.hot.iter_mut().zip(&sh.cold) {
+                h.admitted = false;
+                if !h.active || h.blocked {
+                    continue;
+                }
+                let need: u64 = (0..ngrids)
+                    .filter(|&g| c.walks[g].state != DONE)
+                    .map(|g| setup.store.store(g, c.walks[g].k) as u64)
+                    .sum();
+                if need > 0 && need <= budget {
+                    h.admitted = true;
                     budget -= need;
                     s_sum += need;
                     s_n += 1;
                 }
-                a.push(ok);
             }
-            admitted.push(a);
         }
         st.store_numbers.push(if s_n > 0 {
             s_sum as f64 / s_n as f64 / ngrids as f64
@@ -369,32 +438,39 @@ pub fn intersect_rays<R: Real>(
         let grids = &*setup.grids;
         let store = setup.store;
         pool.install(|| {
-            shards
-                .par_iter_mut()
-                .zip(admitted.par_iter())
-                .for_each(|(sh, adm)| {
-                    for k in sh.keys.iter_mut() {
-                        k.clear();
+            shards.par_iter_mut().for_each(|sh| {
+                for g in 0..ngrids {
+                    sh.keys[g].clear();
+                    sh.region[g] = NO_REGION;
+                }
+                for i in 0..sh.hot.len() {
+                    if sh.hot[i].admitted {
+                        register(
+                            &mut sh.hot[i],
+                            &mut sh.cold[i],
+                            i as u32,
+                            grids,
+                            &store,
+                            &mut sh.keys,
+                            &mut sh.region,
+                        );
                     }
-                    for (i, s) in sh.slots.iter_mut().enumerate() {
-                        if adm[i] {
-                            register(s, i as u32, grids, &store, &mut sh.keys);
-                        }
-                    }
-                    for g in 0..ngrids {
-                        let keys = &mut sh.keys[g];
-                        sh.regs[g].build(keys);
-                    }
-                })
+                }
+                for g in 0..ngrids {
+                    sh.regs[g].build(&sh.keys[g]);
+                }
+            })
         });
         let regs: u64 = shards
             .iter()
             .map(|sh| sh.regs.iter().map(|r| r.len() as u64).sum::<u64>())
             .sum();
         st.registrations += regs;
-        for sh in &shards {
-            for (g, r) in sh.regs.iter().enumerate().take(ngrids) {
-                for v in r.voxels() {
+        let mut region = [NO_REGION; MAX_GRIDS];
+        for sh in shards.iter() {
+            for g in 0..ngrids {
+                region[g].union(&sh.region[g]);
+                for v in sh.regs[g].voxels() {
                     setup.grids.grids[g].flags[v as usize] |= REGISTERED;
                 }
             }
@@ -408,15 +484,15 @@ pub fn intersect_rays<R: Real>(
                 pool.install(|| {
                     shards
                         .par_iter_mut()
-                        .for_each(|sh| scan_block(sh, &block, grids));
+                        .for_each(|sh| scan_block(sh, &block, grids, &region));
                 });
             }
             st.db_scans += 1;
             st.db_bytes_read += scan.stats().bytes_read;
         }
-        for sh in &shards {
-            for (g, r) in sh.regs.iter().enumerate().take(ngrids) {
-                for v in r.voxels() {
+        for sh in shards.iter() {
+            for g in 0..ngrids {
+                for v in sh.regs[g].voxels() {
                     setup.grids.grids[g].flags[v as usize] &= !REGISTERED;
                 }
             }
@@ -430,6 +506,7 @@ pub fn intersect_rays<R: Real>(
             st.tests_skipped_last_voxel += sh.counts.skipped_last_voxel;
             sh.counts = PassCounts::default();
             finished += sh.done.len() as u64;
+            active -= sh.done.len() as u64;
             progress.inc(sh.done.len() as u64);
             for r in sh.done.drain(..) {
                 emit(r)?;
@@ -442,21 +519,39 @@ pub fn intersect_rays<R: Real>(
 /// Walks a ray through each grid, storing it in up to its store number of
 /// voxels: where it enters some object's voxel boundary, or the first
 /// voxel of its walk if that is occupied.
+#[allow(clippy::too_many_arguments)]
 fn register<R: Real>(
-    s: &mut Slot<R>,
+    h: &mut Hot<R>,
+    c: &mut Cold,
     slot: u32,
     grids: &VoxelGrids,
     store: &StorePlan,
     keys: &mut [Vec<u64>; MAX_GRIDS],
+    region: &mut [Region; MAX_GRIDS],
 ) {
     for (g, grid) in grids.grids.iter().enumerate() {
-        let w = &mut s.walks[g];
+        let w = &mut c.walks[g];
         if w.state == DONE {
             continue;
         }
+        h.prev[g] = w.last;
         let spec: &GridSpec = &grid.spec;
+        if spec.cells() == 1 {
+            // A one-voxel grid (a few large objects): the ray is stored in
+            // it once, if it meets the grid's box at all.
+            if grid.flags[0] & OCCUPIED != 0
+                && spec.clip(c.o, c.d, c.inv, c.t_min, c.t_max).is_some()
+            {
+                keys[g].push(slot as u64);
+                region[g].add([0, 0, 0]);
+                w.last = [0, 0, 0];
+                w.k = w.k.saturating_add(1);
+            }
+            w.state = DONE;
+            continue;
+        }
         let (mut dda, mut entry) = if w.state == FRESH {
-            match Dda::start(spec, s.o, s.d, s.inv, s.t_min, s.t_max) {
+            match Dda::start(spec, c.o, c.d, c.inv, c.t_min, c.t_max) {
                 Some(d) => (d, None),
                 None => {
                     w.state = DONE;
@@ -464,7 +559,7 @@ fn register<R: Real>(
                 }
             }
         } else {
-            let mut d = Dda::resume(spec, s.d, s.inv, &w.save);
+            let mut d = Dda::resume(spec, c.d, c.inv, &w.save);
             match d.advance_axis() {
                 Some(a) => (d, Some(a)),
                 None => {
@@ -475,9 +570,8 @@ fn register<R: Real>(
         };
         let limit = store.store(g, w.k);
         let mut n = 0;
-        w.prev = w.last;
         loop {
-            if s.best_t < dda.t_enter {
+            if h.best_t < dda.t_enter {
                 w.state = DONE; // the best hit lies before this voxel
                 break;
             }
@@ -489,8 +583,9 @@ fn register<R: Real>(
                 };
             if stored {
                 keys[g].push(((dda.index as u64) << 32) | slot as u64);
-                let c = dda.voxel();
-                w.last = [c[0] as u16, c[1] as u16, c[2] as u16];
+                let v = dda.voxel();
+                region[g].add(v);
+                w.last = [v[0] as u16, v[1] as u16, v[2] as u16];
                 n += 1;
                 if n == limit {
                     break;
@@ -515,7 +610,12 @@ fn register<R: Real>(
 }
 
 /// Tests one block's objects against the shard's registered rays.
-fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids) {
+fn scan_block<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    grids: &VoxelGrids,
+    region: &[Region; MAX_GRIDS],
+) {
     for o in block.objects() {
         let g = grids.partition.group(&o.bbox);
         if sh.regs[g].is_empty() {
@@ -525,6 +625,9 @@ fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids)
         let Some((lo, hi)) = grid.spec.cell_range(&o.bbox) else {
             continue;
         };
+        if !region[g].overlaps(lo, hi) {
+            continue;
+        }
         let mut prep: Option<Prepared> = None;
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
@@ -535,7 +638,7 @@ fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids)
                         continue;
                     }
                     for &slot in sh.regs[g].get(v as u32) {
-                        let s = &mut sh.slots[slot as usize];
+                        let s = &mut sh.hot[slot as usize];
                         if s.blocked {
                             continue;
                         }
@@ -544,7 +647,7 @@ fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids)
                             continue;
                         }
                         s.mailbox = o.id;
-                        let p = s.walks[g].prev;
+                        let p = s.prev[g];
                         if p[0] != NONE16
                             && (lo[0]..=hi[0]).contains(&(p[0] as u32))
                             && (lo[1]..=hi[1]).contains(&(p[1] as u32))
@@ -558,9 +661,9 @@ fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids)
                         }
                         let pr = prep.get_or_insert_with(|| prepare(&o.shape));
                         sh.counts.tests.add(o.shape.kind());
-                        let rmin = R::from_f64(s.t_min);
+                        let q = &sh.q[slot as usize];
                         if let Some(t) =
-                            intersect_prepared(&o.shape, pr, &o.bbox, &s.q, rmin, s.upper)
+                            intersect_prepared(&o.shape, pr, &o.bbox, q, s.t_min, s.upper)
                         {
                             let t = t.to_f64();
                             if s.shadow {
@@ -582,26 +685,27 @@ fn scan_block<R: Real>(sh: &mut Shard<R>, block: &Block<'_>, grids: &VoxelGrids)
 
 /// Finishes the rays whose result is complete, freeing their slots.
 fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
-    for s in sh.slots.iter_mut() {
-        if !s.active {
+    for (h, c) in sh.hot.iter_mut().zip(sh.cold.iter_mut()) {
+        if !h.active {
             continue;
         }
-        let done = s.blocked
+        let best_t = h.best_t;
+        let done = h.blocked
             || (0..ngrids).all(|g| {
-                let w = &mut s.walks[g];
-                if w.state == WALKING && s.best_t < w.save.t_exit() {
+                let w = &mut c.walks[g];
+                if w.state == WALKING && best_t < w.save.t_exit() {
                     w.state = DONE;
                 }
                 w.state == DONE
             });
         if done {
             sh.done.push(ResultRec {
-                ray: s.id,
-                object: s.best_id,
+                ray: c.id,
+                object: h.best_id,
                 _pad: 0,
-                t: s.best_t,
+                t: h.best_t,
             });
-            s.active = false;
+            h.active = false;
         }
     }
 }

@@ -19,13 +19,14 @@
 
 mod files;
 mod intersect;
+mod radix;
 mod records;
 mod regmap;
 mod shade;
 mod voxels;
 
 pub use files::{ExternalSorter, RecordFile, SpillDir};
-pub use intersect::{IntersectStats, MAX_GRIDS, StoreNumber, StorePlan};
+pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
 pub use records::{NO_HIT, RayKind, RayRec, ResultRec};
 pub use shade::ShadeStats;
 pub use voxels::{VoxelGrid, VoxelGrids};
@@ -55,22 +56,34 @@ pub struct BfOptions {
     pub spill_dir: Option<PathBuf>,
 }
 
-/// How the memory budget is spent.
+/// How the memory budget is spent. Whatever is left after the fixed parts
+/// (frame buffer, voxel flags, I/O buffers) is shared by the phases, which
+/// take turns: a round's rays and results may stay in memory (up to
+/// [`RESIDENT_RAYS`] and [`RESIDENT_RESULTS`] of it), and the rest goes to
+/// the ray slots while intersecting, and to the hit set and the next round's
+/// sorter while shading. What does not fit spills to disk.
 #[derive(Clone, Debug, Serialize)]
 pub struct Budget {
     pub total: u64,
     pub frame: u64,
     pub voxel_flags: u64,
     pub io_buffers: u64,
-    /// Rays in memory during intersection, and registrations per pass.
-    pub ray_slots: u64,
-    pub registrations: u64,
-    /// Records the sorters hold in memory.
-    pub result_sort_records: u64,
-    pub next_ray_sort_records: u64,
+    /// What the phases share.
+    pub shared: u64,
+    /// Bytes of one ray slot with its planned registrations.
+    pub slot_bytes: u64,
     /// Hits per shading set.
     pub shading_set: u64,
+    /// Records the next-round sorter holds in memory.
+    pub next_ray_sort_records: u64,
 }
+
+/// Shares of [`Budget::shared`].
+pub const RESIDENT_RAYS: f64 = 0.30;
+pub const RESIDENT_RESULTS: f64 = 0.10;
+const SLOTS_SHARE: f64 = 0.55;
+const SET_SHARE: f64 = 0.25;
+const NEXT_SHARE: f64 = 0.30;
 
 /// Database reader buffers (a raw and a compressed block) and record file
 /// buffers, with room to spare.
@@ -88,14 +101,11 @@ impl Budget {
     pub fn plan<R: Real>(total: u64, corners: u64, cells: u64) -> Result<Budget, Error> {
         let frame = corners * 24;
         let fixed = frame + cells + IO_BYTES;
-        let per_slot = slot_bytes::<R>() as u64 + REGS_PER_SLOT * REGISTRATION_BYTES as u64;
-        let ray_bytes = std::mem::size_of::<RayRec>() as u64;
-        let hit_bytes = std::mem::size_of::<records::HitRec>() as u64;
-        let result_bytes = std::mem::size_of::<ResultRec>() as u64;
-        // The phases take turns: intersection holds slots, registrations and
-        // the result sorter; shading holds a hit set and the next-ray sorter.
-        let min_avail = (MIN_SLOTS * per_slot * 10).div_ceil(9);
-        let minimum = fixed + min_avail;
+        let slot_bytes = slot_bytes::<R>() as u64 + REGS_PER_SLOT * REGISTRATION_BYTES as u64;
+        // Without resident rays or results, the slots may take all but the
+        // result sorter's share.
+        let min_shared = ((MIN_SLOTS * slot_bytes) as f64 / (1.0 - RESIDENT_RESULTS)).ceil() as u64;
+        let minimum = fixed + min_shared;
         if total < minimum {
             return Err(Error::Invalid(format!(
                 "a memory budget of {} is too small for this render; it needs at least {} \
@@ -105,22 +115,50 @@ impl Budget {
                 fmt_bytes(frame),
                 fmt_bytes(cells),
                 fmt_bytes(IO_BYTES),
-                fmt_bytes(min_avail),
+                fmt_bytes(min_shared),
             )));
         }
-        let avail = total - fixed;
-        let slots = (avail * 9 / 10 / per_slot).max(MIN_SLOTS);
+        let shared = total - fixed;
+        let part = |f: f64, rec: usize| ((shared as f64 * f) as u64 / rec as u64).max(16);
         Ok(Budget {
             total,
             frame,
             voxel_flags: cells,
             io_buffers: IO_BYTES,
-            ray_slots: slots,
-            registrations: slots * REGS_PER_SLOT,
-            result_sort_records: (avail / 10 / result_bytes).max(16),
-            next_ray_sort_records: (avail * 45 / 100 / ray_bytes).max(16),
-            shading_set: (avail * 45 / 100 / hit_bytes).max(16),
+            shared,
+            slot_bytes,
+            shading_set: part(SET_SHARE, std::mem::size_of::<records::HitRec>()),
+            next_ray_sort_records: part(NEXT_SHARE, std::mem::size_of::<RayRec>()),
         })
+    }
+
+    /// Whether `n` rays may stay in memory between phases.
+    pub fn rays_resident(&self, n: u64) -> bool {
+        n * std::mem::size_of::<RayRec>() as u64 <= (self.shared as f64 * RESIDENT_RAYS) as u64
+    }
+
+    /// Whether `n` results may be held in memory, placed by ray id.
+    pub fn results_resident(&self, n: u64) -> bool {
+        n * std::mem::size_of::<ResultRec>() as u64
+            <= (self.shared as f64 * RESIDENT_RESULTS) as u64
+    }
+
+    /// Records the result sorter holds when results spill.
+    pub fn result_sort_records(&self) -> u64 {
+        ((self.shared as f64 * RESIDENT_RESULTS) as u64 / std::mem::size_of::<ResultRec>() as u64)
+            .max(16)
+    }
+
+    /// Ray slots while intersecting, given what else stays in memory.
+    pub fn slots(&self, resident_rays: bool, resident_results: bool) -> u64 {
+        let mut f = SLOTS_SHARE;
+        if !resident_rays {
+            f += RESIDENT_RAYS;
+        }
+        if !resident_results {
+            f += 0.0; // the result sorter keeps its share
+        }
+        (((self.shared as f64) * f) as u64 / self.slot_bytes).max(MIN_SLOTS)
     }
 }
 
@@ -190,6 +228,90 @@ pub struct BfStats {
     pub intersect_seconds: f64,
     pub shade_seconds: f64,
     pub store_number: String,
+}
+
+/// A round's rays.
+enum RoundRays {
+    /// The eye rays, generated from the camera: corner `i` is ray `i`.
+    Eye(u64),
+    Memory(Vec<RayRec>),
+    File(RecordFile<RayRec>),
+}
+
+impl RoundRays {
+    fn len(&self) -> u64 {
+        match self {
+            RoundRays::Eye(n) => *n,
+            RoundRays::Memory(v) => v.len() as u64,
+            RoundRays::File(f) => f.len(),
+        }
+    }
+
+    fn iter<'a>(
+        &'a self,
+        eye: &'a dyn Fn(u64) -> RayRec,
+    ) -> Result<Box<dyn Iterator<Item = Result<RayRec, Error>> + 'a>, Error> {
+        Ok(match self {
+            RoundRays::Eye(n) => Box::new((0..*n).map(|i| Ok(eye(i)))),
+            RoundRays::Memory(v) => Box::new(v.iter().map(|r| Ok(*r))),
+            RoundRays::File(f) => {
+                let mut rd = f.reader()?;
+                Box::new(std::iter::from_fn(move || rd.next().transpose()))
+            }
+        })
+    }
+}
+
+fn result_key(r: &ResultRec) -> u64 {
+    r.ray
+}
+
+/// A slot of the in-memory results not yet written.
+const UNSET: ResultRec = ResultRec {
+    ray: u64::MAX,
+    object: NO_HIT,
+    _pad: 0,
+    t: 0.0,
+};
+
+/// A round's results, brought into ray order: placed by id in memory, or
+/// sorted externally.
+enum Results {
+    Dense(Vec<ResultRec>),
+    Sort(ExternalSorter<ResultRec, u64, fn(&ResultRec) -> u64>),
+}
+
+impl Results {
+    fn put(&mut self, r: ResultRec) -> Result<(), Error> {
+        match self {
+            Results::Dense(v) => {
+                v[r.ray as usize] = r;
+                Ok(())
+            }
+            Results::Sort(s) => s.push(r),
+        }
+    }
+
+    fn into_reader(self) -> Result<ResultReader, Error> {
+        Ok(match self {
+            Results::Dense(v) => ResultReader::Dense(v.into_iter()),
+            Results::Sort(s) => ResultReader::Sorted(s.finish()?),
+        })
+    }
+}
+
+enum ResultReader {
+    Dense(std::vec::IntoIter<ResultRec>),
+    Sorted(files::Sorted<ResultRec, u64, fn(&ResultRec) -> u64>),
+}
+
+impl ResultReader {
+    fn next(&mut self) -> Result<Option<ResultRec>, Error> {
+        match self {
+            ResultReader::Dense(it) => Ok(it.next()),
+            ResultReader::Sorted(s) => s.next(),
+        }
+    }
 }
 
 /// A breadth-first render: the frame and the statistics.
@@ -286,6 +408,7 @@ fn render_in<R: Real>(
     let mut tests = crate::render::KindCounts::default();
     let store = StorePlan::new(bf.store, &grids);
     let (mut t_intersect, mut t_shade) = (0.0, 0.0);
+    let mut slots = Slots::<R>::new(threads);
 
     // Round 1: the eye rays, generated in corner order.
     let eye = camera.eye.to_array();
@@ -305,10 +428,16 @@ fn render_in<R: Real>(
     };
     let corners = opts.corners();
     counts.eye_rays = corners;
-    let mut round_file: Option<RecordFile<RayRec>> = None;
+    let mut rays = RoundRays::Eye(corners);
     let mut round = 1;
+    // Buffers reused from round to round: allocating them afresh costs
+    // page faults every round.
+    let mut dense_buf: Vec<ResultRec> = Vec::new();
+    let mut spare_rays: Vec<RayRec> = Vec::new();
+    let mut set_buf = Vec::new();
+    let mut radix = radix::Scratch::default();
     loop {
-        let n = round_file.as_ref().map_or(corners, |f| f.len());
+        let n = rays.len();
         if n == 0 {
             break;
         }
@@ -316,36 +445,37 @@ fn render_in<R: Real>(
         progress.set_total(n);
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
 
-        // Intersect.
+        // Intersect; results go in ray order, in memory if they fit.
         let ti = Instant::now();
-        let mut sorter = ExternalSorter::new(
-            &spill,
-            "results",
-            budget.result_sort_records as usize,
-            |r: &ResultRec| r.ray,
-        );
+        let resident = budget.results_resident(n);
+        let mut results = if resident {
+            let mut v = std::mem::take(&mut dense_buf);
+            v.clear();
+            v.resize(n as usize, UNSET);
+            Results::Dense(v)
+        } else {
+            Results::Sort(ExternalSorter::new(
+                &spill,
+                "results",
+                budget.result_sort_records() as usize,
+                result_key,
+            ))
+        };
         let ist = {
             let mut setup = IntersectSetup {
                 db,
                 grids: &mut grids,
                 store,
-                slots: budget.ray_slots as usize,
-                registrations: budget.registrations as usize,
-                threads,
+                slots: budget.slots(matches!(rays, RoundRays::Memory(_)), resident) as usize,
+                registrations: (budget.slots(matches!(rays, RoundRays::Memory(_)), resident)
+                    * REGS_PER_SLOT) as usize,
                 eps,
             };
-            let mut emit = |r: ResultRec| sorter.push(r);
-            match &round_file {
-                None => {
-                    let mut it = (0..n).map(|i| Ok(eye_ray(i)));
-                    intersect_rays::<R>(&mut setup, &pool, &mut it, n, &mut emit, progress)?
-                }
-                Some(f) => {
-                    let mut rd = f.reader()?;
-                    let mut it = std::iter::from_fn(|| rd.next().transpose());
-                    intersect_rays::<R>(&mut setup, &pool, &mut it, n, &mut emit, progress)?
-                }
-            }
+            let mut emit = |r: ResultRec| results.put(r);
+            let mut it = rays.iter(&eye_ray)?;
+            intersect_rays::<R>(
+                &mut setup, &pool, &mut slots, &mut it, n, &mut emit, progress,
+            )?
         };
         t_intersect += ti.elapsed().as_secs_f64();
         st.passes.push(ist.passes);
@@ -361,57 +491,64 @@ fn render_in<R: Real>(
         // Shade.
         let ts = Instant::now();
         progress.set_message(&format!("round {round}: shading"));
-        let mut results = sorter.finish()?;
-        let mut next: NextRays = ExternalSorter::new(
+        let mut results = results.into_reader()?;
+        let mut next: NextRays = ExternalSorter::with_buffer(
             &spill,
             "rays",
             budget.next_ray_sort_records as usize,
             ray_key as fn(&RayRec) -> u64,
+            std::mem::take(&mut spare_rays),
         );
-        let setup = ShadeSetup {
+        let mut setup = ShadeSetup {
             db,
+            set: &mut set_buf,
+            radix: &mut radix,
             materials: &header.materials,
             shade: &shade_scene,
             set_cap: budget.shading_set as usize,
         };
         let mut next_result = || results.next();
-        let sst = match &round_file {
-            None => {
-                let mut it = (0..n).map(|i| Ok(eye_ray(i)));
-                shade_round(
-                    &setup,
-                    &pool,
-                    &mut it,
-                    &mut next_result,
-                    &mut frame,
-                    &mut next,
-                    &mut counts,
-                )?
-            }
-            Some(f) => {
-                let mut rd = f.reader()?;
-                let mut it = std::iter::from_fn(|| rd.next().transpose());
-                shade_round(
-                    &setup,
-                    &pool,
-                    &mut it,
-                    &mut next_result,
-                    &mut frame,
-                    &mut next,
-                    &mut counts,
-                )?
-            }
+        let sst = {
+            let mut it = rays.iter(&eye_ray)?;
+            shade_round(
+                &mut setup,
+                &pool,
+                &mut it,
+                &mut next_result,
+                &mut frame,
+                &mut next,
+                &mut counts,
+            )?
         };
+        if let ResultReader::Dense(it) = results {
+            dense_buf = it.into_iter().collect::<Vec<_>>();
+            dense_buf.clear();
+        }
         st.db_scans += sst.db_scans;
         st.db_bytes_read += sst.db_bytes_read;
-        // The next round's rays, in key order, become its ray file.
-        let mut sorted = next.finish()?;
-        let mut w = RecordWriter::<RayRec>::create(&spill, "round")?;
-        while let Some(r) = sorted.next()? {
-            w.push(&r)?;
+        // The next round's rays, in key order: kept in memory if they fit,
+        // else written to a file.
+        if let RoundRays::Memory(v) = std::mem::replace(&mut rays, RoundRays::Eye(0)) {
+            spare_rays = v;
         }
-        drop(sorted);
-        round_file = Some(w.finish()?);
+        let count = next.len();
+        let sorted = next.finish()?;
+        rays = match sorted.into_vec() {
+            Ok(v) if budget.rays_resident(count) => RoundRays::Memory(v),
+            Ok(v) => {
+                let mut w = RecordWriter::<RayRec>::create(&spill, "round")?;
+                w.extend(&v)?;
+                spare_rays = v;
+                RoundRays::File(w.finish()?)
+            }
+            Err(mut sorted) => {
+                let mut w = RecordWriter::<RayRec>::create(&spill, "round")?;
+                while let Some(r) = sorted.next()? {
+                    w.push(&r)?;
+                }
+                RoundRays::File(w.finish()?)
+            }
+        };
         t_shade += ts.elapsed().as_secs_f64();
         round += 1;
     }

@@ -34,21 +34,18 @@ impl Default for RegMap {
 }
 
 impl RegMap {
-    /// Builds the map from `keys` (voxel << 32 | slot), which it sorts.
-    pub fn build(&mut self, keys: &mut [u64]) {
-        keys.sort_unstable();
-        self.items.clear();
-        self.items.extend(keys.iter().map(|k| *k as u32));
-        let mut distinct = 0usize;
-        let mut last = u64::MAX;
-        for k in keys.iter() {
-            if k >> 32 != last {
-                distinct += 1;
-                last = k >> 32;
-            }
-        }
-        let size = (distinct * 2).next_power_of_two().max(16);
+    /// Builds the map from `keys` (voxel << 32 | slot), given in slot
+    /// order: a counting sort by voxel through the table, so each voxel's
+    /// slots stay in slot order.
+    pub fn build(&mut self, keys: &[u64]) {
         self.table.clear();
+        self.items.clear();
+        if keys.is_empty() {
+            self.mask = 0;
+            return;
+        }
+        // Size the table for at most one entry per key.
+        let size = (keys.len() * 2).next_power_of_two().max(16);
         self.table.resize(
             size,
             Entry {
@@ -58,22 +55,43 @@ impl RegMap {
             },
         );
         self.mask = size - 1;
-        let mut i = 0;
-        while i < keys.len() {
-            let v = (keys[i] >> 32) as u32;
-            let start = i;
-            while i < keys.len() && (keys[i] >> 32) as u32 == v {
-                i += 1;
+        // Count per voxel.
+        for k in keys {
+            let v = (k >> 32) as u32;
+            let h = self.slot_of(v);
+            let e = &mut self.table[h];
+            e.voxel = v;
+            e.len += 1;
+        }
+        // Starts, then fill.
+        let mut acc = 0u32;
+        for e in self.table.iter_mut() {
+            if e.voxel != EMPTY {
+                e.start = acc;
+                acc += e.len;
+                e.len = 0;
             }
-            let mut h = hash(v) & self.mask;
-            while self.table[h].voxel != EMPTY {
-                h = (h + 1) & self.mask;
+        }
+        self.items.resize(keys.len(), 0);
+        for k in keys {
+            let h = self.slot_of((k >> 32) as u32);
+            let e = &mut self.table[h];
+            self.items[(e.start + e.len) as usize] = *k as u32;
+            e.len += 1;
+        }
+    }
+
+    /// The table position of `voxel`: its entry, or the empty one where it
+    /// would go.
+    #[inline]
+    fn slot_of(&self, voxel: u32) -> usize {
+        let mut h = hash(voxel) & self.mask;
+        loop {
+            let e = self.table[h].voxel;
+            if e == voxel || e == EMPTY {
+                return h;
             }
-            self.table[h] = Entry {
-                voxel: v,
-                start: start as u32,
-                len: (i - start) as u32,
-            };
+            h = (h + 1) & self.mask;
         }
     }
 
@@ -119,9 +137,9 @@ mod tests {
 
     #[test]
     fn lookup() {
-        let mut keys: Vec<u64> = vec![(7 << 32) | 3, (2 << 32) | 1, (7 << 32) | 1, (9 << 32) | 0];
+        let keys: Vec<u64> = vec![(9 << 32) | 0, (2 << 32) | 1, (7 << 32) | 1, (7 << 32) | 3];
         let mut m = RegMap::default();
-        m.build(&mut keys);
+        m.build(&keys);
         assert_eq!(m.get(7), &[1, 3]);
         assert_eq!(m.get(2), &[1]);
         assert_eq!(m.get(9), &[0]);

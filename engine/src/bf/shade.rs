@@ -26,6 +26,9 @@ pub struct ShadeStats {
 
 pub struct ShadeSetup<'a> {
     pub db: &'a Database,
+    /// The hit set's memory, reused from round to round.
+    pub set: &'a mut Vec<HitRec>,
+    pub radix: &'a mut super::radix::Scratch,
     pub materials: &'a [Material],
     pub shade: &'a ShadeScene,
     /// Hits per set.
@@ -42,7 +45,7 @@ pub fn ray_key(r: &RayRec) -> u64 {
 /// Shades one round. `rays` yields the round's rays in id order; `results`
 /// their results in the same order.
 pub fn shade_round(
-    setup: &ShadeSetup<'_>,
+    setup: &mut ShadeSetup<'_>,
     pool: &rayon::ThreadPool,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
     results: &mut dyn FnMut() -> Result<Option<ResultRec>, Error>,
@@ -51,7 +54,8 @@ pub fn shade_round(
     counts: &mut RayCounts,
 ) -> Result<ShadeStats, Error> {
     let mut st = ShadeStats::default();
-    let mut set: Vec<HitRec> = Vec::new();
+    let mut set = std::mem::take(setup.set);
+    set.clear();
     let mut id: u64 = 0;
     for ray in rays {
         let ray = ray?;
@@ -93,19 +97,22 @@ pub fn shade_round(
     if !set.is_empty() {
         shade_set(setup, pool, &mut set, next, counts, &mut st)?;
     }
+    *setup.set = set;
     Ok(st)
 }
 
 /// Sorts a set of hits by object and shades it in one scan of the objects.
 fn shade_set(
-    setup: &ShadeSetup<'_>,
+    setup: &mut ShadeSetup<'_>,
     pool: &rayon::ThreadPool,
     set: &mut Vec<HitRec>,
     next: &mut NextRays,
     counts: &mut RayCounts,
     st: &mut ShadeStats,
 ) -> Result<(), Error> {
-    pool.install(|| set.par_sort_unstable_by_key(|h| (h.object, h.id)));
+    // Hits arrive in ray order; a stable sort by object keeps that order
+    // within each object.
+    super::radix::sort_by_key(set, |h| h.object as u64, setup.radix);
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;
@@ -121,6 +128,7 @@ fn shade_set(
         }
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
+        let (materials, shade_scene) = (setup.materials, setup.shade);
         let chunk = (stop - at)
             .div_ceil(pool.current_num_threads().max(1) * 4)
             .max(64);
@@ -132,7 +140,7 @@ fn shade_set(
                     let mut c = RayCounts::default();
                     for h in hits {
                         let obj = &objs[(h.object as u64 - first) as usize];
-                        shade_hit(setup, h, obj, &mut out, &mut c);
+                        shade_hit(materials, shade_scene, h, obj, &mut out, &mut c);
                     }
                     (out, c)
                 })
@@ -154,7 +162,8 @@ fn shade_set(
 
 /// Shades one hit with the shared shading code, writing the rays it spawns.
 fn shade_hit(
-    setup: &ShadeSetup<'_>,
+    materials: &[Material],
+    shade_scene: &ShadeScene,
     h: &HitRec,
     obj: &ObjectRef<'_>,
     out: &mut Vec<RayRec>,
@@ -164,12 +173,12 @@ fn shade_hit(
     let o = Vec3::from_f64(r.o);
     let d = Vec3::from_f64(r.d);
     let surf = surface_at(&obj.shape, &RayQ::new(o, d), h.t);
-    let mat = &setup.materials[obj.material as usize];
-    let lights = setup.shade.lights.len() as u64;
+    let mat = &materials[obj.material as usize];
+    let lights = shade_scene.lights.len() as u64;
     let base = h.id * SPAWN_SLOTS;
     let p = surf.p.to_array();
     shade(
-        setup.shade,
+        shade_scene,
         d,
         r.depth,
         r.payload[0],
