@@ -14,7 +14,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 
 /// Buffer size of record readers and writers.
-pub const IO_BUFFER: usize = 256 << 10;
+pub const IO_BUFFER: usize = 32 << 10;
+/// Buffer size of each run's reader while merging, and the most runs merged
+/// at once: a merge holds at most `MERGE_FANIN * MERGE_BUFFER` bytes of
+/// buffers, however many runs there are.
+pub const MERGE_BUFFER: usize = 4 << 10;
+pub const MERGE_FANIN: usize = 16;
 
 /// Where temporary files go, and how many bytes have been written there.
 #[derive(Clone, Debug)]
@@ -145,9 +150,13 @@ impl<T: Pod> RecordFile<T> {
         self.count == 0
     }
     pub fn reader(&self) -> Result<RecordReader<T>, Error> {
+        self.reader_with(IO_BUFFER)
+    }
+
+    pub fn reader_with(&self, buffer: usize) -> Result<RecordReader<T>, Error> {
         let f = File::open(&self.path).at(&self.path)?;
         Ok(RecordReader {
-            input: BufReader::with_capacity(IO_BUFFER, f),
+            input: BufReader::with_capacity(buffer, f),
             path: self.path.clone(),
             left: self.count,
             _t: PhantomData,
@@ -229,7 +238,7 @@ impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
         }
         if self.buf.capacity() == self.buf.len() {
             // Grow geometrically, but never past the memory share.
-            let want = (self.buf.capacity() * 2).clamp(1 << 12, self.cap);
+            let want = (self.buf.capacity() * 2).max(1 << 12).min(self.cap);
             self.buf.reserve_exact(want - self.buf.len());
         }
         self.buf.push(r);
@@ -270,25 +279,64 @@ impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
             self.spill_run()?;
         }
         self.buf = Vec::new();
-        let mut readers = Vec::with_capacity(self.runs.len());
-        let mut heap = BinaryHeap::with_capacity(self.runs.len());
-        for (i, run) in self.runs.iter().enumerate() {
-            let mut r = run.reader()?;
-            if let Some(x) = r.next()? {
-                heap.push(Head {
-                    key: (self.key)(&x),
-                    run: i,
-                    rec: x,
-                });
+        // Merge groups of runs into longer ones until few enough remain.
+        while self.runs.len() > MERGE_FANIN {
+            let group: Vec<RecordFile<T>> = self.runs.drain(..MERGE_FANIN).collect();
+            let mut merged = Merger::new(&group, &self.key)?;
+            let mut w = RecordWriter::create(&self.spill, self.what)?;
+            while let Some(x) = merged.next(&self.key)? {
+                w.push(&x)?;
             }
-            readers.push(r);
+            drop(merged);
+            self.runs.push(w.finish()?);
         }
+        let m = Merger::new(&self.runs, &self.key)?;
+        let (readers, heap) = (m.readers, m.heap);
         Ok(Sorted(SortedInner::Merge {
             readers,
             heap,
             _runs: std::mem::take(&mut self.runs),
             key: self.key,
         }))
+    }
+}
+
+/// A k-way merge of sorted runs.
+struct Merger<T: Pod, K> {
+    readers: Vec<RecordReader<T>>,
+    heap: BinaryHeap<Head<T, K>>,
+}
+
+impl<T: Pod, K: Ord + Copy> Merger<T, K> {
+    fn new(runs: &[RecordFile<T>], key: &impl Fn(&T) -> K) -> Result<Self, Error> {
+        let mut readers = Vec::with_capacity(runs.len());
+        let mut heap = BinaryHeap::with_capacity(runs.len());
+        for (i, run) in runs.iter().enumerate() {
+            let mut r = run.reader_with(MERGE_BUFFER)?;
+            if let Some(x) = r.next()? {
+                heap.push(Head {
+                    key: key(&x),
+                    run: i,
+                    rec: x,
+                });
+            }
+            readers.push(r);
+        }
+        Ok(Merger { readers, heap })
+    }
+
+    fn next(&mut self, key: &impl Fn(&T) -> K) -> Result<Option<T>, Error> {
+        let Some(top) = self.heap.pop() else {
+            return Ok(None);
+        };
+        if let Some(x) = self.readers[top.run].next()? {
+            self.heap.push(Head {
+                key: key(&x),
+                run: top.run,
+                rec: x,
+            });
+        }
+        Ok(Some(top.rec))
     }
 }
 

@@ -85,9 +85,11 @@ const SLOTS_SHARE: f64 = 0.55;
 const SET_SHARE: f64 = 0.25;
 const NEXT_SHARE: f64 = 0.30;
 
-/// Database reader buffers (a raw and a compressed block) and record file
-/// buffers, with room to spare.
-const IO_BYTES: u64 = 3 * (1 << 20) + 8 * files::IO_BUFFER as u64;
+/// Record file buffers at any moment (a round's rays read, results and
+/// next-round rays written, a merge's readers), and a margin for small
+/// allocations; the database's block buffers come on top.
+const IO_BYTES: u64 =
+    5 * files::IO_BUFFER as u64 + (files::MERGE_FANIN * files::MERGE_BUFFER) as u64 + (64 << 10);
 /// Fewest rays worth a pass.
 const MIN_SLOTS: u64 = 64;
 /// Registrations planned per ray in memory.
@@ -98,9 +100,15 @@ const MAX_CELLS: u64 = 1 << 27;
 impl Budget {
     /// Splits `total` bytes for a render of `corners` pixel corners with
     /// `cells` voxels, or explains the smallest budget that would do.
-    pub fn plan<R: Real>(total: u64, corners: u64, cells: u64) -> Result<Budget, Error> {
+    pub fn plan<R: Real>(
+        total: u64,
+        corners: u64,
+        cells: u64,
+        scan_buffers: u64,
+    ) -> Result<Budget, Error> {
         let frame = corners * 24;
-        let fixed = frame + cells + IO_BYTES;
+        let io = IO_BYTES + scan_buffers;
+        let fixed = frame + cells + io;
         let slot_bytes = slot_bytes::<R>() as u64 + REGS_PER_SLOT * REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
@@ -114,7 +122,7 @@ impl Budget {
                 fmt_bytes(minimum),
                 fmt_bytes(frame),
                 fmt_bytes(cells),
-                fmt_bytes(IO_BYTES),
+                fmt_bytes(io),
                 fmt_bytes(min_shared),
             )));
         }
@@ -124,7 +132,7 @@ impl Budget {
             total,
             frame,
             voxel_flags: cells,
-            io_buffers: IO_BYTES,
+            io_buffers: io,
             shared,
             slot_bytes,
             shading_set: part(SET_SHARE, std::mem::size_of::<records::HitRec>()),
@@ -201,7 +209,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         }
     };
     let b = v * mul as f64;
-    if !(b >= 1.0 && b < 1.8e19) {
+    if !(1.0..1.8e19).contains(&b) {
         return Err(format!("size '{s}' is out of range"));
     }
     Ok(b as u64)
@@ -329,7 +337,7 @@ pub fn plan_grids(
 ) -> (Vec<GridSpec>, crate::grid::Partition) {
     let plan = plan_groups(db.sizes(), opts.multiple_grids);
     let frame = opts.corners() * 24;
-    let cap = (memory.saturating_sub(frame) / 4).clamp(1, MAX_CELLS);
+    let cap = (memory.saturating_sub(frame) / 8).clamp(1, MAX_CELLS);
     let mut specs = Vec::new();
     for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
         let res = match (g, opts.grid_res) {
@@ -373,7 +381,12 @@ fn render_in<R: Real>(
         return Err(Error::Invalid("too many grids".into()));
     }
     let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-    let budget = Budget::plan::<R>(bf.memory, opts.corners(), cells)?;
+    let budget = Budget::plan::<R>(
+        bf.memory,
+        opts.corners(),
+        cells,
+        db.scan_buffer_bytes() as u64,
+    )?;
     let threads = if opts.threads == 0 {
         crate::sys::cpus()
     } else {
@@ -435,6 +448,7 @@ fn render_in<R: Real>(
     let mut dense_buf: Vec<ResultRec> = Vec::new();
     let mut spare_rays: Vec<RayRec> = Vec::new();
     let mut set_buf = Vec::new();
+    let mut shade_outputs = Vec::new();
     let mut radix = radix::Scratch::default();
     loop {
         let n = rays.len();
@@ -502,6 +516,7 @@ fn render_in<R: Real>(
         let mut setup = ShadeSetup {
             db,
             set: &mut set_buf,
+            outputs: &mut shade_outputs,
             radix: &mut radix,
             materials: &header.materials,
             shade: &shade_scene,
@@ -598,10 +613,12 @@ mod tests {
 
     #[test]
     fn too_small_a_budget_names_the_minimum() {
-        let e = Budget::plan::<f64>(1 << 20, 513 * 513, 1000)
+        let e = Budget::plan::<f64>(1 << 20, 513 * 513, 1000, 1 << 17)
             .unwrap_err()
             .to_string();
         assert!(e.contains("needs at least"), "{e}");
-        assert!(Budget::plan::<f64>(64 << 20, 513 * 513, 1000).is_ok());
+        assert!(Budget::plan::<f64>(64 << 20, 513 * 513, 1000, 1 << 17).is_ok());
+        // A small image fits in a few hundred kilobytes.
+        assert!(Budget::plan::<f64>(600 << 10, 33 * 33, 20_000, 1 << 17).is_ok());
     }
 }

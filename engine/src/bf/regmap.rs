@@ -3,6 +3,7 @@
 //! by the grid, so a fine grid costs one flag byte per voxel and no more.
 
 /// Open-addressing table from voxel index to a run of `items`.
+#[derive(Default)]
 pub struct RegMap {
     table: Vec<Entry>,
     mask: usize,
@@ -21,16 +22,6 @@ const EMPTY: u32 = u32::MAX;
 #[inline(always)]
 fn hash(v: u32) -> usize {
     (v.wrapping_mul(0x9E37_79B1) ^ (v >> 15)) as usize
-}
-
-impl Default for RegMap {
-    fn default() -> Self {
-        RegMap {
-            table: Vec::new(),
-            mask: 0,
-            items: Vec::new(),
-        }
-    }
 }
 
 impl RegMap {

@@ -28,6 +28,8 @@ pub struct ShadeSetup<'a> {
     pub db: &'a Database,
     /// The hit set's memory, reused from round to round.
     pub set: &'a mut Vec<HitRec>,
+    /// Per-chunk outputs of the parallel shading, reused.
+    pub outputs: &'a mut Vec<(Vec<RayRec>, RayCounts)>,
     pub radix: &'a mut super::radix::Scratch,
     pub materials: &'a [Material],
     pub shade: &'a ShadeScene,
@@ -56,8 +58,7 @@ pub fn shade_round(
     let mut st = ShadeStats::default();
     let mut set = std::mem::take(setup.set);
     set.clear();
-    let mut id: u64 = 0;
-    for ray in rays {
+    for (id, ray) in (0u64..).zip(rays) {
         let ray = ray?;
         let res = results()?
             .ok_or_else(|| Error::Invalid(format!("no intersection result for ray {id}")))?;
@@ -89,7 +90,6 @@ pub fn shade_round(
                 shade_set(setup, pool, &mut set, next, counts, &mut st)?;
             }
         }
-        id += 1;
     }
     if results()?.is_some() {
         return Err(Error::Invalid("more intersection results than rays".into()));
@@ -129,27 +129,30 @@ fn shade_set(
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
         let (materials, shade_scene) = (setup.materials, setup.shade);
-        let chunk = (stop - at)
-            .div_ceil(pool.current_num_threads().max(1) * 4)
-            .max(64);
-        let outs: Vec<(Vec<RayRec>, RayCounts)> = pool.install(|| {
+        let chunks = pool.current_num_threads().max(1) * 4;
+        let chunk = (stop - at).div_ceil(chunks).max(64);
+        let n_chunks = (stop - at).div_ceil(chunk);
+        if setup.outputs.len() < n_chunks {
+            setup.outputs.resize_with(n_chunks, Default::default);
+        }
+        let outputs = &mut setup.outputs[..n_chunks];
+        pool.install(|| {
             set[at..stop]
                 .par_chunks(chunk)
-                .map(|hits| {
-                    let mut out = Vec::new();
-                    let mut c = RayCounts::default();
+                .zip(outputs.par_iter_mut())
+                .for_each(|(hits, (out, c))| {
+                    out.clear();
+                    *c = RayCounts::default();
                     for h in hits {
                         let obj = &objs[(h.object as u64 - first) as usize];
-                        shade_hit(materials, shade_scene, h, obj, &mut out, &mut c);
+                        shade_hit(materials, shade_scene, h, obj, out, c);
                     }
-                    (out, c)
                 })
-                .collect()
         });
-        for (rays, c) in outs {
-            *counts += c;
+        for (rays, c) in setup.outputs[..n_chunks].iter() {
+            *counts += *c;
             for r in rays {
-                next.push(r)?;
+                next.push(*r)?;
             }
         }
         at = stop;

@@ -56,7 +56,7 @@ const MAX_HUGE_SHARE: f64 = 0.01;
 const MAX_HUGE_FEW: u64 = 8;
 /// Setting the huge objects apart is worth it when the rest spans at most
 /// this fraction of the whole scene's diagonal.
-const SHRINK: f64 = 0.5;
+const SHRINK: f64 = 0.6;
 /// Plans the grids from the size summary. `allow_split = false`
 /// (`--grids 1`) keeps one grid.
 pub fn plan_groups(sizes: &SizeSummary, allow_split: bool) -> GroupPlan {

@@ -11,8 +11,18 @@ pub const VERSION: u32 = 1;
 pub const HEADER_BYTES: usize = 256;
 pub const BLOCK_MAGIC: [u8; 4] = *b"SBLK";
 pub const BLOCK_HEADER_BYTES: usize = 32;
-/// Largest uncompressed block payload.
+/// Blocks are closed once they hold this many bytes of records: small
+/// enough that a reader's buffers fit a tight memory budget, large enough
+/// to read at the disk's sequential speed.
+pub const BLOCK_TARGET: usize = 64 << 10;
+/// Largest uncompressed block payload (a block holds at least one record,
+/// and the largest record, a patch of the most vertices, is below this).
 pub const MAX_BLOCK_RAW: usize = 1 << 20;
+/// Bytes a compressed block may take beyond its raw size (zstd's bound for
+/// incompressible data, with room to spare).
+pub fn max_stored(raw: usize) -> usize {
+    raw + raw / 128 + 4096
+}
 /// Words before a record's geometry: kind/vertex count, material, bbox.
 pub const RECORD_HEADER_WORDS: usize = 8;
 /// Limits on the tables, so that a corrupt count cannot ask for memory.

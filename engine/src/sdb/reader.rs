@@ -26,6 +26,7 @@ pub struct Database {
     tables_offset: u64,
     raw_bytes: u64,
     file_bytes: u64,
+    largest_block: usize,
 }
 
 /// Counters of one scan.
@@ -137,6 +138,7 @@ impl Database {
             tables_offset: h.tables_offset,
             raw_bytes: h.raw_bytes,
             file_bytes,
+            largest_block: h.block_raw_max as usize,
         })
     }
 
@@ -177,6 +179,21 @@ impl Database {
         self.raw_bytes
     }
 
+    /// Size of the largest uncompressed block.
+    pub fn largest_block(&self) -> usize {
+        self.largest_block
+    }
+
+    /// Memory a scan holds: buffers for one raw and one stored block.
+    pub fn scan_buffer_bytes(&self) -> usize {
+        self.largest_block
+            + if self.compression == Compression::None {
+                0
+            } else {
+                max_stored(self.largest_block)
+            }
+    }
+
     /// Starts a sequential scan of the objects.
     pub fn scan(&self) -> Result<Scan<'_>, Error> {
         let mut file = File::open(&self.path).at(&self.path)?;
@@ -190,7 +207,7 @@ impl Database {
             db: self,
             file,
             decompressor,
-            words: Vec::with_capacity(MAX_BLOCK_RAW / 4),
+            words: Vec::with_capacity(self.largest_block / 4),
             stored: Vec::new(),
             next_index: 0,
             next_object: 0,
@@ -376,9 +393,9 @@ impl Scan<'_> {
         }
         let raw_len = h.raw_len as usize;
         let stored_len = h.stored_len as usize;
-        if raw_len > MAX_BLOCK_RAW
+        if raw_len > self.db.largest_block
             || !raw_len.is_multiple_of(4)
-            || stored_len > MAX_BLOCK_RAW + 4096
+            || stored_len > max_stored(self.db.largest_block)
         {
             return Err(self.err("block lengths are out of range: the block is corrupt"));
         }

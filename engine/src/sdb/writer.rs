@@ -37,6 +37,7 @@ pub struct DbWriter {
     offset: u64,
     blocks: u64,
     raw_bytes: u64,
+    largest_block: usize,
     objects: u64,
     counts: ShapeCounts,
     bbox: Aabb,
@@ -65,13 +66,14 @@ impl DbWriter {
             out: Some(out),
             compression,
             compressor,
-            block: Vec::with_capacity(MAX_BLOCK_RAW / 4),
+            block: Vec::with_capacity(BLOCK_TARGET / 4),
             block_first: 0,
             block_objects: 0,
             stored: Vec::new(),
             offset: HEADER_BYTES as u64,
             blocks: 0,
             raw_bytes: 0,
+            largest_block: 0,
             objects: 0,
             counts: ShapeCounts::default(),
             bbox: Aabb::EMPTY,
@@ -123,6 +125,7 @@ impl DbWriter {
         };
         h.crc = h.compute_crc(&payload[..stored_len]);
         let raw_len = raw.len() as u64;
+        self.largest_block = self.largest_block.max(raw.len());
         let out = self.out.as_mut().expect("writer used after finish");
         out.write_all(bytemuck::bytes_of(&h)).at(&self.path)?;
         out.write_all(&payload[..stored_len]).at(&self.path)?;
@@ -204,7 +207,7 @@ impl DbWriter {
                 Compression::None => 0,
                 Compression::Zstd(l) => l,
             },
-            block_raw_max: MAX_BLOCK_RAW as u32,
+            block_raw_max: self.largest_block as u32,
             reserved0: 0,
             object_count: self.objects,
             counts: [c.sphere, c.polygon, c.patch, c.cone],
@@ -305,7 +308,7 @@ impl SceneSink for DbWriter {
             _ => 0,
         };
         let words = RECORD_HEADER_WORDS + payload_words(kind, nverts);
-        if (self.block.len() + words) * 4 > MAX_BLOCK_RAW {
+        if self.block_objects > 0 && (self.block.len() + words) * 4 > BLOCK_TARGET {
             self.flush_block()?;
         }
         let bbox = shape.bounds();

@@ -1,0 +1,259 @@
+//! The breadth-first tracer gives exactly the depth-first image and SPD
+//! counts, whatever its store number, memory budget, grids, compression and
+//! threads; and its own counts do not depend on the number of threads.
+
+mod common;
+
+use sray_engine::bf::{self, BfOptions, StoreNumber};
+use sray_engine::df;
+use sray_engine::progress::NoProgress;
+use sray_engine::render::{RenderOptions, RenderStats};
+use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::source::SceneSource;
+use std::path::{Path, PathBuf};
+
+const SIZE: u32 = 40;
+
+fn convert(nff: &Path, dir: &Path, c: Compression) -> PathBuf {
+    let out = dir.join(format!(
+        "{}-{}.sdb",
+        nff.file_stem().unwrap().to_str().unwrap(),
+        c.name()
+    ));
+    let mut w = DbWriter::create(&out, c).unwrap();
+    SceneSource::Nff(nff.to_path_buf())
+        .stream_into(&mut w, &NoProgress)
+        .unwrap();
+    w.finish().unwrap();
+    out
+}
+
+fn opts(threads: usize, grids: bool) -> RenderOptions {
+    RenderOptions {
+        width: SIZE,
+        height: SIZE,
+        threads,
+        multiple_grids: grids,
+        ..Default::default()
+    }
+}
+
+fn df_render(db: &Database) -> (Vec<u8>, RenderStats) {
+    let out = df::render(db, &opts(2, true), &NoProgress).unwrap();
+    (out.frame.to_rgb8(), out.stats)
+}
+
+fn bf_render(
+    db: &Database,
+    o: &RenderOptions,
+    store: StoreNumber,
+    memory: u64,
+) -> (Vec<u8>, RenderStats) {
+    let b = BfOptions {
+        memory,
+        store,
+        spill_dir: None,
+    };
+    let out = bf::render(db, o, &b, &NoProgress).unwrap();
+    (out.frame.to_rgb8(), out.stats)
+}
+
+fn assert_same(name: &str, what: &str, a: &(Vec<u8>, RenderStats), b: &(Vec<u8>, RenderStats)) {
+    assert!(a.0 == b.0, "{name} ({what}): images differ");
+    assert_eq!(a.1.rays, b.1.rays, "{name} ({what}): SPD counts differ");
+}
+
+const PLENTY: u64 = 1 << 30;
+
+#[test]
+fn every_store_number_gives_the_depth_first_image() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, size) in common::DEFAULT_SCENES {
+        let path = convert(
+            &common::shared_spd().join(format!("{name}{size}.nff")),
+            dir.path(),
+            Compression::None,
+        );
+        let db = Database::open(&path).unwrap();
+        let reference = df_render(&db);
+        for store in [
+            StoreNumber::Fixed(1),
+            StoreNumber::Fixed(2),
+            StoreNumber::Adaptive,
+        ] {
+            let got = bf_render(&db, &opts(2, true), store, PLENTY);
+            assert_same(name, &format!("store {store:?}"), &reference, &got);
+            assert_eq!(got.1.mode, "bf");
+        }
+    }
+}
+
+#[test]
+fn budgets_from_a_few_hundred_kilobytes_to_plenty() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, size) in [("balls", 4), ("gears", 4), ("rings", 7), ("teapot", 12)] {
+        let path = convert(
+            &common::shared_spd().join(format!("{name}{size}.nff")),
+            dir.path(),
+            Compression::None,
+        );
+        let db = Database::open(&path).unwrap();
+        let reference = df_render(&db);
+        let mut spilled = false;
+        for memory in [600 << 10, 1 << 20, 4 << 20, PLENTY] {
+            let got = bf_render(&db, &opts(2, true), StoreNumber::Adaptive, memory);
+            assert_same(name, &format!("memory {memory}"), &reference, &got);
+            let extra = got.1.breadth_first.as_ref().unwrap();
+            spilled |= extra["spill_bytes_written"].as_u64().unwrap() > 0;
+            if memory == 600 << 10 {
+                // A tight budget means ray filling: more passes than rays fit.
+                let passes: u64 = extra["passes"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|p| p.as_u64().unwrap())
+                    .sum();
+                assert!(passes > 10, "{name}: only {passes} passes at 600 KiB");
+            }
+        }
+        assert!(spilled, "{name}: nothing ever spilled to disk");
+    }
+}
+
+#[test]
+fn one_grid_or_several_and_compression() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, size) in [("balls", 4), ("tree", 11), ("gears", 4)] {
+        let nff = common::shared_spd().join(format!("{name}{size}.nff"));
+        let plain = Database::open(&convert(&nff, dir.path(), Compression::None)).unwrap();
+        let packed = Database::open(&convert(&nff, dir.path(), Compression::Zstd(3))).unwrap();
+        let reference = df_render(&plain);
+        let several = bf_render(&plain, &opts(2, true), StoreNumber::Adaptive, PLENTY);
+        let one = bf_render(&plain, &opts(2, false), StoreNumber::Adaptive, PLENTY);
+        assert!(
+            several.1.grids.len() > 1,
+            "{name}: expected the ground in a grid of its own"
+        );
+        assert_eq!(one.1.grids.len(), 1);
+        assert_same(name, "several grids", &reference, &several);
+        assert_same(name, "one grid", &reference, &one);
+        let z = bf_render(&packed, &opts(2, true), StoreNumber::Adaptive, 2 << 20);
+        assert_same(name, "zstd", &reference, &z);
+        // Compression changes what is read from disk, not what is tested.
+        assert_eq!(z.1.intersection_tests, several.1.intersection_tests);
+    }
+}
+
+#[test]
+fn counts_do_not_depend_on_threads_or_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, size) in [("mount", 6), ("rings", 7), ("tetra", 6)] {
+        let path = convert(
+            &common::shared_spd().join(format!("{name}{size}.nff")),
+            dir.path(),
+            Compression::None,
+        );
+        let db = Database::open(&path).unwrap();
+        let a = bf_render(&db, &opts(1, true), StoreNumber::Adaptive, PLENTY);
+        for (threads, memory) in [(2, PLENTY), (3, PLENTY), (2, 1 << 20)] {
+            let b = bf_render(&db, &opts(threads, true), StoreNumber::Adaptive, memory);
+            assert_same(name, &format!("{threads} threads"), &a, &b);
+            assert_eq!(
+                a.1.intersection_tests_by_kind, b.1.intersection_tests_by_kind,
+                "{name}"
+            );
+            let (x, y) = (
+                a.1.breadth_first.as_ref().unwrap(),
+                b.1.breadth_first.as_ref().unwrap(),
+            );
+            for k in [
+                "ray_voxel_registrations",
+                "tests_skipped_last_voxel",
+                "tests_skipped_mailbox",
+                "rays_per_round",
+            ] {
+                assert_eq!(
+                    x[k], y[k],
+                    "{name}: {k} with {threads} threads, {memory} bytes"
+                );
+            }
+            if memory == PLENTY {
+                for k in [
+                    "passes",
+                    "remaining_rays_per_pass",
+                    "store_numbers",
+                    "db_scans",
+                ] {
+                    assert_eq!(x[k], y[k], "{name}: {k} with {threads} threads");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_paper_s_rules_do_their_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = convert(
+        &common::shared_spd().join("rings7.nff"),
+        dir.path(),
+        Compression::None,
+    );
+    let db = Database::open(&path).unwrap();
+    let (_, st) = bf_render(&db, &opts(2, true), StoreNumber::Fixed(1), PLENTY);
+    let x = st.breadth_first.unwrap();
+    // The last-voxel rule and the mailbox both save tests.
+    assert!(x["tests_skipped_last_voxel"].as_u64().unwrap() > 0);
+    assert!(x["tests_skipped_mailbox"].as_u64().unwrap() > 0);
+    // With the store number fixed at one, the remaining rays fall pass after
+    // pass (Fig. 3a), and the adaptive store number needs fewer passes.
+    let remaining = x["remaining_rays_per_pass"][0].as_array().unwrap();
+    assert!(remaining.len() > 3);
+    assert!(remaining.windows(2).all(|w| w[1].as_u64() <= w[0].as_u64()));
+    let (_, ad) = bf_render(&db, &opts(2, true), StoreNumber::Adaptive, PLENTY);
+    let y = ad.breadth_first.unwrap();
+    let passes = |v: &serde_json::Value| {
+        v["passes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| p.as_u64().unwrap())
+            .sum::<u64>()
+    };
+    assert!(
+        passes(&y) < passes(&x),
+        "adaptive {} vs fixed {}",
+        passes(&y),
+        passes(&x)
+    );
+    // Store numbers grow as rays finish.
+    let sn = y["store_numbers"][0].as_array().unwrap();
+    assert!(
+        sn.last().unwrap().as_f64() > sn.first().unwrap().as_f64(),
+        "{sn:?}"
+    );
+}
+
+#[test]
+fn too_small_a_budget_says_the_minimum() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = convert(
+        &common::shared_spd().join("balls4.nff"),
+        dir.path(),
+        Compression::None,
+    );
+    let db = Database::open(&path).unwrap();
+    let b = BfOptions {
+        memory: 64 << 10,
+        store: StoreNumber::Adaptive,
+        spill_dir: None,
+    };
+    let e = bf::render(&db, &opts(1, true), &b, &NoProgress)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("too small") && e.contains("needs at least"),
+        "{e}"
+    );
+}
