@@ -29,7 +29,7 @@
 //! decoded block for its own rays, so no ray is touched by two threads.
 
 use super::records::{NO_HIT, RayRec, ResultRec};
-use super::regmap::RegMap;
+use super::regmap::{END, RegMap};
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
@@ -231,7 +231,6 @@ struct Shard<R> {
     hot: Vec<Hot<R>>,
     q: Vec<RayQ<R>>,
     cold: Vec<Cold>,
-    keys: [Vec<u64>; MAX_GRIDS],
     regs: [RegMap; MAX_GRIDS],
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
@@ -265,6 +264,8 @@ pub struct IntersectSetup<'a> {
     pub slots: usize,
     /// Registrations per pass, at most.
     pub registrations: usize,
+    /// Grids of at most this many voxels get a dense voxel index per shard.
+    pub dense_cells: usize,
     pub eps: f64,
 }
 
@@ -282,7 +283,6 @@ impl<R: Real> Slots<R> {
                     hot: Vec::new(),
                     q: Vec::new(),
                     cold: Vec::new(),
-                    keys: Default::default(),
                     regs: Default::default(),
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
@@ -437,10 +437,13 @@ pub fn intersect_rays<R: Real>(
         // Register, per shard.
         let grids = &*setup.grids;
         let store = setup.store;
+        let dense_cells = setup.dense_cells;
         pool.install(|| {
             shards.par_iter_mut().for_each(|sh| {
+                let expect = sh.regs.iter().map(|r| r.len()).max().unwrap_or(0).max(1024);
                 for g in 0..ngrids {
-                    sh.keys[g].clear();
+                    let cells = grids.grids[g].spec.cells();
+                    sh.regs[g].clear(expect, if cells <= dense_cells { cells } else { 0 });
                     sh.region[g] = NO_REGION;
                 }
                 for i in 0..sh.hot.len() {
@@ -451,13 +454,10 @@ pub fn intersect_rays<R: Real>(
                             i as u32,
                             grids,
                             &store,
-                            &mut sh.keys,
+                            &mut sh.regs,
                             &mut sh.region,
                         );
                     }
-                }
-                for g in 0..ngrids {
-                    sh.regs[g].build(&sh.keys[g]);
                 }
             })
         });
@@ -470,7 +470,7 @@ pub fn intersect_rays<R: Real>(
         for sh in shards.iter() {
             for g in 0..ngrids {
                 region[g].union(&sh.region[g]);
-                for v in sh.regs[g].voxels() {
+                for &v in sh.regs[g].voxels() {
                     setup.grids.grids[g].flags[v as usize] |= REGISTERED;
                 }
             }
@@ -492,7 +492,7 @@ pub fn intersect_rays<R: Real>(
         }
         for sh in shards.iter() {
             for g in 0..ngrids {
-                for v in sh.regs[g].voxels() {
+                for &v in sh.regs[g].voxels() {
                     setup.grids.grids[g].flags[v as usize] &= !REGISTERED;
                 }
             }
@@ -526,7 +526,7 @@ fn register<R: Real>(
     slot: u32,
     grids: &VoxelGrids,
     store: &StorePlan,
-    keys: &mut [Vec<u64>; MAX_GRIDS],
+    regs: &mut [RegMap; MAX_GRIDS],
     region: &mut [Region; MAX_GRIDS],
 ) {
     for (g, grid) in grids.grids.iter().enumerate() {
@@ -542,7 +542,7 @@ fn register<R: Real>(
             if grid.flags[0] & OCCUPIED != 0
                 && spec.clip(c.o, c.d, c.inv, c.t_min, c.t_max).is_some()
             {
-                keys[g].push(slot as u64);
+                regs[g].insert(0, slot);
                 region[g].add([0, 0, 0]);
                 w.last = [0, 0, 0];
                 w.k = w.k.saturating_add(1);
@@ -582,7 +582,7 @@ fn register<R: Real>(
                     Some(a) => f & entry_face(a, dda.steps_up(a)) != 0,
                 };
             if stored {
-                keys[g].push(((dda.index as u64) << 32) | slot as u64);
+                regs[g].insert(dda.index as u32, slot);
                 let v = dda.voxel();
                 region[g].add(v);
                 w.last = [v[0] as u16, v[1] as u16, v[2] as u16];
@@ -634,10 +634,15 @@ fn scan_block<R: Real>(
                 let row = grid.spec.index([0, y, z]);
                 for x in lo[0]..=hi[0] {
                     let v = row + x as usize;
-                    if grid.flags[v] & REGISTERED == 0 {
+                    if !sh.regs[g].is_dense() && grid.flags[v] & REGISTERED == 0 {
                         continue;
                     }
-                    for &slot in sh.regs[g].get(v as u32) {
+                    let Some(mut r) = sh.regs[g].first(v as u32) else {
+                        continue;
+                    };
+                    while r != END {
+                        let (slot, next) = sh.regs[g].link(r);
+                        r = next;
                         let s = &mut sh.hot[slot as usize];
                         if s.blocked {
                             continue;

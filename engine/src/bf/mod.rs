@@ -81,7 +81,8 @@ pub struct Budget {
 /// Shares of [`Budget::shared`].
 pub const RESIDENT_RAYS: f64 = 0.30;
 pub const RESIDENT_RESULTS: f64 = 0.10;
-const SLOTS_SHARE: f64 = 0.55;
+const SLOTS_SHARE: f64 = 0.45;
+const DENSE_SHARE: f64 = 0.10;
 const SET_SHARE: f64 = 0.25;
 const NEXT_SHARE: f64 = 0.30;
 
@@ -94,6 +95,12 @@ const IO_BYTES: u64 =
 const MIN_SLOTS: u64 = 64;
 /// Registrations planned per ray in memory.
 const REGS_PER_SLOT: u64 = 4;
+/// Databases smaller than this are cheap to scan...
+const CHEAP_SCAN_BYTES: u64 = 256 << 20;
+/// ... so that rounds keep at most this many rays in memory at once, which
+/// measured faster than holding every ray (the scan's accesses to rays stay
+/// in cache).
+const CACHE_SLOTS: u64 = 1 << 17;
 /// Most voxels in the breadth-first grids.
 const MAX_CELLS: u64 = 1 << 27;
 
@@ -138,6 +145,12 @@ impl Budget {
             shading_set: part(SET_SHARE, std::mem::size_of::<records::HitRec>()),
             next_ray_sort_records: part(NEXT_SHARE, std::mem::size_of::<RayRec>()),
         })
+    }
+
+    /// Largest grid that gets a dense voxel index (four bytes per voxel per
+    /// thread), out of the slots' share.
+    pub fn dense_cells(&self, threads: usize) -> usize {
+        ((self.shared as f64 * DENSE_SHARE) as u64 / (4 * threads.max(1) as u64)) as usize
     }
 
     /// Whether `n` rays may stay in memory between phases.
@@ -476,13 +489,19 @@ fn render_in<R: Real>(
             ))
         };
         let ist = {
+            let mut slots_n = budget.slots(matches!(rays, RoundRays::Memory(_)), resident);
+            if db.raw_bytes() < CHEAP_SCAN_BYTES {
+                // A pass over a small database costs little; a smaller ray
+                // set keeps the scan's ray accesses in cache.
+                slots_n = slots_n.min(CACHE_SLOTS);
+            }
             let mut setup = IntersectSetup {
                 db,
                 grids: &mut grids,
                 store,
-                slots: budget.slots(matches!(rays, RoundRays::Memory(_)), resident) as usize,
-                registrations: (budget.slots(matches!(rays, RoundRays::Memory(_)), resident)
-                    * REGS_PER_SLOT) as usize,
+                slots: slots_n as usize,
+                registrations: (slots_n * REGS_PER_SLOT) as usize,
+                dense_cells: budget.dense_cells(threads),
                 eps,
             };
             let mut emit = |r: ResultRec| results.put(r);
