@@ -165,3 +165,61 @@ fn failures_leave_no_output() {
         "files left behind"
     );
 }
+
+/// Every tracer option given on the command line reaches the renderer and
+/// shows in the statistics.
+#[test]
+fn options_reach_the_renderer() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let stats = |extra: &[&str]| {
+        let mut a = vec![
+            "render",
+            "spd:balls:2",
+            "-o",
+            "o.png",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--stats",
+            "s.json",
+        ];
+        a.extend_from_slice(extra);
+        ok(d, &a);
+        json(&std::fs::read_to_string(d.join("s.json")).unwrap())
+    };
+    // balls: the ground polygon goes to a grid of its own unless told not to.
+    assert_eq!(stats(&[])["grids"].as_array().unwrap().len(), 2);
+    assert_eq!(
+        stats(&["--grids", "1"])["grids"].as_array().unwrap().len(),
+        1
+    );
+    let s = stats(&["--grids", "1", "--grid-res", "5"]);
+    assert_eq!(s["grid_res"], serde_json::json!([5, 5, 5]));
+    let s = stats(&[
+        "--mode",
+        "bf",
+        "--store-number",
+        "2",
+        "--threads",
+        "1",
+        "--depth",
+        "2",
+    ]);
+    assert_eq!(s["mode"], "bf");
+    assert_eq!(s["store_number"], "2");
+    assert_eq!(s["threads"], 1);
+    assert_eq!(s["depth"], 2);
+    assert!(
+        s["store_numbers"][0]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|v| v.as_f64() == Some(2.0))
+    );
+    let s = stats(&["--precision", "single"]);
+    assert_eq!(s["precision"], "single");
+    let err = fails(d, &["render", "spd:balls:2", "-o", "o.png", "--grids", "2"]);
+    assert!(err.contains("--grids"), "{err}");
+}

@@ -1,4 +1,5 @@
 //! The coordinator: drives renders and hosts the `sray` command line.
 
+pub mod bench;
 pub mod cli;
 pub mod job;

@@ -32,9 +32,18 @@ pub fn cpus() -> usize {
 
 /// Memory available for new work (Linux `MemAvailable`), or `None`.
 pub fn mem_available_bytes() -> Option<u64> {
+    meminfo_bytes("MemAvailable:")
+}
+
+/// The machine's physical memory (Linux `MemTotal`), or `None`.
+pub fn mem_total_bytes() -> Option<u64> {
+    meminfo_bytes("MemTotal:")
+}
+
+fn meminfo_bytes(key: &str) -> Option<u64> {
     std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
         s.lines()
-            .find(|l| l.starts_with("MemAvailable:"))
+            .find(|l| l.starts_with(key))
             .and_then(|l| l.split_whitespace().nth(1))
             .and_then(|v| v.parse::<u64>().ok())
             .map(|k| k * 1024)

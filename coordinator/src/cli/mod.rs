@@ -35,6 +35,8 @@ enum Command {
     Info(info_cmd::InfoArgs),
     /// Read a whole object database, checking every block, and report the read speed
     Verify(verify::VerifyArgs),
+    /// Run the benchmarks (the paper's experiments, POV-Ray, speed against accuracy)
+    Bench(crate::bench::BenchArgs),
 }
 
 /// Runs the command line; errors are printed and turned into exit code 1.
@@ -46,6 +48,7 @@ pub fn main() -> ExitCode {
         Command::Convert(a) => convert::run(a),
         Command::Info(a) => info_cmd::run(a),
         Command::Verify(a) => verify::run(a),
+        Command::Bench(a) => crate::bench::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -35,8 +35,8 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = sray_engine::df::GRID_DENSITY)]
     pub grid_density: f64,
     /// Grids: auto (set huge objects apart in their own grid) or 1
-    #[arg(long, default_value = "auto", value_parser = parse_grids)]
-    pub grids: bool,
+    #[arg(long, value_enum, default_value_t = Grids::Auto)]
+    pub grids: Grids,
     /// Worker threads (default: all cores)
     #[arg(long)]
     pub threads: Option<usize>,
@@ -50,6 +50,10 @@ pub struct RenderArgs {
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
+    /// Time the depth-first tracer's intersection queries, to split its
+    /// trace time into intersection and shading (costs a little time)
+    #[arg(long)]
+    pub profile: bool,
     /// Write statistics as JSON to this file
     #[arg(long)]
     pub stats: Option<PathBuf>,
@@ -74,12 +78,14 @@ fn parse_store(s: &str) -> Result<StoreNumber, String> {
     }
 }
 
-fn parse_grids(s: &str) -> Result<bool, String> {
-    match s {
-        "auto" => Ok(true),
-        "1" => Ok(false),
-        _ => Err(format!("--grids takes auto or 1, not '{s}'")),
-    }
+/// `--grids`: how objects are split into grids (Section 2.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Grids {
+    /// Huge objects apart in their own grid when the scene is not uniform
+    Auto,
+    /// Every object in one grid
+    #[value(name = "1")]
+    One,
 }
 
 struct BarStages;
@@ -103,8 +109,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             threads: a.threads.unwrap_or(0),
             grid_res: a.grid_res,
             grid_density: a.grid_density,
-            multiple_grids: a.grids,
+            multiple_grids: a.grids == Grids::Auto,
             precision: a.precision,
+            profile: a.profile,
         },
         mode: a.mode,
         memory: a.memory,

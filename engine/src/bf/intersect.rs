@@ -416,20 +416,22 @@ pub fn intersect_rays<R: Real>(
                 if !h.active || h.blocked {
                     continue;
                 }
-                let need: u64 = (0..ngrids)
-                    .filter(|&g| c.walks[g].state != DONE)
-                    .map(|g| setup.store.store(g, c.walks[g].k) as u64)
-                    .sum();
+                let (mut need, mut walks) = (0u64, 0u64);
+                for g in (0..ngrids).filter(|&g| c.walks[g].state != DONE) {
+                    need += setup.store.store(g, c.walks[g].k) as u64;
+                    walks += 1;
+                }
                 if need > 0 && need <= budget {
                     h.admitted = true;
                     budget -= need;
                     s_sum += need;
-                    s_n += 1;
+                    s_n += walks;
                 }
             }
         }
+        // The mean store number over the walks admitted to this pass.
         st.store_numbers.push(if s_n > 0 {
-            s_sum as f64 / s_n as f64 / ngrids as f64
+            s_sum as f64 / s_n as f64
         } else {
             0.0
         });

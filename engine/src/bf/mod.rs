@@ -246,8 +246,6 @@ pub struct BfStats {
     pub tests_skipped_mailbox: u64,
     pub memory_budget_bytes: u64,
     pub budget: Option<Budget>,
-    pub intersect_seconds: f64,
-    pub shade_seconds: f64,
     pub store_number: String,
 }
 
@@ -587,8 +585,6 @@ fn render_in<R: Real>(
         round += 1;
     }
     st.spill_bytes_written = spill.bytes_written();
-    st.intersect_seconds = t_intersect;
-    st.shade_seconds = t_shade;
     st.budget = Some(budget);
     let grid_stats = grids.stats();
     let stats = RenderStats {
@@ -607,6 +603,8 @@ fn render_in<R: Real>(
         grids: grid_stats,
         preprocess_seconds,
         trace_seconds: t_intersect + t_shade,
+        intersect_seconds: Some(t_intersect),
+        shade_seconds: Some(t_shade),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
         breadth_first: Some(serde_json::to_value(&st).map_err(|e| Error::Invalid(e.to_string()))?),
         ..Default::default()

@@ -150,7 +150,7 @@ pub fn render(
     let scene = DfScene::new(db, &objects, opts)?;
     let preprocess = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let (frame, rays, tests) = trace::render(&scene, opts, progress)?;
+    let (frame, rays, tests, intersect) = trace::render(&scene, opts, progress)?;
     let trace_seconds = t1.elapsed().as_secs_f64();
     let grids = scene.grid_stats();
     let stats = RenderStats {
@@ -169,6 +169,8 @@ pub fn render(
         grids,
         preprocess_seconds: preprocess,
         trace_seconds,
+        intersect_seconds: opts.profile.then_some(intersect),
+        shade_seconds: opts.profile.then_some((trace_seconds - intersect).max(0.0)),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
         ..Default::default()
     };

@@ -24,6 +24,9 @@ struct Scratch {
     shadow_cache: Vec<u32>,
     tests: KindCounts,
     rays: RayCounts,
+    /// With profiling: nanoseconds spent finding hits and blockers.
+    profile: bool,
+    intersect_ns: u64,
 }
 
 const NO_OBJECT: u32 = u32::MAX;
@@ -36,6 +39,8 @@ impl Scratch {
             shadow_cache: vec![NO_OBJECT; cache_slots],
             tests: KindCounts::default(),
             rays: RayCounts::default(),
+            profile: false,
+            intersect_ns: 0,
         }
     }
 
@@ -63,7 +68,7 @@ pub fn render(
     scene: &DfScene,
     opts: &RenderOptions,
     progress: &dyn Progress,
-) -> Result<(Frame, RayCounts, KindCounts), Error> {
+) -> Result<(Frame, RayCounts, KindCounts, f64), Error> {
     match opts.precision {
         Precision::Double => render_in::<f64>(scene, opts, progress),
         Precision::Single => render_in::<f32>(scene, opts, progress),
@@ -74,7 +79,7 @@ fn render_in<R: Real>(
     scene: &DfScene,
     opts: &RenderOptions,
     progress: &dyn Progress,
-) -> Result<(Frame, RayCounts, KindCounts), Error> {
+) -> Result<(Frame, RayCounts, KindCounts, f64), Error> {
     let cam = &scene.camera;
     let mut frame = Frame::new(cam.width, cam.height);
     let row_len = cam.width as usize + 1;
@@ -85,13 +90,17 @@ fn render_in<R: Real>(
         .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
     progress.set_total(cam.height as u64 + 1);
     progress.set_message("tracing");
-    let per_row: Vec<(RayCounts, KindCounts)> = pool.install(|| {
+    let per_row: Vec<(RayCounts, KindCounts, u64)> = pool.install(|| {
         frame
             .corners
             .par_chunks_mut(row_len)
             .enumerate()
             .map_init(
-                || Scratch::new(scene.shapes.len(), cache_slots),
+                || {
+                    let mut sc = Scratch::new(scene.shapes.len(), cache_slots);
+                    sc.profile = opts.profile;
+                    sc
+                },
                 |sc, (row, out)| {
                     sc.shadow_cache.fill(NO_OBJECT);
                     for col in 0..row_len {
@@ -106,18 +115,29 @@ fn render_in<R: Real>(
                         trace::<R>(scene, sc, cam.eye, d, 0.0, 1, 1.0, &mut add);
                     }
                     progress.inc(1);
-                    (std::mem::take(&mut sc.rays), std::mem::take(&mut sc.tests))
+                    (
+                        std::mem::take(&mut sc.rays),
+                        std::mem::take(&mut sc.tests),
+                        std::mem::take(&mut sc.intersect_ns),
+                    )
                 },
             )
             .collect()
     });
     let mut rays = RayCounts::default();
     let mut tests = KindCounts::default();
-    for (r, t) in per_row {
+    let mut ns = 0;
+    for (r, t, n) in per_row {
         rays += r;
         tests += t;
+        ns += n;
     }
-    Ok((frame, rays, tests))
+    Ok((
+        frame,
+        rays,
+        tests,
+        ns as f64 * 1e-9 / thread_count(opts) as f64,
+    ))
 }
 
 /// 1/d per axis.
@@ -138,7 +158,12 @@ fn trace<R: Real>(
     weight: f32,
     add: &mut impl FnMut([f32; 3]),
 ) {
-    let Some((t, id)) = nearest::<R>(s, sc, o, d, t_min) else {
+    let t0 = sc.profile.then(std::time::Instant::now);
+    let hit = nearest::<R>(s, sc, o, d, t_min);
+    if let Some(t0) = t0 {
+        sc.intersect_ns += t0.elapsed().as_nanos() as u64;
+    }
+    let Some((t, id)) = hit else {
         add(s.shade.background(weight));
         return;
     };
@@ -165,7 +190,12 @@ fn trace<R: Real>(
             } => {
                 sc.rays.shadow_rays += 1;
                 let slot = light as usize * max_depth + depth as usize - 1;
-                if !occluded::<R>(s, sc, slot, surf.p, dir, eps, dist) {
+                let t0 = sc.profile.then(std::time::Instant::now);
+                let blocked = occluded::<R>(s, sc, slot, surf.p, dir, eps, dist);
+                if let Some(t0) = t0 {
+                    sc.intersect_ns += t0.elapsed().as_nanos() as u64;
+                }
+                if !blocked {
                     add(color);
                 }
             }

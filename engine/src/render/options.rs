@@ -91,6 +91,9 @@ pub struct RenderOptions {
     /// Allow the scene to be split into several grids (`--grids 1` = no).
     pub multiple_grids: bool,
     pub precision: Precision,
+    /// Time the depth-first tracer's intersection queries, to split its
+    /// trace time into intersection and shading (costs a little time).
+    pub profile: bool,
 }
 
 impl Default for RenderOptions {
@@ -104,6 +107,7 @@ impl Default for RenderOptions {
             grid_density: crate::df::GRID_DENSITY,
             multiple_grids: true,
             precision: Precision::Double,
+            profile: false,
         }
     }
 }

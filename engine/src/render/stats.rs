@@ -79,6 +79,12 @@ pub struct RenderStats {
     pub convert_seconds: f64,
     pub preprocess_seconds: f64,
     pub trace_seconds: f64,
+    /// The trace time split into intersection tests and shading: always for
+    /// the breadth-first tracer; for the depth-first one with `profile`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub intersect_seconds: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shade_seconds: Option<f64>,
     pub total_seconds: f64,
     pub peak_rss_bytes: u64,
     #[serde(flatten)]
