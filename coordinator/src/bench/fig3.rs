@@ -28,7 +28,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         "rings{size}, {} eye rays ({side}x{side} pixels, rays through the corners), one grid of \
          res^3 voxels holding every object (`--grids 1 --grid-res res`), depth 1. The count is the eye \
          rays still without complete intersection information as each pass over the objects begins. Adaptive \
-         starts at round(res/10) per ray, doubles as the rays in memory halve, and is capped at res \
+         starts at round(res/10) per ray, doubles with every pass the ray survives (finished rays free the memory), capped at res \
          (Section 2.2's two methods; the paper's Fig. 3b started at 1 and 2).",
         (side + 1) * (side + 1)
     ));

@@ -153,6 +153,21 @@ impl<T: Pod> RecordFile<T> {
         self.reader_with(IO_BUFFER)
     }
 
+    /// Reads records `start .. start + count` (clamped to the file).
+    pub fn reader_range(&self, start: u64, count: u64) -> Result<RecordReader<T>, Error> {
+        use std::io::{Seek, SeekFrom};
+        let start = start.min(self.count);
+        let mut f = File::open(&self.path).at(&self.path)?;
+        f.seek(SeekFrom::Start(start * std::mem::size_of::<T>() as u64))
+            .at(&self.path)?;
+        Ok(RecordReader {
+            input: BufReader::with_capacity(IO_BUFFER, f),
+            path: self.path.clone(),
+            left: count.min(self.count - start),
+            _t: PhantomData,
+        })
+    }
+
     pub fn reader_with(&self, buffer: usize) -> Result<RecordReader<T>, Error> {
         let f = File::open(&self.path).at(&self.path)?;
         Ok(RecordReader {
@@ -253,6 +268,13 @@ impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
         self.runs.push(w.finish()?);
         self.buf.clear();
         Ok(())
+    }
+
+    /// Adds records already in key order, as one run of the merge.
+    pub fn add_sorted_run(&mut self, run: RecordFile<T>) {
+        if !run.is_empty() {
+            self.runs.push(run);
+        }
     }
 
     /// Records pushed so far.

@@ -23,28 +23,25 @@ mod radix;
 mod records;
 mod regmap;
 mod shade;
+mod tracer;
 mod voxels;
 
 pub use files::{ExternalSorter, RecordFile, SpillDir};
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
 pub use records::{NO_HIT, RayKind, RayRec, ResultRec};
 pub use shade::ShadeStats;
+pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};
 
 use crate::error::Error;
 use crate::grid::{GridSpec, choose_resolution, plan_groups};
 use crate::math::Real;
 use crate::progress::Progress;
-use crate::render::{
-    Camera, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats, ShadeScene, epsilon,
-};
+use crate::render::{Camera, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats};
 use crate::sdb::Database;
-use files::RecordWriter;
-use intersect::{IntersectSetup, REGISTRATION_BYTES, intersect_rays, slot_bytes};
+use intersect::{REGISTRATION_BYTES, slot_bytes};
 use serde::Serialize;
-use shade::{NextRays, ShadeSetup, ray_key, shade_round};
 use std::path::PathBuf;
-use std::time::Instant;
 
 /// Options of the breadth-first tracer.
 #[derive(Clone, Debug)]
@@ -253,83 +250,30 @@ pub struct BfStats {
 enum RoundRays {
     /// The eye rays, generated from the camera: corner `i` is ray `i`.
     Eye(u64),
-    Memory(Vec<RayRec>),
-    File(RecordFile<RayRec>),
+    Held(HeldRays),
 }
 
 impl RoundRays {
     fn len(&self) -> u64 {
         match self {
             RoundRays::Eye(n) => *n,
-            RoundRays::Memory(v) => v.len() as u64,
-            RoundRays::File(f) => f.len(),
+            RoundRays::Held(HeldRays::Memory(v)) => v.len() as u64,
+            RoundRays::Held(HeldRays::File(f)) => f.len(),
         }
     }
 
     fn iter<'a>(
         &'a self,
-        eye: &'a dyn Fn(u64) -> RayRec,
+        camera: &'a Camera,
     ) -> Result<Box<dyn Iterator<Item = Result<RayRec, Error>> + 'a>, Error> {
         Ok(match self {
-            RoundRays::Eye(n) => Box::new((0..*n).map(|i| Ok(eye(i)))),
-            RoundRays::Memory(v) => Box::new(v.iter().map(|r| Ok(*r))),
-            RoundRays::File(f) => {
+            RoundRays::Eye(n) => Box::new((0..*n).map(|i| Ok(eye_ray(camera, i)))),
+            RoundRays::Held(HeldRays::Memory(v)) => Box::new(v.iter().map(|r| Ok(*r))),
+            RoundRays::Held(HeldRays::File(f)) => {
                 let mut rd = f.reader()?;
                 Box::new(std::iter::from_fn(move || rd.next().transpose()))
             }
         })
-    }
-}
-
-fn result_key(r: &ResultRec) -> u64 {
-    r.ray
-}
-
-/// A slot of the in-memory results not yet written.
-const UNSET: ResultRec = ResultRec {
-    ray: u64::MAX,
-    object: NO_HIT,
-    _pad: 0,
-    t: 0.0,
-};
-
-/// A round's results, brought into ray order: placed by id in memory, or
-/// sorted externally.
-enum Results {
-    Dense(Vec<ResultRec>),
-    Sort(ExternalSorter<ResultRec, u64, fn(&ResultRec) -> u64>),
-}
-
-impl Results {
-    fn put(&mut self, r: ResultRec) -> Result<(), Error> {
-        match self {
-            Results::Dense(v) => {
-                v[r.ray as usize] = r;
-                Ok(())
-            }
-            Results::Sort(s) => s.push(r),
-        }
-    }
-
-    fn into_reader(self) -> Result<ResultReader, Error> {
-        Ok(match self {
-            Results::Dense(v) => ResultReader::Dense(v.into_iter()),
-            Results::Sort(s) => ResultReader::Sorted(s.finish()?),
-        })
-    }
-}
-
-enum ResultReader {
-    Dense(std::vec::IntoIter<ResultRec>),
-    Sorted(files::Sorted<ResultRec, u64, fn(&ResultRec) -> u64>),
-}
-
-impl ResultReader {
-    fn next(&mut self) -> Result<Option<ResultRec>, Error> {
-        match self {
-            ResultReader::Dense(it) => Ok(it.next()),
-            ResultReader::Sorted(s) => s.next(),
-        }
     }
 }
 
@@ -384,227 +328,63 @@ fn render_in<R: Real>(
     bf: &BfOptions,
     progress: &dyn Progress,
 ) -> Result<BfOutput, Error> {
-    opts.validate()?;
-    let header = db.scene();
-    let camera = Camera::new(&header.view, opts.width, opts.height)?;
-    let (specs, partition) = plan_grids(db, opts, bf.memory);
-    if specs.len() > MAX_GRIDS {
-        return Err(Error::Invalid("too many grids".into()));
-    }
-    let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-    let budget = Budget::plan::<R>(
-        bf.memory,
-        opts.corners(),
-        cells,
-        db.scan_buffer_bytes() as u64,
-    )?;
-    let threads = if opts.threads == 0 {
-        crate::sys::cpus()
-    } else {
-        opts.threads
-    };
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-    let spill = SpillDir::new(bf.spill_dir.as_deref())?;
-    let eps = epsilon(&db.bbox(), opts.precision);
-    let shade_scene = ShadeScene::new(header, opts.max_depth, eps);
-
-    // Preprocess: one scan marks the voxels.
-    let t0 = Instant::now();
-    progress.set_message("preprocess: marking voxels");
-    let (mut grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
-    let preprocess_seconds = t0.elapsed().as_secs_f64();
-
+    let camera = Camera::new(&db.scene().view, opts.width, opts.height)?;
+    let mut tr = Tracer::<R>::new(db, opts, bf, opts.corners(), progress)?;
     let mut frame = Frame::new(opts.width, opts.height);
-    let mut counts = RayCounts::default();
-    let mut st = BfStats {
-        memory_budget_bytes: bf.memory,
-        db_scans: 1,
-        db_bytes_read: pre.bytes_read,
-        store_number: match bf.store {
-            StoreNumber::Fixed(n) => n.to_string(),
-            StoreNumber::Adaptive => "adaptive".into(),
-        },
+    let mut counts = RayCounts {
+        eye_rays: opts.corners(),
         ..Default::default()
     };
-    let mut tests = crate::render::KindCounts::default();
-    let store = StorePlan::new(bf.store, &grids);
-    let (mut t_intersect, mut t_shade) = (0.0, 0.0);
-    let mut slots = Slots::<R>::new(threads);
-
-    // Round 1: the eye rays, generated in corner order.
-    let eye = camera.eye.to_array();
-    let eye_ray = |i: u64| {
-        let (col, row) = camera.corner_of(i as u32);
-        RayRec {
-            o: eye,
-            d: camera.direction(col, row).to_array(),
-            t_max: f64::INFINITY,
-            key: i,
-            payload: [1.0, 0.0, 0.0],
-            corner: i as u32,
-            depth: 1,
-            kind: RayKind::Eye as u8,
-            _pad: [0; 6],
-        }
-    };
-    let corners = opts.corners();
-    counts.eye_rays = corners;
-    let mut rays = RoundRays::Eye(corners);
+    // Round 1: the eye rays, generated in corner order; each later round
+    // holds the rays the previous one spawned, in key order.
+    let mut rays = RoundRays::Eye(opts.corners());
     let mut round = 1;
-    // Buffers reused from round to round: allocating them afresh costs
-    // page faults every round.
-    let mut dense_buf: Vec<ResultRec> = Vec::new();
-    let mut spare_rays: Vec<RayRec> = Vec::new();
-    let mut set_buf = Vec::new();
-    let mut shade_outputs = Vec::new();
-    let mut radix = radix::Scratch::default();
     loop {
         let n = rays.len();
         if n == 0 {
             break;
         }
-        st.rays_per_round.push(n);
+        tr.stats.rays_per_round.push(n);
         progress.set_total(n);
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
+        let resident = matches!(rays, RoundRays::Held(HeldRays::Memory(_)));
+        let (mut results, _) = tr.intersect(0, &mut rays.iter(&camera)?, n, resident, progress)?;
 
-        // Intersect; results go in ray order, in memory if they fit.
-        let ti = Instant::now();
-        let resident = budget.results_resident(n);
-        let mut results = if resident {
-            let mut v = std::mem::take(&mut dense_buf);
-            v.clear();
-            v.resize(n as usize, UNSET);
-            Results::Dense(v)
-        } else {
-            Results::Sort(ExternalSorter::new(
-                &spill,
-                "results",
-                budget.result_sort_records() as usize,
-                result_key,
-            ))
-        };
-        let ist = {
-            let mut slots_n = budget.slots(matches!(rays, RoundRays::Memory(_)), resident);
-            if db.raw_bytes() < CHEAP_SCAN_BYTES {
-                // A pass over a small database costs little; a smaller ray
-                // set keeps the scan's ray accesses in cache.
-                slots_n = slots_n.min(CACHE_SLOTS);
-            }
-            let mut setup = IntersectSetup {
-                db,
-                grids: &mut grids,
-                store,
-                slots: slots_n as usize,
-                registrations: (slots_n * REGS_PER_SLOT) as usize,
-                dense_cells: budget.dense_cells(threads),
-                eps,
-            };
-            let mut emit = |r: ResultRec| results.put(r);
-            let mut it = rays.iter(&eye_ray)?;
-            intersect_rays::<R>(
-                &mut setup, &pool, &mut slots, &mut it, n, &mut emit, progress,
-            )?
-        };
-        t_intersect += ti.elapsed().as_secs_f64();
-        st.passes.push(ist.passes);
-        st.remaining_rays_per_pass.push(ist.remaining_rays_per_pass);
-        st.store_numbers.push(ist.store_numbers);
-        st.db_scans += ist.db_scans;
-        st.db_bytes_read += ist.db_bytes_read;
-        st.ray_voxel_registrations += ist.registrations;
-        st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
-        st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
-        tests += ist.intersection_tests;
-
-        // Shade.
-        let ts = Instant::now();
         progress.set_message(&format!("round {round}: shading"));
-        let mut results = results.into_reader()?;
-        let mut next: NextRays = ExternalSorter::with_buffer(
-            &spill,
-            "rays",
-            budget.next_ray_sort_records as usize,
-            ray_key as fn(&RayRec) -> u64,
-            std::mem::take(&mut spare_rays),
-        );
-        let mut setup = ShadeSetup {
-            db,
-            set: &mut set_buf,
-            outputs: &mut shade_outputs,
-            radix: &mut radix,
-            materials: &header.materials,
-            shade: &shade_scene,
-            set_cap: budget.shading_set as usize,
-        };
-        let mut next_result = || results.next();
-        let sst = {
-            let mut it = rays.iter(&eye_ray)?;
-            shade_round(
-                &mut setup,
-                &pool,
-                &mut it,
-                &mut next_result,
-                &mut frame,
-                &mut next,
-                &mut counts,
-            )?
-        };
-        if let ResultReader::Dense(it) = results {
-            dense_buf = it.into_iter().collect::<Vec<_>>();
-            dense_buf.clear();
+        let (next, count, _) = tr.shade(
+            0,
+            &mut rays.iter(&camera)?,
+            &mut results,
+            &mut |corner, c| frame.add(corner, c),
+            &mut counts,
+        )?;
+        tr.recycle(results);
+        if let RoundRays::Held(HeldRays::Memory(v)) = std::mem::replace(&mut rays, RoundRays::Eye(0)) {
+            tr.recycle_rays(v);
         }
-        st.db_scans += sst.db_scans;
-        st.db_bytes_read += sst.db_bytes_read;
-        // The next round's rays, in key order: kept in memory if they fit,
-        // else written to a file.
-        if let RoundRays::Memory(v) = std::mem::replace(&mut rays, RoundRays::Eye(0)) {
-            spare_rays = v;
-        }
-        let count = next.len();
-        let sorted = next.finish()?;
-        rays = match sorted.into_vec() {
-            Ok(v) if budget.rays_resident(count) => RoundRays::Memory(v),
-            Ok(v) => {
-                let mut w = RecordWriter::<RayRec>::create(&spill, "round")?;
-                w.extend(&v)?;
-                spare_rays = v;
-                RoundRays::File(w.finish()?)
-            }
-            Err(mut sorted) => {
-                let mut w = RecordWriter::<RayRec>::create(&spill, "round")?;
-                while let Some(r) = sorted.next()? {
-                    w.push(&r)?;
-                }
-                RoundRays::File(w.finish()?)
-            }
-        };
-        t_shade += ts.elapsed().as_secs_f64();
+        rays = RoundRays::Held(tr.hold_rays(next, count)?);
         round += 1;
     }
-    st.spill_bytes_written = spill.bytes_written();
-    st.budget = Some(budget);
-    let grid_stats = grids.stats();
+    let st = tr.finish_stats();
+    let grid_stats = tr.grid_stats();
     let stats = RenderStats {
         mode: "bf".into(),
         objects: db.object_count(),
         width: opts.width,
         height: opts.height,
         depth: opts.max_depth,
-        threads,
+        threads: tr.threads,
         precision: format!("{:?}", opts.precision).to_lowercase(),
-        epsilon: eps,
+        epsilon: tr.eps,
         rays: counts,
-        intersection_tests: tests.total(),
-        intersection_tests_by_kind: tests,
+        intersection_tests: tr.tests.total(),
+        intersection_tests_by_kind: tr.tests,
         grid_res: grid_stats[0].resolution,
         grids: grid_stats,
-        preprocess_seconds,
-        trace_seconds: t_intersect + t_shade,
-        intersect_seconds: Some(t_intersect),
-        shade_seconds: Some(t_shade),
+        preprocess_seconds: tr.preprocess_seconds,
+        trace_seconds: tr.intersect_seconds + tr.shade_seconds,
+        intersect_seconds: Some(tr.intersect_seconds),
+        shade_seconds: Some(tr.shade_seconds),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
         breadth_first: Some(serde_json::to_value(&st).map_err(|e| Error::Invalid(e.to_string()))?),
         ..Default::default()

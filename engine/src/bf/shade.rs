@@ -10,7 +10,7 @@ use super::records::{HitRec, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 use crate::error::Error;
 use crate::intersect::{RayQ, surface_at};
 use crate::math::Vec3;
-use crate::render::{Frame, RayCounts, ShadeScene, Spawn, shade, to_fixed};
+use crate::render::{RayCounts, ShadeScene, Spawn, shade, to_fixed};
 use crate::scene::Material;
 use crate::sdb::{Database, ObjectRef};
 use rayon::prelude::*;
@@ -44,21 +44,24 @@ pub fn ray_key(r: &RayRec) -> u64 {
     r.key
 }
 
-/// Shades one round. `rays` yields the round's rays in id order; `results`
-/// their results in the same order.
+/// Shades a run of a round's rays. `rays` yields them in id order from
+/// `first`; `results` their results in the same order. Colour goes to
+/// `contribute` (pixel corner, fixed-point colour).
+#[allow(clippy::too_many_arguments)]
 pub fn shade_round(
     setup: &mut ShadeSetup<'_>,
     pool: &rayon::ThreadPool,
+    first: u64,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
     results: &mut dyn FnMut() -> Result<Option<ResultRec>, Error>,
-    frame: &mut Frame,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
     next: &mut NextRays,
     counts: &mut RayCounts,
 ) -> Result<ShadeStats, Error> {
     let mut st = ShadeStats::default();
     let mut set = std::mem::take(setup.set);
     set.clear();
-    for (id, ray) in (0u64..).zip(rays) {
+    for (id, ray) in (first..).zip(rays) {
         let ray = ray?;
         let res = results()?
             .ok_or_else(|| Error::Invalid(format!("no intersection result for ray {id}")))?;
@@ -70,10 +73,10 @@ pub fn shade_round(
         }
         if ray.is_shadow() {
             if res.object == NO_HIT {
-                frame.add(ray.corner, to_fixed(ray.payload));
+                contribute(ray.corner, to_fixed(ray.payload));
             }
         } else if res.object == NO_HIT {
-            frame.add(ray.corner, to_fixed(setup.shade.background(ray.payload[0])));
+            contribute(ray.corner, to_fixed(setup.shade.background(ray.payload[0])));
         } else {
             if ray.kind() == RayKind::Eye {
                 counts.eye_hit_rays += 1;

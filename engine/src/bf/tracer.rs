@@ -1,0 +1,382 @@
+//! The breadth-first stages as one object: a [`Tracer`] owns a database's
+//! grids, the memory budget and the buffers reused from round to round,
+//! and runs the two stages of a round on any contiguous run of its rays:
+//! [`Tracer::intersect`] (results back in ray order) and [`Tracer::shade`]
+//! (colour contributions and the next round's rays, sorted by key).
+//!
+//! The embedded renderer ([`super::render`]) gives a tracer whole rounds; a
+//! cluster worker gives it one shard of a round at a time. Both produce the
+//! same results, because a ray's intersection depends only on the ray, and
+//! a ray's spawn keys only on its id in the round.
+
+use super::files::{ExternalSorter, RecordFile, RecordWriter, Sorted, SpillDir};
+use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
+use super::records::{NO_HIT, RayKind, RayRec, ResultRec};
+use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
+use super::voxels::VoxelGrids;
+use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, REGS_PER_SLOT};
+use crate::error::Error;
+use crate::math::Real;
+use crate::progress::Progress;
+use crate::render::{Camera, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
+use crate::sdb::Database;
+use std::time::Instant;
+
+/// Eye ray `i`: through pixel corner `i`, in corner order.
+pub fn eye_ray(camera: &Camera, i: u64) -> RayRec {
+    let (col, row) = camera.corner_of(i as u32);
+    RayRec {
+        o: camera.eye.to_array(),
+        d: camera.direction(col, row).to_array(),
+        t_max: f64::INFINITY,
+        key: i,
+        payload: [1.0, 0.0, 0.0],
+        corner: i as u32,
+        depth: 1,
+        kind: RayKind::Eye as u8,
+        _pad: [0; 6],
+    }
+}
+
+fn result_key(r: &ResultRec) -> u64 {
+    r.ray
+}
+
+/// A slot of the in-memory results not yet written.
+const UNSET: ResultRec = ResultRec {
+    ray: u64::MAX,
+    object: NO_HIT,
+    _pad: 0,
+    t: 0.0,
+};
+
+type ResultSorter = ExternalSorter<ResultRec, u64, fn(&ResultRec) -> u64>;
+
+/// Results of a run of rays, brought into ray order: placed by id in memory
+/// when they fit, else sorted externally.
+enum Results {
+    Dense { first: u64, v: Vec<ResultRec> },
+    Sort(ResultSorter),
+}
+
+impl Results {
+    fn put(&mut self, r: ResultRec) -> Result<(), Error> {
+        match self {
+            Results::Dense { first, v } => {
+                v[(r.ray - *first) as usize] = r;
+                Ok(())
+            }
+            Results::Sort(s) => s.push(r),
+        }
+    }
+}
+
+/// Rays in key order, as [`Tracer::shade`] returns the ones it spawned.
+pub type SortedRays = Sorted<RayRec, u64, fn(&RayRec) -> u64>;
+
+/// Results in ray order, as [`Tracer::intersect`] returns them.
+pub enum ResultReader {
+    Dense(std::vec::IntoIter<ResultRec>),
+    Sorted(Sorted<ResultRec, u64, fn(&ResultRec) -> u64>),
+}
+
+impl ResultReader {
+    pub fn next_result(&mut self) -> Result<Option<ResultRec>, Error> {
+        match self {
+            ResultReader::Dense(it) => Ok(it.next()),
+            ResultReader::Sorted(s) => s.next(),
+        }
+    }
+}
+
+/// The breadth-first stages over one database.
+pub struct Tracer<'db, R: Real> {
+    db: &'db Database,
+    grids: VoxelGrids,
+    store: StorePlan,
+    pub budget: Budget,
+    pool: rayon::ThreadPool,
+    pub threads: usize,
+    pub spill: SpillDir,
+    pub eps: f64,
+    shade_scene: ShadeScene,
+    slots: Slots<R>,
+    // Buffers reused from call to call: allocating them afresh costs page
+    // faults every round.
+    dense_buf: Vec<ResultRec>,
+    spare_rays: Vec<RayRec>,
+    set_buf: Vec<super::records::HitRec>,
+    shade_outputs: Vec<(Vec<RayRec>, RayCounts)>,
+    radix: super::radix::Scratch,
+    /// Accumulated over every call.
+    pub stats: BfStats,
+    pub tests: KindCounts,
+    pub preprocess_seconds: f64,
+    pub intersect_seconds: f64,
+    pub shade_seconds: f64,
+}
+
+impl<'db, R: Real> Tracer<'db, R> {
+    /// Plans the grids and the budget and marks the voxels (one scan).
+    /// `frame_corners` is the size of the frame this process holds beside
+    /// the tracer (0 for a cluster worker, which holds none).
+    pub fn new(
+        db: &'db Database,
+        opts: &RenderOptions,
+        bf: &BfOptions,
+        frame_corners: u64,
+        progress: &dyn Progress,
+    ) -> Result<Self, Error> {
+        opts.validate()?;
+        let (specs, partition) = super::plan_grids(db, opts, bf.memory);
+        if specs.len() > MAX_GRIDS {
+            return Err(Error::Invalid("too many grids".into()));
+        }
+        let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
+        let budget = Budget::plan::<R>(
+            bf.memory,
+            frame_corners,
+            cells,
+            db.scan_buffer_bytes() as u64,
+        )?;
+        let threads = if opts.threads == 0 {
+            crate::sys::cpus()
+        } else {
+            opts.threads
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
+        let spill = SpillDir::new(bf.spill_dir.as_deref())?;
+        let eps = epsilon(&db.bbox(), opts.precision);
+        let shade_scene = ShadeScene::new(db.scene(), opts.max_depth, eps);
+
+        let t0 = Instant::now();
+        progress.set_message("preprocess: marking voxels");
+        let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
+        let preprocess_seconds = t0.elapsed().as_secs_f64();
+        let store = StorePlan::new(bf.store, &grids);
+        let stats = BfStats {
+            memory_budget_bytes: bf.memory,
+            db_scans: 1,
+            db_bytes_read: pre.bytes_read,
+            store_number: match bf.store {
+                super::StoreNumber::Fixed(n) => n.to_string(),
+                super::StoreNumber::Adaptive => "adaptive".into(),
+            },
+            budget: Some(budget.clone()),
+            ..Default::default()
+        };
+        Ok(Tracer {
+            db,
+            grids,
+            store,
+            budget,
+            pool,
+            threads,
+            spill,
+            eps,
+            shade_scene,
+            slots: Slots::new(threads),
+            dense_buf: Vec::new(),
+            spare_rays: Vec::new(),
+            set_buf: Vec::new(),
+            shade_outputs: Vec::new(),
+            radix: Default::default(),
+            stats,
+            tests: KindCounts::default(),
+            preprocess_seconds,
+            intersect_seconds: 0.0,
+            shade_seconds: 0.0,
+        })
+    }
+
+    pub fn grid_stats(&self) -> Vec<crate::grid::GridStat> {
+        self.grids.stats()
+    }
+
+    /// Intersects the `n` rays `rays` yields, whose ids in the round are
+    /// `first, first + 1, ...`; returns their results in that order, with
+    /// those ids. `rays_resident` says whether the caller keeps the rays in
+    /// memory meanwhile (which leaves less for the slots).
+    pub fn intersect(
+        &mut self,
+        first: u64,
+        rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+        n: u64,
+        rays_resident: bool,
+        progress: &dyn Progress,
+    ) -> Result<(ResultReader, IntersectStats), Error> {
+        let ti = Instant::now();
+        let budget = &self.budget;
+        let resident = budget.results_resident(n);
+        let mut results = if resident {
+            let mut v = std::mem::take(&mut self.dense_buf);
+            v.clear();
+            v.resize(n as usize, UNSET);
+            Results::Dense { first, v }
+        } else {
+            Results::Sort(ExternalSorter::new(
+                &self.spill,
+                "results",
+                budget.result_sort_records() as usize,
+                result_key as fn(&ResultRec) -> u64,
+            ))
+        };
+        let mut slots_n = budget.slots(rays_resident, resident);
+        if self.db.raw_bytes() < CHEAP_SCAN_BYTES {
+            // A pass over a small database costs little; a smaller ray set
+            // keeps the scan's ray accesses in cache.
+            slots_n = slots_n.min(CACHE_SLOTS);
+        }
+        let mut setup = IntersectSetup {
+            db: self.db,
+            grids: &mut self.grids,
+            store: self.store,
+            slots: slots_n as usize,
+            registrations: (slots_n * REGS_PER_SLOT) as usize,
+            dense_cells: budget.dense_cells(self.threads),
+            eps: self.eps,
+        };
+        let ist = {
+            let mut emit = |mut r: ResultRec| {
+                r.ray += first;
+                results.put(r)
+            };
+            intersect_rays::<R>(
+                &mut setup,
+                &self.pool,
+                &mut self.slots,
+                rays,
+                n,
+                &mut emit,
+                progress,
+            )?
+        };
+        let st = &mut self.stats;
+        st.passes.push(ist.passes);
+        st.remaining_rays_per_pass
+            .push(ist.remaining_rays_per_pass.clone());
+        st.store_numbers.push(ist.store_numbers.clone());
+        st.db_scans += ist.db_scans;
+        st.db_bytes_read += ist.db_bytes_read;
+        st.ray_voxel_registrations += ist.registrations;
+        st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
+        st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
+        self.tests += ist.intersection_tests;
+        let reader = match results {
+            Results::Dense { v, .. } => ResultReader::Dense(v.into_iter()),
+            Results::Sort(s) => ResultReader::Sorted(s.finish()?),
+        };
+        self.intersect_seconds += ti.elapsed().as_secs_f64();
+        Ok((reader, ist))
+    }
+
+    /// Hands a dense result buffer back for reuse.
+    pub fn recycle(&mut self, results: ResultReader) {
+        if let ResultReader::Dense(it) = results {
+            let mut v: Vec<ResultRec> = it.collect();
+            v.clear();
+            if v.capacity() > self.dense_buf.capacity() {
+                self.dense_buf = v;
+            }
+        }
+    }
+
+    /// Hands a round's ray buffer back for reuse by the next sort.
+    pub fn recycle_rays(&mut self, mut rays: Vec<RayRec>) {
+        rays.clear();
+        if rays.capacity() > self.spare_rays.capacity() {
+            self.spare_rays = rays;
+        }
+    }
+
+    /// Shades the rays `rays` yields (ids `first, first + 1, ...`) with
+    /// their `results` in the same order: colour contributions go to
+    /// `contribute` (pixel corner, fixed-point colour), the rays they spawn
+    /// come back sorted by key, with their number.
+    pub fn shade(
+        &mut self,
+        first: u64,
+        rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+        results: &mut ResultReader,
+        contribute: &mut dyn FnMut(u32, [i64; 3]),
+        counts: &mut RayCounts,
+    ) -> Result<(SortedRays, u64, ShadeStats), Error> {
+        let ts = Instant::now();
+        let mut next: NextRays = ExternalSorter::with_buffer(
+            &self.spill,
+            "rays",
+            self.budget.next_ray_sort_records as usize,
+            ray_key as fn(&RayRec) -> u64,
+            std::mem::take(&mut self.spare_rays),
+        );
+        let mut setup = ShadeSetup {
+            db: self.db,
+            set: &mut self.set_buf,
+            outputs: &mut self.shade_outputs,
+            radix: &mut self.radix,
+            materials: &self.db.scene().materials,
+            shade: &self.shade_scene,
+            set_cap: self.budget.shading_set as usize,
+        };
+        let mut next_result = || results.next_result();
+        let sst = shade_round(
+            &mut setup,
+            &self.pool,
+            first,
+            rays,
+            &mut next_result,
+            contribute,
+            &mut next,
+            counts,
+        )?;
+        self.stats.db_scans += sst.db_scans;
+        self.stats.db_bytes_read += sst.db_bytes_read;
+        let count = next.len();
+        let sorted = next.finish()?;
+        self.shade_seconds += ts.elapsed().as_secs_f64();
+        Ok((sorted, count, sst))
+    }
+
+    /// Keeps sorted rays in memory if the budget allows, else writes them
+    /// to a file.
+    pub fn hold_rays(
+        &mut self,
+        sorted: SortedRays,
+        count: u64,
+    ) -> Result<HeldRays, Error> {
+        let t = Instant::now();
+        let held = match sorted.into_vec() {
+            Ok(v) if self.budget.rays_resident(count) => HeldRays::Memory(v),
+            Ok(v) => {
+                let mut w = RecordWriter::<RayRec>::create(&self.spill, "round")?;
+                w.extend(&v)?;
+                self.recycle_rays(v);
+                HeldRays::File(w.finish()?)
+            }
+            Err(mut sorted) => {
+                let mut w = RecordWriter::<RayRec>::create(&self.spill, "round")?;
+                while let Some(r) = sorted.next()? {
+                    w.push(&r)?;
+                }
+                HeldRays::File(w.finish()?)
+            }
+        };
+        self.shade_seconds += t.elapsed().as_secs_f64();
+        Ok(held)
+    }
+
+    /// The statistics so far, with the spill total brought up to date.
+    pub fn finish_stats(&mut self) -> BfStats {
+        self.stats.spill_bytes_written = self.spill.bytes_written();
+        self.stats.clone()
+    }
+}
+
+/// A round's rays between stages.
+pub enum HeldRays {
+    Memory(Vec<RayRec>),
+    File(RecordFile<RayRec>),
+}
