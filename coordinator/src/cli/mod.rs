@@ -1,6 +1,7 @@
 //! The `sray` command line.
 
 mod bar;
+mod cluster_cmd;
 mod convert;
 mod gen_cmd;
 mod info_cmd;
@@ -35,6 +36,10 @@ enum Command {
     Info(info_cmd::InfoArgs),
     /// Read a whole object database, checking every block, and report the read speed
     Verify(verify::VerifyArgs),
+    /// Serve a cluster: workers register here, clients submit renders here
+    Coordinator(cluster_cmd::CoordinatorArgs),
+    /// Join a cluster: take intersection and shading work from a coordinator
+    Worker(cluster_cmd::WorkerArgs),
     /// Run the benchmarks (the paper's experiments, POV-Ray, speed against accuracy)
     Bench(crate::bench::BenchArgs),
 }
@@ -49,6 +54,8 @@ pub fn main() -> ExitCode {
         Command::Info(a) => info_cmd::run(a),
         Command::Verify(a) => verify::run(a),
         Command::Bench(a) => crate::bench::run(a),
+        Command::Coordinator(a) => cluster_cmd::coordinator(a),
+        Command::Worker(a) => cluster_cmd::worker(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -60,6 +60,22 @@ pub struct RenderArgs {
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
+    /// Render on the cluster whose coordinator is at URL (http://HOST:PORT,
+    /// or https:// with --tls-ca)
+    #[arg(long, conflicts_with = "local_workers")]
+    pub coordinator: Option<String>,
+    /// Start N worker processes on this machine, render on them, stop them
+    #[arg(long)]
+    pub local_workers: Option<usize>,
+    /// Rays per shard on a cluster (default: the coordinator's, 65536)
+    #[arg(long)]
+    pub shard_rays: Option<u64>,
+    /// File holding the cluster's shared token
+    #[arg(long)]
+    pub token_file: Option<PathBuf>,
+    /// Certificate (PEM) to trust for an https coordinator
+    #[arg(long)]
+    pub tls_ca: Option<PathBuf>,
 }
 
 fn parse_memory(s: &str) -> Result<u64, String> {
@@ -116,9 +132,84 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         mode: a.mode,
         memory: a.memory,
         store: a.store_number,
-        tmp_dir: a.tmp_dir,
+        tmp_dir: a.tmp_dir.clone(),
     };
+    if a.coordinator.is_some() || a.local_workers.is_some() {
+        return run_cluster(&a, &req);
+    }
     let result = render(&req, &BarStages)?;
     write_outputs(&result, &a.output, a.stats.as_deref())?;
+    Ok(())
+}
+
+/// Renders on a cluster: a remote coordinator, or local worker processes.
+fn run_cluster(a: &RenderArgs, req: &RenderRequest) -> anyhow::Result<()> {
+    use crate::cluster::{client, local};
+    if req.mode == Mode::Df {
+        anyhow::bail!(
+            "a cluster renders breadth-first: --mode df cannot be used with --coordinator or --local-workers"
+        );
+    }
+    if a.profile {
+        anyhow::bail!("--profile times the depth-first tracer, which does not run on a cluster");
+    }
+    req.options.validate()?;
+    let t0 = std::time::Instant::now();
+    let scene = crate::job::prepare(&req.scene, req.tmp_dir.as_deref(), &BarStages)?;
+    let params = sray_worker::params::to_proto(&req.options, req.store);
+    let shard_rays = a.shard_rays.unwrap_or(0);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let bar = Bar::new("cluster", "");
+    let db = scene.db.path().to_path_buf();
+    let result = rt.block_on(async {
+        match (&a.coordinator, a.local_workers) {
+            (Some(url), _) => {
+                let target = sray_proto::net::Target {
+                    url: url.clone(),
+                    token: a
+                        .token_file
+                        .as_deref()
+                        .map(sray_proto::auth::Token::from_file)
+                        .transpose()
+                        .map_err(anyhow::Error::msg)?,
+                    ca: a.tls_ca.clone(),
+                };
+                client::render(&target, &db, params, shard_rays, &bar).await
+            }
+            (None, Some(n)) => {
+                let plan = local::LocalPlan {
+                    workers: n,
+                    memory: req
+                        .memory
+                        .unwrap_or_else(sray_engine::sys::default_memory_budget),
+                    threads: req.options.threads,
+                    tmp_dir: req.tmp_dir.clone(),
+                };
+                local::render(&plan, &db, params, shard_rays, &bar).await
+            }
+            (None, None) => unreachable!("checked by the caller"),
+        }
+    });
+    bar.finish();
+    let mut result = result?;
+    result.stats["convert_seconds"] = scene.convert_seconds.into();
+    result.stats["client_seconds"] = t0.elapsed().as_secs_f64().into();
+    write_file(&a.output, &result.png)?;
+    if let Some(p) = &a.stats {
+        write_file(p, &serde_json::to_vec_pretty(&result.stats)?)?;
+    }
+    Ok(())
+}
+
+/// Writes bytes atomically.
+fn write_file(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut tmp = sray_engine::fsutil::temp_beside(path)?;
+    tmp.write_all(bytes)
+        .map_err(|e| sray_engine::Error::io(path, e))?;
+    sray_engine::fsutil::persist(tmp, path)?;
     Ok(())
 }

@@ -192,6 +192,8 @@ impl<T: Pod> RecordReader<T> {
         self.left
     }
 
+    // Fallible, unlike `Iterator::next`: a read can fail.
+    #[allow(clippy::should_implement_trait)]
     pub fn next(&mut self) -> Result<Option<T>, Error> {
         if self.left == 0 {
             return Ok(None);
@@ -403,6 +405,8 @@ enum SortedInner<T: Pod, K: Ord, F> {
 }
 
 impl<T: Pod, K: Ord + Copy, F: Fn(&T) -> K> Sorted<T, K, F> {
+    // Fallible, unlike `Iterator::next`: a read can fail.
+    #[allow(clippy::should_implement_trait)]
     pub fn next(&mut self) -> Result<Option<T>, Error> {
         match &mut self.0 {
             SortedInner::Memory { items, at } => {

@@ -26,9 +26,9 @@ mod shade;
 mod tracer;
 mod voxels;
 
-pub use files::{ExternalSorter, RecordFile, SpillDir};
+pub use files::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
-pub use records::{NO_HIT, RayKind, RayRec, ResultRec};
+pub use records::{Contribution, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};
@@ -359,7 +359,9 @@ fn render_in<R: Real>(
             &mut counts,
         )?;
         tr.recycle(results);
-        if let RoundRays::Held(HeldRays::Memory(v)) = std::mem::replace(&mut rays, RoundRays::Eye(0)) {
+        if let RoundRays::Held(HeldRays::Memory(v)) =
+            std::mem::replace(&mut rays, RoundRays::Eye(0))
+        {
             tr.recycle_rays(v);
         }
         rays = RoundRays::Held(tr.hold_rays(next, count)?);

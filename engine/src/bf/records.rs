@@ -86,3 +86,13 @@ pub struct HitRec {
     pub object: u32,
     pub _pad: u32,
 }
+
+/// Colour added to a pixel corner (fixed point), as cluster workers return
+/// it from shading.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Contribution {
+    pub corner: u32,
+    pub _pad: u32,
+    pub rgb: [i64; 3],
+}

@@ -9,7 +9,7 @@
 //! same results, because a ray's intersection depends only on the ray, and
 //! a ray's spawn keys only on its id in the round.
 
-use super::files::{ExternalSorter, RecordFile, RecordWriter, Sorted, SpillDir};
+use super::files::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
 use super::records::{NO_HIT, RayKind, RayRec, ResultRec};
 use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
@@ -74,10 +74,12 @@ impl Results {
 /// Rays in key order, as [`Tracer::shade`] returns the ones it spawned.
 pub type SortedRays = Sorted<RayRec, u64, fn(&RayRec) -> u64>;
 
-/// Results in ray order, as [`Tracer::intersect`] returns them.
+/// Results in ray order: as [`Tracer::intersect`] returns them, or read
+/// from a file of results already in order.
 pub enum ResultReader {
     Dense(std::vec::IntoIter<ResultRec>),
     Sorted(Sorted<ResultRec, u64, fn(&ResultRec) -> u64>),
+    File(RecordReader<ResultRec>),
 }
 
 impl ResultReader {
@@ -85,6 +87,7 @@ impl ResultReader {
         match self {
             ResultReader::Dense(it) => Ok(it.next()),
             ResultReader::Sorted(s) => s.next(),
+            ResultReader::File(r) => r.next(),
         }
     }
 }
@@ -342,11 +345,7 @@ impl<'db, R: Real> Tracer<'db, R> {
 
     /// Keeps sorted rays in memory if the budget allows, else writes them
     /// to a file.
-    pub fn hold_rays(
-        &mut self,
-        sorted: SortedRays,
-        count: u64,
-    ) -> Result<HeldRays, Error> {
+    pub fn hold_rays(&mut self, sorted: SortedRays, count: u64) -> Result<HeldRays, Error> {
         let t = Instant::now();
         let held = match sorted.into_vec() {
             Ok(v) if self.budget.rays_resident(count) => HeldRays::Memory(v),

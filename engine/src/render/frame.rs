@@ -69,6 +69,14 @@ impl Frame {
         out
     }
 
+    /// The image as PNG bytes.
+    pub fn png_bytes(&self) -> Result<Vec<u8>, Error> {
+        let mut v = Vec::new();
+        encode_png(&mut v, self.width, self.height, &self.to_rgb8())
+            .map_err(|e| Error::Invalid(format!("cannot encode the image: {e}")))?;
+        Ok(v)
+    }
+
     /// Writes a PNG, atomically.
     pub fn write_png(&self, path: &Path) -> Result<(), Error> {
         write_png(path, self.width, self.height, &self.to_rgb8())
@@ -78,17 +86,25 @@ impl Frame {
 /// Writes 8-bit RGB pixels as a PNG, atomically.
 pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), Error> {
     let tmp = temp_beside(path)?;
-    {
-        let mut enc = png::Encoder::new(BufWriter::new(tmp.as_file()), width, height);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let err = |e: png::EncodingError| Error::io(path, std::io::Error::other(e));
-        let mut w = enc.write_header().map_err(err)?;
-        w.write_image_data(rgb).map_err(err)?;
-        w.finish().map_err(err)?;
-    }
+    encode_png(BufWriter::new(tmp.as_file()), width, height, rgb)
+        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
     persist(tmp, path)
+}
+
+/// Encodes 8-bit RGB pixels as a PNG into `out`.
+pub fn encode_png(
+    out: impl std::io::Write,
+    width: u32,
+    height: u32,
+    rgb: &[u8],
+) -> Result<(), png::EncodingError> {
+    let mut enc = png::Encoder::new(out, width, height);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut w = enc.write_header()?;
+    w.write_image_data(rgb)?;
+    w.finish()
 }
 
 #[cfg(test)]

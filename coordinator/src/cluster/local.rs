@@ -1,0 +1,152 @@
+//! `sray render --local-workers N`: a coordinator in this process and N
+//! worker processes on loopback, started for one render and stopped after
+//! it, on error and on Ctrl-C alike (the children are killed when their
+//! handles drop). A random token keeps other local users out.
+
+use super::client::{self, JobResult};
+use super::server::{Security, serve};
+use super::state::{Config, Shared};
+use anyhow::{Context, bail};
+use sray_engine::progress::Progress;
+use sray_proto::auth::Token;
+use sray_proto::net::Target;
+use sray_proto::v1;
+use std::path::Path;
+use std::process::Stdio;
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tokio::process::{Child, Command};
+
+/// How to split this machine among the local workers.
+pub struct LocalPlan {
+    pub workers: usize,
+    /// Memory budget of the whole render, split evenly.
+    pub memory: u64,
+    /// Threads of the whole render (0: all cores), split evenly.
+    pub threads: usize,
+    pub tmp_dir: Option<std::path::PathBuf>,
+}
+
+pub async fn render(
+    plan: &LocalPlan,
+    db: &Path,
+    params: v1::RenderParams,
+    shard_rays: u64,
+    progress: &dyn Progress,
+) -> anyhow::Result<JobResult> {
+    if plan.workers == 0 || plan.workers > 256 {
+        bail!("--local-workers takes 1 to 256, not {}", plan.workers);
+    }
+    let dir = match &plan.tmp_dir {
+        Some(d) => tempfile::Builder::new().prefix("sray-local-").tempdir_in(d),
+        None => tempfile::Builder::new().prefix("sray-local-").tempdir(),
+    }
+    .context("cannot create a temporary directory")?;
+    let token = random_token()?;
+    let token_file = dir.path().join("token");
+    std::fs::write(&token_file, &token).context("cannot write the token file")?;
+    let shared = Shared::new(Config {
+        data_dir: dir.path().join("data"),
+        tmp_dir: plan.tmp_dir.clone(),
+        worker_wait: Duration::from_secs(30),
+        ..Config::default()
+    })?;
+    // The workers share one cache, where the scene is already (a link to
+    // the database), so that they verify it instead of fetching it.
+    let hash = {
+        let shared = shared.clone();
+        let db = db.to_path_buf();
+        tokio::task::spawn_blocking(move || shared.scenes.add_file(&db)).await??
+    };
+    let cache = dir.path().join("cache");
+    std::fs::create_dir_all(&cache)?;
+    let abs = std::fs::canonicalize(db)?;
+    std::os::unix::fs::symlink(&abs, cache.join(format!("{hash}.sdb")))?;
+
+    let listener = TcpListener::bind("127.0.0.1:0")
+        .await
+        .context("cannot listen on loopback")?;
+    let url = format!("http://{}", listener.local_addr()?);
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let sec = Security {
+        token: Some(Token::new(&token).map_err(anyhow::Error::msg)?),
+        tls: None,
+    };
+    let server = tokio::spawn(serve(shared.clone(), listener, sec.clone(), async {
+        let _ = stop_rx.await;
+    }));
+
+    let cpus = sray_engine::sys::cpus();
+    let threads = if plan.threads == 0 {
+        cpus
+    } else {
+        plan.threads
+    };
+    let each_threads = (threads / plan.workers).max(1);
+    let each_memory = (plan.memory / plan.workers as u64).max(1 << 20);
+    let exe = std::env::current_exe().context("cannot find the sray executable")?;
+    let mut children: Vec<Child> = Vec::new();
+    let mut logs = Vec::new();
+    for i in 0..plan.workers {
+        let log_path = dir.path().join(format!("worker-{i}.log"));
+        let log = std::fs::File::create(&log_path)?;
+        let child = Command::new(&exe)
+            .arg("worker")
+            .args(["--coordinator", &url])
+            .arg("--token-file")
+            .arg(&token_file)
+            .arg("--cache-dir")
+            .arg(&cache)
+            .args(["--threads", &each_threads.to_string()])
+            .args(["--memory", &each_memory.to_string()])
+            .args(["--name", &format!("local-{i}")])
+            .args(
+                plan.tmp_dir
+                    .iter()
+                    .flat_map(|d| [std::ffi::OsStr::new("--tmp-dir"), d.as_os_str()]),
+            )
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::from(log))
+            .kill_on_drop(true)
+            .spawn()
+            .context("cannot start a worker process")?;
+        children.push(child);
+        logs.push(log_path);
+    }
+
+    let target = Target {
+        url,
+        token: sec.token.clone(),
+        ca: None,
+    };
+    let job = client::render(&target, db, params, shard_rays, progress);
+    let all_exited = async {
+        for c in children.iter_mut() {
+            let _ = c.wait().await;
+        }
+    };
+    let r = tokio::select! {
+        r = job => r,
+        _ = all_exited => {
+            let tail = logs.iter().filter_map(|p| std::fs::read_to_string(p).ok()).filter_map(|s| s.lines().last().map(String::from)).collect::<Vec<_>>().join("\n");
+            Err(anyhow::anyhow!("every local worker exited:\n{tail}"))
+        }
+    };
+    for c in children.iter_mut() {
+        let _ = c.kill().await;
+    }
+    let _ = stop_tx.send(());
+    let _ = server.await;
+    r
+}
+
+/// 32 random bytes from the kernel, as hex.
+fn random_token() -> anyhow::Result<String> {
+    let mut b = [0u8; 32];
+    use std::io::Read;
+    std::fs::File::open("/dev/urandom")
+        .and_then(|mut f| f.read_exact(&mut b))
+        .context("cannot read /dev/urandom")?;
+    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
+}

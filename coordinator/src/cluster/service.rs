@@ -1,0 +1,488 @@
+//! The coordinator's gRPC service: the calls of `sray.proto`, on top of
+//! [`Shared`]. Every record a worker sends is checked before it is kept:
+//! results in ray order for exactly the shard's rays, contributions to
+//! pixel corners of the image, spawned rays in key order within the keys
+//! the shard's rays can spawn.
+
+use super::driver;
+use super::state::{Refusal, Shared, TaskOutput};
+use sray_engine::bf::{Contribution, NO_HIT, RayRec, RecordWriter, ResultRec};
+use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
+use sray_proto::wire::{SCENE_CHUNK_BYTES, pack, records_per_chunk, unpack};
+use std::io::Write;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+use tokio::sync::mpsc;
+use tokio_stream::Stream;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+
+/// How long a worker's `NextTask` waits for work before answering "none".
+const POLL: Duration = Duration::from_secs(10);
+
+pub struct Service {
+    pub shared: Arc<Shared>,
+}
+
+type Stream_<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
+
+fn refused(r: Refusal) -> Status {
+    match r {
+        Refusal::UnknownWorker => Status::not_found("unknown worker: register again"),
+        Refusal::NotYours => Status::aborted("the task is not (or no longer) this worker's"),
+    }
+}
+
+fn internal(e: impl std::fmt::Display) -> Status {
+    Status::internal(e.to_string())
+}
+
+#[tonic::async_trait]
+impl Coordinator for Service {
+    async fn register(
+        &self,
+        req: Request<v1::RegisterRequest>,
+    ) -> Result<Response<v1::RegisterReply>, Status> {
+        let r = req.into_inner();
+        if r.protocol_version != sray_proto::PROTOCOL_VERSION {
+            return Err(Status::failed_precondition(format!(
+                "protocol version {} (this coordinator speaks {}): run the same sray version everywhere",
+                r.protocol_version,
+                sray_proto::PROTOCOL_VERSION
+            )));
+        }
+        let name: String = r.name.chars().take(128).collect();
+        let id = self
+            .shared
+            .register(name.clone(), r.threads, r.memory_bytes);
+        tracing::info!(worker = id, name = %name, threads = r.threads, memory = r.memory_bytes, "worker registered");
+        Ok(Response::new(v1::RegisterReply {
+            worker_id: id,
+            heartbeat_ms: self.shared.cfg.heartbeat.as_millis() as u32,
+        }))
+    }
+
+    async fn heartbeat(
+        &self,
+        req: Request<v1::HeartbeatRequest>,
+    ) -> Result<Response<v1::HeartbeatReply>, Status> {
+        let known = self.shared.beat(req.into_inner().worker_id);
+        Ok(Response::new(v1::HeartbeatReply { known }))
+    }
+
+    async fn next_task(
+        &self,
+        req: Request<v1::NextTaskRequest>,
+    ) -> Result<Response<v1::NextTaskReply>, Status> {
+        let task = self
+            .shared
+            .next_task(req.into_inner().worker_id, POLL)
+            .await
+            .map_err(refused)?;
+        Ok(Response::new(v1::NextTaskReply { task }))
+    }
+
+    type TaskInputStream = Stream_<v1::RecordChunk>;
+
+    async fn task_input(
+        &self,
+        req: Request<v1::TaskRef>,
+    ) -> Result<Response<Self::TaskInputStream>, Status> {
+        let (task, input) = self.shared.task_input(req.get_ref()).map_err(refused)?;
+        let (tx, rx) = mpsc::channel(4);
+        let shared = self.shared.clone();
+        tokio::task::spawn_blocking(move || {
+            let send = |kind: v1::RecordKind, data: Vec<u8>| {
+                shared
+                    .traffic
+                    .to_workers
+                    .fetch_add(data.len() as u64, Ordering::Relaxed);
+                tx.blocking_send(Ok(v1::RecordChunk {
+                    kind: kind as i32,
+                    data,
+                }))
+                .is_ok()
+            };
+            let fail = |e: sray_engine::Error| {
+                let _ = tx.blocking_send(Err(internal(e)));
+            };
+            if let (Some(rays), false) = (&input.rays, task.eye_rays) {
+                let mut rd = match rays.reader_range(task.first_ray, task.ray_count) {
+                    Ok(r) => r,
+                    Err(e) => return fail(e),
+                };
+                if !stream_records(&mut rd, v1::RecordKind::Rays, &send, &fail) {
+                    return;
+                }
+            }
+            if let Some(results) = &input.results {
+                let mut rd = match results.reader() {
+                    Ok(r) => r,
+                    Err(e) => return fail(e),
+                };
+                stream_records(&mut rd, v1::RecordKind::Results, &send, &fail);
+            }
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    async fn complete_task(
+        &self,
+        req: Request<Streaming<v1::TaskOutput>>,
+    ) -> Result<Response<v1::CompleteTaskReply>, Status> {
+        let mut stream = req.into_inner();
+        let Some(Part::Header(tref)) = stream.message().await?.and_then(|m| m.part) else {
+            return Err(Status::invalid_argument(
+                "a task's output starts with its header",
+            ));
+        };
+        let Ok((task, input)) = self.shared.task_input(&tref) else {
+            return Ok(Response::new(v1::CompleteTaskReply { accepted: false }));
+        };
+        let mut rx = Receiver::new(&self.shared, &task, &input);
+        loop {
+            let msg = match stream.message().await {
+                Ok(Some(m)) => m,
+                Ok(None) => {
+                    self.shared
+                        .abandon(&tref, "the output ended without a summary");
+                    return Err(Status::invalid_argument("output ended without a summary"));
+                }
+                Err(s) => {
+                    self.shared.abandon(&tref, "the output stream broke");
+                    return Err(s);
+                }
+            };
+            match msg.part {
+                Some(Part::Records(c)) => {
+                    self.shared
+                        .traffic
+                        .from_workers
+                        .fetch_add(c.data.len() as u64, Ordering::Relaxed);
+                    if let Err(e) = rx.take(c) {
+                        self.shared.fail(&tref, format!("bad output: {e}"));
+                        return Err(Status::invalid_argument(e));
+                    }
+                }
+                Some(Part::Summary(s)) => {
+                    let out = match rx.finish(s) {
+                        Ok(o) => o,
+                        Err(e) => {
+                            self.shared.fail(&tref, format!("bad output: {e}"));
+                            return Err(Status::invalid_argument(e));
+                        }
+                    };
+                    let accepted = self.shared.complete(&tref, out);
+                    return Ok(Response::new(v1::CompleteTaskReply { accepted }));
+                }
+                _ => return Err(Status::invalid_argument("a second header")),
+            }
+        }
+    }
+
+    async fn fail_task(
+        &self,
+        req: Request<v1::FailTaskRequest>,
+    ) -> Result<Response<v1::Empty>, Status> {
+        let r = req.into_inner();
+        if let Some(t) = r.task {
+            let error: String = r.error.chars().take(2000).collect();
+            self.shared.fail(&t, error);
+        }
+        Ok(Response::new(v1::Empty {}))
+    }
+
+    async fn scene_manifest(
+        &self,
+        req: Request<v1::SceneRef>,
+    ) -> Result<Response<v1::SceneManifestReply>, Status> {
+        let hash = req.into_inner().hash;
+        let shared = self.shared.clone();
+        let s = tokio::task::spawn_blocking(move || shared.scenes.get(&hash))
+            .await
+            .map_err(internal)?
+            .map_err(|e| Status::invalid_argument(e.to_string()))?
+            .ok_or_else(|| Status::not_found("no such scene"))?;
+        Ok(Response::new(v1::SceneManifestReply {
+            size: s.size,
+            chunk_size: SCENE_CHUNK_BYTES as u32,
+            chunk_hashes: s.chunk_hashes.iter().map(|h| h.to_vec()).collect(),
+        }))
+    }
+
+    async fn scene_chunk(
+        &self,
+        req: Request<v1::SceneChunkRequest>,
+    ) -> Result<Response<v1::SceneChunkReply>, Status> {
+        let r = req.into_inner();
+        let shared = self.shared.clone();
+        let data = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, Status> {
+            let s = shared
+                .scenes
+                .get(&r.hash)
+                .map_err(|e| Status::invalid_argument(e.to_string()))?
+                .ok_or_else(|| Status::not_found("no such scene"))?;
+            s.chunk(r.index)
+                .map_err(|e| Status::invalid_argument(e.to_string()))
+        })
+        .await
+        .map_err(internal)??;
+        let t = &self.shared.traffic;
+        t.scene_bytes
+            .fetch_add(data.len() as u64, Ordering::Relaxed);
+        t.scene_chunks.fetch_add(1, Ordering::Relaxed);
+        Ok(Response::new(v1::SceneChunkReply { data }))
+    }
+
+    async fn has_scene(
+        &self,
+        req: Request<v1::SceneRef>,
+    ) -> Result<Response<v1::HasSceneReply>, Status> {
+        let hash = req.into_inner().hash;
+        let shared = self.shared.clone();
+        let present = tokio::task::spawn_blocking(move || shared.scenes.get(&hash))
+            .await
+            .map_err(internal)?
+            .map_err(|e| Status::invalid_argument(e.to_string()))?
+            .is_some();
+        Ok(Response::new(v1::HasSceneReply { present }))
+    }
+
+    async fn upload_scene(
+        &self,
+        req: Request<Streaming<v1::SceneUpload>>,
+    ) -> Result<Response<v1::SceneRef>, Status> {
+        use v1::scene_upload::Part as Up;
+        let mut stream = req.into_inner();
+        let Some(Up::Header(h)) = stream.message().await?.and_then(|m| m.part) else {
+            return Err(Status::invalid_argument("an upload starts with its header"));
+        };
+        if !super::scenes::valid_hash(&h.hash) {
+            return Err(Status::invalid_argument("not a scene hash"));
+        }
+        let mut file = self.shared.scenes.upload_file().map_err(internal)?;
+        let mut got = 0u64;
+        while let Some(m) = stream.message().await? {
+            let Some(Up::Data(d)) = m.part else {
+                return Err(Status::invalid_argument("a second header"));
+            };
+            got += d.len() as u64;
+            if got > h.size {
+                return Err(Status::invalid_argument("more bytes than announced"));
+            }
+            file.write_all(&d).map_err(internal)?;
+        }
+        if got != h.size {
+            return Err(Status::invalid_argument(format!(
+                "the upload ended after {got} of {} bytes",
+                h.size
+            )));
+        }
+        file.flush().map_err(internal)?;
+        let shared = self.shared.clone();
+        let hash = tokio::task::spawn_blocking(move || shared.scenes.add_upload(file, &h.hash))
+            .await
+            .map_err(internal)?
+            .map_err(|e| Status::invalid_argument(format!("{e:#}")))?;
+        tracing::info!(scene = %hash, bytes = got, "scene uploaded");
+        Ok(Response::new(v1::SceneRef { hash }))
+    }
+
+    async fn submit_job(
+        &self,
+        req: Request<v1::JobSpec>,
+    ) -> Result<Response<v1::JobAccepted>, Status> {
+        let spec = req.into_inner();
+        let job = driver::Job::check(&self.shared, spec)
+            .await
+            .map_err(|e| Status::invalid_argument(format!("{e:#}")))?;
+        let id = driver::start(self.shared.clone(), job);
+        Ok(Response::new(v1::JobAccepted { job_id: id }))
+    }
+
+    type WatchJobStream = Stream_<v1::JobEvent>;
+
+    async fn watch_job(
+        &self,
+        req: Request<v1::JobRef>,
+    ) -> Result<Response<Self::WatchJobStream>, Status> {
+        let id = req.into_inner().job_id;
+        let rx = self
+            .shared
+            .take_watcher(id)
+            .ok_or_else(|| Status::not_found("no such job, or it is watched already"))?;
+        Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
+            ReceiverStream::new(rx),
+            Ok,
+        ))))
+    }
+
+    async fn cancel_job(&self, req: Request<v1::JobRef>) -> Result<Response<v1::Empty>, Status> {
+        self.shared.cancel(req.into_inner().job_id);
+        Ok(Response::new(v1::Empty {}))
+    }
+}
+
+/// Streams a reader's records in chunks; false if the receiver went away
+/// or reading failed.
+fn stream_records<T: bytemuck::Pod>(
+    rd: &mut sray_engine::bf::RecordReader<T>,
+    kind: v1::RecordKind,
+    send: &dyn Fn(v1::RecordKind, Vec<u8>) -> bool,
+    fail: &dyn Fn(sray_engine::Error),
+) -> bool {
+    let per = records_per_chunk::<T>();
+    let mut buf = Vec::with_capacity(per);
+    loop {
+        match rd.next() {
+            Ok(Some(r)) => {
+                buf.push(r);
+                if buf.len() == per {
+                    if !send(kind, pack(&buf)) {
+                        return false;
+                    }
+                    buf.clear();
+                }
+            }
+            Ok(None) => break,
+            Err(e) => {
+                fail(e);
+                return false;
+            }
+        }
+    }
+    buf.is_empty() || send(kind, pack(&buf))
+}
+
+/// Takes a task's output records, checking them as they come.
+struct Receiver<'a> {
+    shared: &'a Shared,
+    task: &'a v1::Task,
+    input: &'a super::state::TaskInput,
+    results: Option<RecordWriter<ResultRec>>,
+    contributions: Option<RecordWriter<Contribution>>,
+    rays: Option<RecordWriter<RayRec>>,
+    n_results: u64,
+    hits: u64,
+    last_key: Option<u64>,
+}
+
+impl<'a> Receiver<'a> {
+    fn new(shared: &'a Shared, task: &'a v1::Task, input: &'a super::state::TaskInput) -> Self {
+        Receiver {
+            shared,
+            task,
+            input,
+            results: None,
+            contributions: None,
+            rays: None,
+            n_results: 0,
+            hits: 0,
+            last_key: None,
+        }
+    }
+
+    fn writer<T: bytemuck::Pod>(
+        slot: &mut Option<RecordWriter<T>>,
+        shared: &Shared,
+        what: &str,
+    ) -> Result<(), String> {
+        if slot.is_none() {
+            *slot = Some(RecordWriter::create(&shared.spill, what).map_err(|e| e.to_string())?);
+        }
+        Ok(())
+    }
+
+    fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
+        let intersect = self.task.stage == v1::Stage::Intersect as i32;
+        let io = |e: sray_engine::Error| e.to_string();
+        match (v1::RecordKind::try_from(c.kind), intersect) {
+            (Ok(v1::RecordKind::Results), true) => {
+                let v = unpack::<ResultRec>(&c.data).map_err(|e| e.to_string())?;
+                for r in &v {
+                    let want = self.task.first_ray + self.n_results;
+                    if r.ray != want {
+                        return Err(format!("result for ray {} where ray {want} was due", r.ray));
+                    }
+                    if r.object != NO_HIT
+                        && (r.object as u64 >= self.input.objects || !r.t.is_finite())
+                    {
+                        return Err(format!(
+                            "ray {}: no object {} at distance {}",
+                            r.ray, r.object, r.t
+                        ));
+                    }
+                    self.hits += (r.object != NO_HIT) as u64;
+                    self.n_results += 1;
+                }
+                if self.n_results > self.task.ray_count {
+                    return Err("more results than rays".into());
+                }
+                Self::writer(&mut self.results, self.shared, "out-results")?;
+                self.results.as_mut().expect("made").extend(&v).map_err(io)
+            }
+            (Ok(v1::RecordKind::Contributions), false) => {
+                let v = unpack::<Contribution>(&c.data).map_err(|e| e.to_string())?;
+                if let Some(bad) = v.iter().find(|x| x.corner as u64 >= self.input.corners) {
+                    return Err(format!(
+                        "a contribution to pixel corner {} of {}",
+                        bad.corner, self.input.corners
+                    ));
+                }
+                Self::writer(&mut self.contributions, self.shared, "out-contrib")?;
+                self.contributions
+                    .as_mut()
+                    .expect("made")
+                    .extend(&v)
+                    .map_err(io)
+            }
+            (Ok(v1::RecordKind::Rays), false) => {
+                let v = unpack::<RayRec>(&c.data).map_err(|e| e.to_string())?;
+                let slots = sray_engine::bf::SPAWN_SLOTS;
+                let lo = self.task.first_ray * slots;
+                let hi = (self.task.first_ray + self.task.ray_count) * slots;
+                for r in &v {
+                    if r.key < lo || r.key >= hi || self.last_key.is_some_and(|k| r.key <= k) {
+                        return Err(format!("spawned ray key {} out of order or range", r.key));
+                    }
+                    if r.corner as u64 >= self.input.corners
+                        || !r.o.iter().chain(&r.d).all(|x| x.is_finite())
+                    {
+                        return Err(format!("spawned ray {} is malformed", r.key));
+                    }
+                    self.last_key = Some(r.key);
+                }
+                Self::writer(&mut self.rays, self.shared, "out-rays")?;
+                self.rays.as_mut().expect("made").extend(&v).map_err(io)
+            }
+            _ => Err(format!(
+                "record kind {} does not belong in this stage's output",
+                c.kind
+            )),
+        }
+    }
+
+    fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
+        let intersect = self.task.stage == v1::Stage::Intersect as i32;
+        if intersect && self.n_results != self.task.ray_count {
+            return Err(format!(
+                "{} results for {} rays",
+                self.n_results, self.task.ray_count
+            ));
+        }
+        let err = |e: sray_engine::Error| e.to_string();
+        Ok(TaskOutput {
+            results: self.results.map(|w| w.finish()).transpose().map_err(err)?,
+            contributions: self
+                .contributions
+                .map(|w| w.finish())
+                .transpose()
+                .map_err(err)?,
+            rays: self.rays.map(|w| w.finish()).transpose().map_err(err)?,
+            hits: self.hits,
+            summary,
+        })
+    }
+}

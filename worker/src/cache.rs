@@ -1,0 +1,224 @@
+//! The worker's scene cache: object databases fetched from the coordinator
+//! in chunks, stored under their content hash, verified chunk by chunk
+//! (BLAKE3) whenever a job starts, and repaired by fetching again only the
+//! chunks that do not match.
+
+use anyhow::{Context, bail};
+use sray_proto::net::Client;
+use sray_proto::v1;
+use std::fs::{File, OpenOptions};
+use std::io::Read;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Tries per chunk before a fetch is given up.
+const FETCH_TRIES: u32 = 3;
+/// Largest chunk a manifest may announce.
+const MAX_CHUNK: u32 = 16 << 20;
+
+pub struct SceneCache {
+    dir: PathBuf,
+    /// Chunks fetched since start, and how many of those replaced a
+    /// corrupt or missing chunk of an existing copy.
+    pub chunks_fetched: AtomicU64,
+    pub chunks_repaired: AtomicU64,
+}
+
+/// A scene hash is 64 lowercase hex digits: it names a file in the cache
+/// directory and must never name anything else.
+pub fn check_hash(hash: &str) -> anyhow::Result<()> {
+    if hash.len() == 64
+        && hash
+            .bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+    {
+        Ok(())
+    } else {
+        bail!("'{hash}' is not a scene hash")
+    }
+}
+
+struct Manifest {
+    size: u64,
+    chunk: u64,
+    hashes: Vec<[u8; 32]>,
+}
+
+impl SceneCache {
+    pub fn new(dir: &Path) -> anyhow::Result<SceneCache> {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the cache directory {}", dir.display()))?;
+        Ok(SceneCache {
+            dir: dir.to_path_buf(),
+            chunks_fetched: AtomicU64::new(0),
+            chunks_repaired: AtomicU64::new(0),
+        })
+    }
+
+    /// A verified local copy of scene `hash`.
+    pub async fn ensure(&self, client: &mut Client, hash: &str) -> anyhow::Result<PathBuf> {
+        check_hash(hash)?;
+        let m = client
+            .scene_manifest(v1::SceneRef { hash: hash.into() })
+            .await
+            .with_context(|| format!("scene {hash}: manifest"))?
+            .into_inner();
+        let manifest = check_manifest(&m)?;
+        let path = self.dir.join(format!("{hash}.sdb"));
+        let existing = std::fs::metadata(&path)
+            .map(|md| md.len() == manifest.size)
+            .unwrap_or(false);
+        // A fresh copy is assembled in a file of its own (several workers
+        // may share a cache directory) and renamed into place when whole.
+        let part = if existing {
+            None
+        } else {
+            let t = tempfile::Builder::new()
+                .prefix(&format!("{hash}."))
+                .suffix(".part")
+                .tempfile_in(&self.dir)
+                .with_context(|| format!("cannot create a file in {}", self.dir.display()))?;
+            t.as_file()
+                .set_len(manifest.size)
+                .with_context(|| t.path().display().to_string())?;
+            Some(t)
+        };
+        let work = part
+            .as_ref()
+            .map_or(path.clone(), |t| t.path().to_path_buf());
+        let bad = if existing {
+            let (bad, whole) = verify(&work, &manifest, hash).await?;
+            if bad.is_empty() && !whole {
+                bail!("scene {hash}: every chunk matches its manifest but the whole file does not");
+            }
+            if !bad.is_empty() {
+                tracing::warn!(scene = hash, chunks = ?bad, "cached scene is corrupt: fetching those chunks again");
+            }
+            bad
+        } else {
+            (0..manifest.hashes.len()).collect()
+        };
+        for &i in &bad {
+            self.fetch_chunk(client, hash, &manifest, i, &work).await?;
+            if existing {
+                self.chunks_repaired.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if !bad.is_empty() {
+            let (still, whole) = verify(&work, &manifest, hash).await?;
+            if !still.is_empty() || !whole {
+                bail!(
+                    "scene {hash}: chunks {still:?} still do not match after fetching them again"
+                );
+            }
+        }
+        if let Some(t) = part {
+            t.persist(&path)
+                .with_context(|| path.display().to_string())?;
+        }
+        Ok(path)
+    }
+
+    async fn fetch_chunk(
+        &self,
+        client: &mut Client,
+        hash: &str,
+        m: &Manifest,
+        i: usize,
+        path: &Path,
+    ) -> anyhow::Result<()> {
+        let want_len = (m.size - i as u64 * m.chunk).min(m.chunk) as usize;
+        for attempt in 1..=FETCH_TRIES {
+            let data = client
+                .scene_chunk(v1::SceneChunkRequest {
+                    hash: hash.into(),
+                    index: i as u64,
+                })
+                .await
+                .with_context(|| format!("scene {hash}: chunk {i}"))?
+                .into_inner()
+                .data;
+            self.chunks_fetched.fetch_add(1, Ordering::Relaxed);
+            if data.len() == want_len && *blake3::hash(&data).as_bytes() == m.hashes[i] {
+                let f = OpenOptions::new()
+                    .write(true)
+                    .open(path)
+                    .with_context(|| path.display().to_string())?;
+                f.write_all_at(&data, i as u64 * m.chunk)
+                    .with_context(|| path.display().to_string())?;
+                return Ok(());
+            }
+            tracing::warn!(
+                scene = hash,
+                chunk = i,
+                attempt,
+                "chunk failed its checksum: fetching it again"
+            );
+        }
+        bail!("scene {hash}: chunk {i} failed its checksum {FETCH_TRIES} times")
+    }
+}
+
+fn check_manifest(m: &v1::SceneManifestReply) -> anyhow::Result<Manifest> {
+    if m.chunk_size == 0 || m.chunk_size > MAX_CHUNK {
+        bail!(
+            "scene manifest: chunk size {} is out of range",
+            m.chunk_size
+        );
+    }
+    let chunk = m.chunk_size as u64;
+    let n = m.size.div_ceil(chunk);
+    if m.chunk_hashes.len() as u64 != n {
+        bail!(
+            "scene manifest: {} chunk hashes for {} chunks",
+            m.chunk_hashes.len(),
+            n
+        );
+    }
+    let mut hashes = Vec::with_capacity(n as usize);
+    for h in &m.chunk_hashes {
+        hashes.push(
+            <[u8; 32]>::try_from(h.as_slice())
+                .map_err(|_| anyhow::anyhow!("scene manifest: a chunk hash is not 32 bytes"))?,
+        );
+    }
+    Ok(Manifest {
+        size: m.size,
+        chunk,
+        hashes,
+    })
+}
+
+/// Reads the file once: the chunks that do not match the manifest, and
+/// whether the whole file has the expected hash.
+async fn verify(path: &Path, m: &Manifest, hash: &str) -> anyhow::Result<(Vec<usize>, bool)> {
+    let path = path.to_path_buf();
+    let chunk = m.chunk as usize;
+    let hashes = m.hashes.clone();
+    let want = hash.to_string();
+    tokio::task::spawn_blocking(move || -> anyhow::Result<(Vec<usize>, bool)> {
+        let mut f = File::open(&path).with_context(|| path.display().to_string())?;
+        let mut whole = blake3::Hasher::new();
+        let mut buf = vec![0u8; chunk];
+        let mut bad = Vec::new();
+        for (i, h) in hashes.iter().enumerate() {
+            let mut got = 0;
+            while got < chunk {
+                let n = f
+                    .read(&mut buf[got..])
+                    .with_context(|| path.display().to_string())?;
+                if n == 0 {
+                    break;
+                }
+                got += n;
+            }
+            whole.update(&buf[..got]);
+            if blake3::hash(&buf[..got]).as_bytes() != h {
+                bad.push(i);
+            }
+        }
+        Ok((bad, whole.finalize().to_hex().as_str() == want))
+    })
+    .await?
+}

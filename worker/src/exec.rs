@@ -1,0 +1,321 @@
+//! A job's executor: one thread that owns the job's database and its
+//! breadth-first [`Tracer`] (grids built once per job), and runs the job's
+//! tasks one after another. The engine is synchronous and uses its own
+//! thread pool; the thread talks to the async side through channels, so
+//! the network never waits on the tracer nor the tracer on the network,
+//! beyond the few chunks the channels hold.
+
+use sray_engine::bf::{
+    BfOptions, Contribution, RayRec, RecordWriter, ResultReader, ResultRec, Tracer, eye_ray,
+};
+use sray_engine::math::Real;
+use sray_engine::progress::NoProgress;
+use sray_engine::render::{Camera, Precision, RayCounts, RenderOptions};
+use sray_engine::sdb::Database;
+use sray_proto::v1::{self, RecordKind, task_output::Part};
+use sray_proto::wire::{pack, records_per_chunk, unpack};
+use std::path::PathBuf;
+use std::time::Instant;
+use tokio::sync::{mpsc, oneshot};
+
+/// What a job's tasks share.
+pub struct JobSetup {
+    pub job_id: u64,
+    pub db_path: PathBuf,
+    pub opts: RenderOptions,
+    pub bf: BfOptions,
+}
+
+/// One task for the executor, with its input stream (if it has input), the
+/// channel its output goes to, and where to say how it ended.
+pub struct Work {
+    pub task: v1::Task,
+    pub input: Option<tonic::Streaming<v1::RecordChunk>>,
+    pub out: mpsc::Sender<v1::TaskOutput>,
+    pub done: oneshot::Sender<Result<(), String>>,
+}
+
+pub struct Executor {
+    pub job_id: u64,
+    tx: std::sync::mpsc::Sender<Work>,
+}
+
+impl Executor {
+    /// Starts the job's thread; the database is opened and the grids built
+    /// there, before the first task runs.
+    pub fn start(setup: JobSetup, rt: tokio::runtime::Handle) -> Executor {
+        let (tx, rx) = std::sync::mpsc::channel::<Work>();
+        let job_id = setup.job_id;
+        std::thread::Builder::new()
+            .name(format!("job-{job_id}"))
+            .spawn(move || match setup.opts.precision {
+                Precision::Double => job_thread::<f64>(setup, rt, rx),
+                Precision::Single => job_thread::<f32>(setup, rt, rx),
+            })
+            .expect("cannot start a thread");
+        Executor { job_id, tx }
+    }
+
+    /// Queues a task; false if the thread has ended.
+    pub fn submit(&self, w: Work) -> bool {
+        self.tx.send(w).is_ok()
+    }
+}
+
+fn job_thread<R: Real>(
+    setup: JobSetup,
+    rt: tokio::runtime::Handle,
+    rx: std::sync::mpsc::Receiver<Work>,
+) {
+    let db = match Database::open(&setup.db_path) {
+        Ok(db) => db,
+        Err(e) => return fail_all(rx, &format!("cannot open the scene: {e}")),
+    };
+    let camera = match Camera::new(&db.scene().view, setup.opts.width, setup.opts.height) {
+        Ok(c) => c,
+        Err(e) => return fail_all(rx, &e.to_string()),
+    };
+    let t0 = Instant::now();
+    let mut tracer = match Tracer::<R>::new(&db, &setup.opts, &setup.bf, 0, &NoProgress) {
+        Ok(t) => t,
+        Err(e) => return fail_all(rx, &e.to_string()),
+    };
+    tracing::info!(
+        job = setup.job_id,
+        seconds = t0.elapsed().as_secs_f64(),
+        "grids built"
+    );
+    let corners = setup.opts.corners();
+    for w in rx {
+        let Work {
+            task,
+            input,
+            out,
+            done,
+        } = w;
+        let run = std::panic::AssertUnwindSafe(|| {
+            run_task(&mut tracer, &camera, corners, &rt, &task, input, &out)
+        });
+        let r = std::panic::catch_unwind(run).unwrap_or_else(|p| {
+            Err(format!(
+                "the tracer panicked: {}",
+                p.downcast_ref::<String>()
+                    .map(String::as_str)
+                    .or_else(|| p.downcast_ref::<&str>().copied())
+                    .unwrap_or("unknown cause")
+            ))
+        });
+        let _ = done.send(r);
+    }
+}
+
+fn fail_all(rx: std::sync::mpsc::Receiver<Work>, e: &str) {
+    for w in rx {
+        let _ = w.done.send(Err(e.to_string()));
+    }
+}
+
+/// Sends one output message from the executor thread.
+fn send(out: &mpsc::Sender<v1::TaskOutput>, part: Part) -> Result<(), String> {
+    out.blocking_send(v1::TaskOutput { part: Some(part) })
+        .map_err(|_| "the output stream to the coordinator closed".to_string())
+}
+
+fn send_records<T: bytemuck::Pod>(
+    out: &mpsc::Sender<v1::TaskOutput>,
+    kind: RecordKind,
+    recs: &[T],
+) -> Result<(), String> {
+    send(
+        out,
+        Part::Records(v1::RecordChunk {
+            kind: kind as i32,
+            data: pack(recs),
+        }),
+    )
+}
+
+/// The input stream's records of one kind, written to a local file.
+struct Inputs {
+    rays: Option<sray_engine::bf::RecordFile<RayRec>>,
+    results: Option<sray_engine::bf::RecordFile<ResultRec>>,
+}
+
+fn read_inputs<R: Real>(
+    tracer: &Tracer<R>,
+    rt: &tokio::runtime::Handle,
+    stream: Option<tonic::Streaming<v1::RecordChunk>>,
+) -> Result<Inputs, String> {
+    let mut inputs = Inputs {
+        rays: None,
+        results: None,
+    };
+    let Some(mut stream) = stream else {
+        return Ok(inputs);
+    };
+    let io = |e: sray_engine::Error| e.to_string();
+    let mut rays = RecordWriter::<RayRec>::create(&tracer.spill, "in-rays").map_err(io)?;
+    let mut results = RecordWriter::<ResultRec>::create(&tracer.spill, "in-results").map_err(io)?;
+    let (mut n_rays, mut n_results) = (0u64, 0u64);
+    loop {
+        let msg = rt
+            .block_on(stream.message())
+            .map_err(|s| format!("task input: {}", s.message()))?;
+        let Some(chunk) = msg else { break };
+        match RecordKind::try_from(chunk.kind) {
+            Ok(RecordKind::Rays) => {
+                let v = unpack::<RayRec>(&chunk.data).map_err(|e| e.to_string())?;
+                n_rays += v.len() as u64;
+                rays.extend(&v).map_err(io)?;
+            }
+            Ok(RecordKind::Results) => {
+                let v = unpack::<ResultRec>(&chunk.data).map_err(|e| e.to_string())?;
+                n_results += v.len() as u64;
+                results.extend(&v).map_err(io)?;
+            }
+            _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
+        }
+    }
+    if n_rays > 0 {
+        inputs.rays = Some(rays.finish().map_err(io)?);
+    }
+    if n_results > 0 {
+        inputs.results = Some(results.finish().map_err(io)?);
+    }
+    Ok(inputs)
+}
+
+fn run_task<R: Real>(
+    tracer: &mut Tracer<R>,
+    camera: &Camera,
+    corners: u64,
+    rt: &tokio::runtime::Handle,
+    task: &v1::Task,
+    input: Option<tonic::Streaming<v1::RecordChunk>>,
+    out: &mpsc::Sender<v1::TaskOutput>,
+) -> Result<(), String> {
+    let t0 = Instant::now();
+    let (first, n) = (task.first_ray, task.ray_count);
+    if task.eye_rays && first.checked_add(n).is_none_or(|end| end > corners) {
+        return Err(format!(
+            "eye rays {first}..{} are beyond the image's {corners}",
+            first.saturating_add(n)
+        ));
+    }
+    let inputs = read_inputs(tracer, rt, input)?;
+    let io = |e: sray_engine::Error| e.to_string();
+    // The shard's rays: made here for the eye rays, else as received.
+    let ray_file = if task.eye_rays {
+        None
+    } else {
+        let f = inputs.rays.as_ref().ok_or("task input: no rays")?;
+        if f.len() != n {
+            return Err(format!("task input: {} rays for a shard of {n}", f.len()));
+        }
+        Some(f)
+    };
+    let rays =
+        || -> Result<Box<dyn Iterator<Item = Result<RayRec, sray_engine::Error>> + '_>, String> {
+            Ok(match ray_file {
+                None => Box::new((first..first + n).map(|i| Ok(eye_ray(camera, i)))),
+                Some(f) => {
+                    let mut rd = f.reader().map_err(io)?;
+                    Box::new(std::iter::from_fn(move || rd.next().transpose()))
+                }
+            })
+        };
+    let mut summary = v1::TaskSummary::default();
+    match v1::Stage::try_from(task.stage) {
+        Ok(v1::Stage::Intersect) => {
+            let (mut results, ist) = tracer
+                .intersect(first, &mut *rays()?, n, false, &NoProgress)
+                .map_err(io)?;
+            let per = records_per_chunk::<ResultRec>();
+            let mut buf = Vec::with_capacity(per);
+            while let Some(r) = results.next_result().map_err(io)? {
+                buf.push(r);
+                if buf.len() == per {
+                    send_records(out, RecordKind::Results, &buf)?;
+                    buf.clear();
+                }
+            }
+            if !buf.is_empty() {
+                send_records(out, RecordKind::Results, &buf)?;
+            }
+            tracer.recycle(results);
+            let t = ist.intersection_tests;
+            summary.tests_sphere = t.sphere;
+            summary.tests_polygon = t.polygon;
+            summary.tests_patch = t.patch;
+            summary.tests_cone = t.cone;
+            summary.stats_json = serde_json::to_string(&ist).unwrap_or_default();
+        }
+        Ok(v1::Stage::Shade) => {
+            let results_file = inputs.results.as_ref().ok_or("task input: no results")?;
+            if results_file.len() != n {
+                return Err(format!(
+                    "task input: {} results for a shard of {n}",
+                    results_file.len()
+                ));
+            }
+            let mut results = ResultReader::File(results_file.reader().map_err(io)?);
+            let per = records_per_chunk::<Contribution>();
+            let mut buf: Vec<Contribution> = Vec::with_capacity(per);
+            let mut send_err = None;
+            let mut counts = RayCounts::default();
+            let (mut next, _count, sst) = {
+                let mut contribute = |corner: u32, rgb: [i64; 3]| {
+                    if send_err.is_some() {
+                        return;
+                    }
+                    buf.push(Contribution {
+                        corner,
+                        _pad: 0,
+                        rgb,
+                    });
+                    if buf.len() == per {
+                        if let Err(e) = send_records(out, RecordKind::Contributions, &buf) {
+                            send_err = Some(e);
+                        }
+                        buf.clear();
+                    }
+                };
+                tracer
+                    .shade(
+                        first,
+                        &mut *rays()?,
+                        &mut results,
+                        &mut contribute,
+                        &mut counts,
+                    )
+                    .map_err(io)?
+            };
+            if let Some(e) = send_err {
+                return Err(e);
+            }
+            if !buf.is_empty() {
+                send_records(out, RecordKind::Contributions, &buf)?;
+            }
+            let per = records_per_chunk::<RayRec>();
+            let mut rbuf = Vec::with_capacity(per);
+            while let Some(r) = next.next().map_err(io)? {
+                rbuf.push(r);
+                if rbuf.len() == per {
+                    send_records(out, RecordKind::Rays, &rbuf)?;
+                    rbuf.clear();
+                }
+            }
+            if !rbuf.is_empty() {
+                send_records(out, RecordKind::Rays, &rbuf)?;
+            }
+            summary.eye_hit_rays = counts.eye_hit_rays;
+            summary.reflect_rays = counts.reflect_rays;
+            summary.refract_rays = counts.refract_rays;
+            summary.shadow_rays = counts.shadow_rays;
+            summary.stats_json = serde_json::to_string(&sst).unwrap_or_default();
+        }
+        _ => return Err(format!("unknown stage {}", task.stage)),
+    }
+    summary.seconds = t0.elapsed().as_secs_f64();
+    send(out, Part::Summary(summary))
+}
