@@ -59,3 +59,96 @@ pub fn shared_spd() -> PathBuf {
 pub fn json(s: &str) -> serde_json::Value {
     serde_json::from_str(s).unwrap_or_else(|e| panic!("not JSON ({e}):\n{s}"))
 }
+
+/// A background `sray` process whose stderr is collected line by line;
+/// killed when dropped.
+pub struct Proc {
+    pub child: std::process::Child,
+    lines: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+}
+
+impl Proc {
+    pub fn start(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Proc {
+        use std::io::BufRead;
+        let mut cmd = sray();
+        cmd.current_dir(dir)
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let mut child = cmd.spawn().expect("start sray");
+        let err = child.stderr.take().unwrap();
+        let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let l2 = lines.clone();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(err).lines() {
+                let Ok(line) = line else { break };
+                l2.lock().unwrap().push(line);
+            }
+        });
+        Proc { child, lines }
+    }
+
+    /// Waits (up to `secs`) for a stderr line containing all of `parts`.
+    pub fn wait_for(&self, parts: &[&str], secs: f64) -> String {
+        self.wait_for_after(0, parts, secs)
+    }
+
+    /// Lines of stderr so far, to wait for later lines only.
+    pub fn mark(&self) -> usize {
+        self.lines.lock().unwrap().len()
+    }
+
+    /// As [`Proc::wait_for`], among the lines after `mark`.
+    pub fn wait_for_after(&self, mark: usize, parts: &[&str], secs: f64) -> String {
+        let end = std::time::Instant::now() + std::time::Duration::from_secs_f64(secs);
+        loop {
+            if let Some(l) = self
+                .lines
+                .lock()
+                .unwrap()
+                .iter()
+                .skip(mark)
+                .find(|l| parts.iter().all(|p| l.contains(p)))
+            {
+                return l.clone();
+            }
+            assert!(
+                std::time::Instant::now() < end,
+                "no line with {parts:?} within {secs} s; got:\n{}",
+                self.log()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
+    pub fn log(&self) -> String {
+        self.lines.lock().unwrap().join("\n")
+    }
+
+    /// Waits for the process to end (up to `secs`) and returns its status.
+    pub fn wait(&mut self, secs: f64) -> std::process::ExitStatus {
+        let end = std::time::Instant::now() + std::time::Duration::from_secs_f64(secs);
+        loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                return s;
+            }
+            assert!(
+                std::time::Instant::now() < end,
+                "still running after {secs} s:\n{}",
+                self.log()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}

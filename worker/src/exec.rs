@@ -37,7 +37,19 @@ pub struct Work {
 
 pub struct Executor {
     pub job_id: u64,
-    tx: std::sync::mpsc::Sender<Work>,
+    tx: Option<std::sync::mpsc::Sender<Work>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+/// Dropping an executor ends its thread and waits for it, so that the
+/// job's memory and spill files are gone when the drop returns.
+impl Drop for Executor {
+    fn drop(&mut self) {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 impl Executor {
@@ -46,19 +58,23 @@ impl Executor {
     pub fn start(setup: JobSetup, rt: tokio::runtime::Handle) -> Executor {
         let (tx, rx) = std::sync::mpsc::channel::<Work>();
         let job_id = setup.job_id;
-        std::thread::Builder::new()
+        let thread = std::thread::Builder::new()
             .name(format!("job-{job_id}"))
             .spawn(move || match setup.opts.precision {
                 Precision::Double => job_thread::<f64>(setup, rt, rx),
                 Precision::Single => job_thread::<f32>(setup, rt, rx),
             })
             .expect("cannot start a thread");
-        Executor { job_id, tx }
+        Executor {
+            job_id,
+            tx: Some(tx),
+            thread: Some(thread),
+        }
     }
 
     /// Queues a task; false if the thread has ended.
     pub fn submit(&self, w: Work) -> bool {
-        self.tx.send(w).is_ok()
+        self.tx.as_ref().is_some_and(|tx| tx.send(w).is_ok())
     }
 }
 
@@ -154,9 +170,8 @@ fn read_inputs<R: Real>(
         return Ok(inputs);
     };
     let io = |e: sray_engine::Error| e.to_string();
-    let mut rays = RecordWriter::<RayRec>::create(&tracer.spill, "in-rays").map_err(io)?;
-    let mut results = RecordWriter::<ResultRec>::create(&tracer.spill, "in-results").map_err(io)?;
-    let (mut n_rays, mut n_results) = (0u64, 0u64);
+    let mut rays: Option<RecordWriter<RayRec>> = None;
+    let mut results: Option<RecordWriter<ResultRec>> = None;
     loop {
         let msg = rt
             .block_on(stream.message())
@@ -165,23 +180,23 @@ fn read_inputs<R: Real>(
         match RecordKind::try_from(chunk.kind) {
             Ok(RecordKind::Rays) => {
                 let v = unpack::<RayRec>(&chunk.data).map_err(|e| e.to_string())?;
-                n_rays += v.len() as u64;
-                rays.extend(&v).map_err(io)?;
+                if rays.is_none() {
+                    rays = Some(RecordWriter::create(&tracer.spill, "in-rays").map_err(io)?);
+                }
+                rays.as_mut().expect("made").extend(&v).map_err(io)?;
             }
             Ok(RecordKind::Results) => {
                 let v = unpack::<ResultRec>(&chunk.data).map_err(|e| e.to_string())?;
-                n_results += v.len() as u64;
-                results.extend(&v).map_err(io)?;
+                if results.is_none() {
+                    results = Some(RecordWriter::create(&tracer.spill, "in-results").map_err(io)?);
+                }
+                results.as_mut().expect("made").extend(&v).map_err(io)?;
             }
             _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
         }
     }
-    if n_rays > 0 {
-        inputs.rays = Some(rays.finish().map_err(io)?);
-    }
-    if n_results > 0 {
-        inputs.results = Some(results.finish().map_err(io)?);
-    }
+    inputs.rays = rays.map(|w| w.finish()).transpose().map_err(io)?;
+    inputs.results = results.map(|w| w.finish()).transpose().map_err(io)?;
     Ok(inputs)
 }
 

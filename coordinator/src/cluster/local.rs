@@ -133,12 +133,34 @@ pub async fn render(
             Err(anyhow::anyhow!("every local worker exited:\n{tail}"))
         }
     };
-    for c in children.iter_mut() {
-        let _ = c.kill().await;
-    }
+    stop_all(&mut children).await;
     let _ = stop_tx.send(());
     let _ = server.await;
     r
+}
+
+/// Asks the workers to stop (SIGTERM: they finish cleaning up their spill
+/// files), and kills those still running after a grace period.
+async fn stop_all(children: &mut [Child]) {
+    for c in children.iter() {
+        if let Some(pid) = c.id() {
+            // SAFETY: kill(2) takes two integers and touches no memory of
+            // ours. `pid` is the id of our own child, which we have not
+            // reaped (we still hold its handle), so it cannot have been
+            // reused for another process.
+            unsafe {
+                libc::kill(pid as libc::pid_t, libc::SIGTERM);
+            }
+        }
+    }
+    for c in children.iter_mut() {
+        if tokio::time::timeout(Duration::from_secs(5), c.wait())
+            .await
+            .is_err()
+        {
+            let _ = c.kill().await;
+        }
+    }
 }
 
 /// 32 random bytes from the kernel, as hex.

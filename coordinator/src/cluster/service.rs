@@ -76,11 +76,18 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::NextTaskRequest>,
     ) -> Result<Response<v1::NextTaskReply>, Status> {
-        let task = self
-            .shared
-            .next_task(req.into_inner().worker_id, POLL)
-            .await
-            .map_err(refused)?;
+        let worker = req.into_inner().worker_id;
+        let task = self.shared.next_task(worker, POLL).await.map_err(refused)?;
+        if let Some(t) = &task {
+            tracing::debug!(
+                worker,
+                task = t.task_id,
+                attempt = t.attempt,
+                stage = t.stage,
+                round = t.round,
+                "task assigned"
+            );
+        }
         Ok(Response::new(v1::NextTaskReply { task }))
     }
 

@@ -37,7 +37,10 @@ impl SpillDir {
             b
         };
         let dir = match parent {
-            Some(p) => b.tempdir_in(p).at(p)?,
+            Some(p) => {
+                std::fs::create_dir_all(p).at(p)?;
+                b.tempdir_in(p).at(p)?
+            }
             None => b.tempdir().at(std::env::temp_dir())?,
         };
         Ok(SpillDir {
@@ -106,11 +109,23 @@ impl<T: Pod> RecordWriter<T> {
             self.count * std::mem::size_of::<T>() as u64,
             AtomicOrdering::Relaxed,
         );
+        // The file now belongs to the `RecordFile`.
+        let path = std::mem::take(&mut self.path);
         Ok(RecordFile {
-            path: self.path,
+            path,
             count: self.count,
             _t: PhantomData,
         })
+    }
+}
+
+/// A writer dropped unfinished (an error, an abandoned task) removes its
+/// file.
+impl<T: Pod> Drop for RecordWriter<T> {
+    fn drop(&mut self) {
+        if !self.path.as_os_str().is_empty() {
+            let _ = std::fs::remove_file(&self.path);
+        }
     }
 }
 

@@ -1,0 +1,414 @@
+//! The cluster with real processes on loopback: a coordinator, workers and
+//! clients started as `sray coordinator`, `sray worker` and `sray render`.
+
+mod common;
+
+use common::{Proc, fails, json, ok, run};
+use std::path::Path;
+
+const COUNTS: [&str; 7] = [
+    "eye_rays",
+    "eye_hit_rays",
+    "reflect_rays",
+    "refract_rays",
+    "shadow_rays",
+    "intersection_tests",
+    "intersection_tests_by_kind",
+];
+
+/// A coordinator on a free port; returns it and its URL.
+fn coordinator(dir: &Path, extra: &[&str]) -> (Proc, String) {
+    let mut args = vec![
+        "coordinator",
+        "--listen",
+        "127.0.0.1:0",
+        "--data-dir",
+        "data",
+        "--heartbeat-ms",
+        "200",
+        "--worker-timeout",
+        "2",
+    ];
+    args.extend_from_slice(extra);
+    let p = Proc::start(dir, &args, &[("RUST_LOG", "info,sray_coordinator=debug")]);
+    let line = p.wait_for(&["listening on"], 30.0);
+    let url = line.rsplit(' ').next().unwrap().to_string();
+    (p, url)
+}
+
+fn worker(dir: &Path, url: &str, name: &str, token: &str) -> Proc {
+    Proc::start(
+        dir,
+        &[
+            "worker",
+            "--coordinator",
+            url,
+            "--token-file",
+            token,
+            "--cache-dir",
+            &format!("cache-{name}"),
+            "--threads",
+            "1",
+            "--memory",
+            "64MiB",
+            "--name",
+            name,
+        ],
+        &[],
+    )
+}
+
+/// The embedded breadth-first render of a scene: image bytes and stats.
+fn embedded(dir: &Path, scene: &str, size: &str) -> (Vec<u8>, serde_json::Value) {
+    ok(
+        dir,
+        &[
+            "render", scene, "-o", "emb.png", "--mode", "bf", "--width", size, "--height", size,
+            "--stats", "emb.json",
+        ],
+    );
+    let df = {
+        ok(
+            dir,
+            &[
+                "render", scene, "-o", "df.png", "--mode", "df", "--width", size, "--height", size,
+            ],
+        );
+        std::fs::read(dir.join("df.png")).unwrap()
+    };
+    let img = std::fs::read(dir.join("emb.png")).unwrap();
+    assert!(img == df, "{scene}: embedded bf and df differ");
+    let stats = json(&std::fs::read_to_string(dir.join("emb.json")).unwrap());
+    (img, stats)
+}
+
+fn same(what: &str, img: &[u8], stats: &serde_json::Value, want: &(Vec<u8>, serde_json::Value)) {
+    assert!(
+        img == want.0.as_slice(),
+        "{what}: image differs from the embedded render"
+    );
+    for k in COUNTS {
+        assert_eq!(stats[k], want.1[k], "{what}: {k}");
+    }
+}
+
+fn render_args<'a>(
+    scene: &'a str,
+    url: &'a str,
+    token: &'a str,
+    out: &'a str,
+    size: &'a str,
+) -> Vec<&'a str> {
+    vec![
+        "render",
+        scene,
+        "-o",
+        out,
+        "--coordinator",
+        url,
+        "--token-file",
+        token,
+        "--width",
+        size,
+        "--height",
+        size,
+        "--shard-rays",
+        "512",
+        "--stats",
+        "cluster.json",
+    ]
+}
+
+fn cluster_stats(dir: &Path) -> serde_json::Value {
+    json(&std::fs::read_to_string(dir.join("cluster.json")).unwrap())
+}
+
+/// The worker id the coordinator gave the worker called `name`.
+fn worker_id(coord: &Proc, name: &str) -> String {
+    let line = coord.wait_for(&["worker registered", &format!("name={name}")], 30.0);
+    line.split_whitespace()
+        .find_map(|w| w.strip_prefix("worker="))
+        .unwrap()
+        .to_string()
+}
+
+#[test]
+fn a_coordinator_and_three_workers() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "cluster-secret\n").unwrap();
+    std::fs::write(d.join("wrong"), "not-the-secret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token"]);
+    let mut workers: Vec<Proc> = ["w0", "w1", "w2"]
+        .iter()
+        .map(|n| worker(d, &url, n, "token"))
+        .collect();
+    let ids: Vec<String> = ["w0", "w1", "w2"]
+        .iter()
+        .map(|n| worker_id(&coord, n))
+        .collect();
+
+    // 1. The same image and counts as the embedded render.
+    let want = embedded(d, "spd:balls:3", "96");
+    ok(
+        d,
+        &render_args("spd:balls:3", &url, "token", "c1.png", "96"),
+    );
+    let s = cluster_stats(d);
+    same(
+        "three workers",
+        &std::fs::read(d.join("c1.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert_eq!(s["mode"], "cluster");
+    assert_eq!(s["workers"], 3);
+    assert!(s["tasks"].as_u64().unwrap() > 6, "{s}");
+    assert!(s["bytes_per_ray"].as_f64().unwrap() > 0.0);
+
+    // 2. A client with the wrong token, or none, is refused; no output.
+    let err = fails(
+        d,
+        &render_args("spd:balls:3", &url, "wrong", "bad.png", "32"),
+    );
+    assert!(err.contains("token"), "{err}");
+    let mut no_token = render_args("spd:balls:3", &url, "token", "bad.png", "32");
+    no_token.drain(6..8);
+    let err = fails(d, &no_token);
+    assert!(err.contains("token"), "{err}");
+    assert!(!d.join("bad.png").exists());
+
+    // 3. So is a worker with the wrong token: it stops with a message.
+    let mut bad = worker(d, &url, "intruder", "wrong");
+    assert!(!bad.wait(30.0).success());
+    assert!(bad.log().contains("refused"), "{}", bad.log());
+    drop(bad);
+
+    // 4. A worker killed while it holds a task: the task goes to the
+    //    others and the image is still the embedded one.
+    let want2 = embedded(d, "spd:gears:2", "128");
+    let mark = coord.mark();
+    let mut client = Proc::start(
+        d,
+        &render_args("spd:gears:2", &url, "token", "c2.png", "128"),
+        &[],
+    );
+    // Its first task of the job: the worker builds its grids before it
+    // can answer, so it is killed with the task in hand.
+    coord.wait_for_after(
+        mark,
+        &["task assigned", &format!("worker={}", ids[1])],
+        60.0,
+    );
+    workers[1].child.kill().unwrap();
+    let status = client.wait(300.0);
+    assert!(status.success(), "{}", client.log());
+    let s = cluster_stats(d);
+    same(
+        "a worker killed",
+        &std::fs::read(d.join("c2.png")).unwrap(),
+        &s,
+        &want2,
+    );
+    assert!(s["tasks_requeued"].as_u64().unwrap() >= 1, "{s}");
+
+    // 5. A corrupted chunk in a worker's cached scene is found and fetched
+    //    again (only w0 left, so w0 runs the job).
+    workers[2].child.kill().unwrap();
+    let cache = d.join("cache-w0");
+    let cached = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| {
+            p.extension().is_some_and(|e| e == "sdb")
+                && std::fs::read(p).unwrap().len() < 1 << 20
+                && ok(d, &["info", p.to_str().unwrap(), "--json"]).contains("\"objects\": 821")
+        })
+        .expect("w0 cached balls:3");
+    let mut bytes = std::fs::read(&cached).unwrap();
+    let good = bytes.clone();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x5a;
+    std::fs::write(&cached, &bytes).unwrap();
+    ok(
+        d,
+        &render_args("spd:balls:3", &url, "token", "c3.png", "96"),
+    );
+    let s = cluster_stats(d);
+    same(
+        "after repair",
+        &std::fs::read(d.join("c3.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert_eq!(s["scene_chunks_served"], 1, "{s}");
+    assert!(
+        std::fs::read(&cached).unwrap() == good,
+        "the cached scene was not repaired"
+    );
+    assert!(
+        workers[0].log().contains("fetching those chunks again"),
+        "{}",
+        workers[0].log()
+    );
+    drop(coord);
+}
+
+#[test]
+fn local_workers_render_the_embedded_image_and_stop() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let want = embedded(d, "spd:teapot:4", "64");
+    let tmp = d.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let o = run(
+        d,
+        &[
+            "render",
+            "spd:teapot:4",
+            "-o",
+            "local.png",
+            "--local-workers",
+            "2",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--shard-rays",
+            "300",
+            "--stats",
+            "cluster.json",
+            "--tmp-dir",
+            tmp.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = cluster_stats(d);
+    same(
+        "local workers",
+        &std::fs::read(d.join("local.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert_eq!(s["workers"], 2);
+    // Nothing is left running or lying around.
+    let tmp_s = tmp.to_str().unwrap().to_string();
+    let alive: Vec<String> = std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| std::fs::read(e.unwrap().path().join("cmdline")).ok())
+        .map(|c| String::from_utf8_lossy(&c).replace('\0', " "))
+        .filter(|c| c.contains(&tmp_s) && c.contains("worker"))
+        .collect();
+    assert!(alive.is_empty(), "workers still running: {alive:?}");
+    assert_eq!(
+        std::fs::read_dir(&tmp).unwrap().count(),
+        0,
+        "temporary files left"
+    );
+}
+
+#[test]
+fn a_job_without_workers_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (_coord, url) = coordinator(d, &["--worker-wait", "1"]);
+    let err = fails(
+        d,
+        &[
+            "render",
+            "spd:balls:1",
+            "-o",
+            "none.png",
+            "--coordinator",
+            &url,
+            "--width",
+            "16",
+            "--height",
+            "16",
+        ],
+    );
+    assert!(err.contains("no worker"), "{err}");
+    assert!(!d.join("none.png").exists());
+    // An unreachable coordinator is a clear error too.
+    let err = fails(
+        d,
+        &[
+            "render",
+            "spd:balls:1",
+            "-o",
+            "none.png",
+            "--coordinator",
+            "http://127.0.0.1:9",
+        ],
+    );
+    assert!(err.contains("cannot reach the coordinator"), "{err}");
+}
+
+/// TLS: a CA, a certificate for 127.0.0.1 signed by it; the coordinator
+/// serves TLS, the worker and the client trust the CA.
+#[test]
+fn tls_end_to_end() {
+    use rcgen::{BasicConstraints, CertificateParams, IsCa, Issuer, KeyPair};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut ca_params = CertificateParams::new(Vec::<String>::new()).unwrap();
+    ca_params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+    let ca_key = KeyPair::generate().unwrap();
+    let ca = ca_params.self_signed(&ca_key).unwrap();
+    let leaf_key = KeyPair::generate().unwrap();
+    let leaf = CertificateParams::new(vec!["127.0.0.1".to_string(), "localhost".to_string()])
+        .unwrap()
+        .signed_by(&leaf_key, &Issuer::new(ca_params, ca_key))
+        .unwrap();
+    std::fs::write(d.join("ca.pem"), ca.pem()).unwrap();
+    std::fs::write(d.join("cert.pem"), leaf.pem()).unwrap();
+    std::fs::write(d.join("key.pem"), leaf_key.serialize_pem()).unwrap();
+    std::fs::write(d.join("token"), "tls-secret").unwrap();
+    let (_coord, url) = coordinator(
+        d,
+        &[
+            "--tls-cert",
+            "cert.pem",
+            "--tls-key",
+            "key.pem",
+            "--token-file",
+            "token",
+        ],
+    );
+    assert!(url.starts_with("https://"), "{url}");
+    let _w = Proc::start(
+        d,
+        &[
+            "worker",
+            "--coordinator",
+            &url,
+            "--tls-ca",
+            "ca.pem",
+            "--token-file",
+            "token",
+            "--cache-dir",
+            "cache",
+            "--threads",
+            "1",
+            "--memory",
+            "64MiB",
+        ],
+        &[],
+    );
+    let want = embedded(d, "spd:tetra:2", "48");
+    let mut args = render_args("spd:tetra:2", &url, "token", "tls.png", "48");
+    args.extend_from_slice(&["--tls-ca", "ca.pem"]);
+    ok(d, &args);
+    same(
+        "tls",
+        &std::fs::read(d.join("tls.png")).unwrap(),
+        &cluster_stats(d),
+        &want,
+    );
+    // Without the CA the client cannot connect.
+    let err = fails(
+        d,
+        &render_args("spd:tetra:2", &url, "token", "no.png", "48"),
+    );
+    assert!(err.contains("--tls-ca"), "{err}");
+}
