@@ -218,6 +218,7 @@ fn run_task<R: Real>(
         ));
     }
     let inputs = read_inputs(tracer, rt, input)?;
+    let t_in = t0.elapsed().as_secs_f64();
     let io = |e: sray_engine::Error| e.to_string();
     // The shard's rays: made here for the eye rays, else as received.
     let ray_file = if task.eye_rays {
@@ -332,5 +333,13 @@ fn run_task<R: Real>(
         _ => return Err(format!("unknown stage {}", task.stage)),
     }
     summary.seconds = t0.elapsed().as_secs_f64();
+    tracing::debug!(
+        task = task.task_id,
+        stage = task.stage,
+        rays = n,
+        input_seconds = t_in,
+        seconds = summary.seconds,
+        "task run"
+    );
     send(out, Part::Summary(summary))
 }

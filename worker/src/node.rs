@@ -174,13 +174,16 @@ impl Node {
     }
 
     async fn try_task(&mut self, tref: &v1::TaskRef, task: v1::Task) -> anyhow::Result<()> {
-        let hash = task
-            .scene
-            .as_ref()
-            .map(|s| s.hash.clone())
-            .unwrap_or_default();
-        let path = self.cache.ensure(&mut self.client, &hash).await?;
         if self.exec.as_ref().map(|e| e.job_id) != Some(task.job_id) {
+            // A new job: check (and repair) the cached scene once, then
+            // build the job's grids on its own executor.
+            self.exec = None;
+            let hash = task
+                .scene
+                .as_ref()
+                .map(|s| s.hash.clone())
+                .unwrap_or_default();
+            let path = self.cache.ensure(&mut self.client, &hash).await?;
             let params = task
                 .params
                 .as_ref()

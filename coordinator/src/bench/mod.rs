@@ -9,6 +9,7 @@ mod exec;
 mod fig3;
 mod povray;
 mod report;
+mod scaling;
 mod table1;
 
 use anyhow::Context;
@@ -27,10 +28,17 @@ pub enum Experiment {
     Table1,
     /// The paper's Fig. 3: remaining rays per pass, fixed and adaptive store number
     Fig3,
+    /// The cluster: embedded against 1 and 2 local workers, traffic per ray
+    Scaling,
 }
 
 impl Experiment {
-    const ALL: [Experiment; 3] = [Experiment::Povray, Experiment::Table1, Experiment::Fig3];
+    const ALL: [Experiment; 4] = [
+        Experiment::Povray,
+        Experiment::Table1,
+        Experiment::Fig3,
+        Experiment::Scaling,
+    ];
 }
 
 #[derive(Args, Debug)]
@@ -148,6 +156,7 @@ fn plan(e: Experiment, ctx: &Ctx) -> Plan {
         Experiment::Povray => povray::plan(ctx),
         Experiment::Table1 => table1::plan(ctx),
         Experiment::Fig3 => fig3::plan(ctx),
+        Experiment::Scaling => scaling::plan(ctx),
     }
 }
 
@@ -156,6 +165,7 @@ fn run_one(e: Experiment, ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         Experiment::Povray => povray::run(ctx, r),
         Experiment::Table1 => table1::run(ctx, r),
         Experiment::Fig3 => fig3::run(ctx, r),
+        Experiment::Scaling => scaling::run(ctx, r),
     }
 }
 

@@ -21,6 +21,25 @@ pub struct Security {
     pub tls: Option<(PathBuf, PathBuf)>,
 }
 
+/// HTTP/2 flow-control window, bytes.
+pub const WINDOW: u32 = 8 << 20;
+
+/// Accepted connections with Nagle's algorithm off: small messages
+/// (heartbeats, task requests, window updates) must not wait 40 ms for a
+/// delayed acknowledgement.
+fn incoming(
+    listener: TcpListener,
+) -> impl tokio_stream::Stream<Item = std::io::Result<tokio::net::TcpStream>> {
+    tokio_stream::StreamExt::map(
+        tokio_stream::wrappers::TcpListenerStream::new(listener),
+        |s| {
+            let s = s?;
+            s.set_nodelay(true)?;
+            Ok(s)
+        },
+    )
+}
+
 /// Serves until `shutdown` completes.
 pub async fn serve(
     shared: Arc<Shared>,
@@ -28,9 +47,13 @@ pub async fn serve(
     sec: Security,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
+    // Record streams are megabytes: windows large enough that a stream is
+    // not paced by window updates.
     let mut builder = Server::builder()
         .http2_keepalive_interval(Some(std::time::Duration::from_secs(10)))
-        .http2_keepalive_timeout(Some(std::time::Duration::from_secs(20)));
+        .http2_keepalive_timeout(Some(std::time::Duration::from_secs(20)))
+        .initial_stream_window_size(Some(WINDOW))
+        .initial_connection_window_size(Some(2 * WINDOW));
     if let Some((cert, key)) = &sec.tls {
         let c = std::fs::read(cert)
             .with_context(|| format!("cannot read the certificate {}", cert.display()))?;
@@ -49,10 +72,7 @@ pub async fn serve(
     let mon = tokio::spawn(monitor(shared));
     let r = builder
         .add_service(svc)
-        .serve_with_incoming_shutdown(
-            tokio_stream::wrappers::TcpListenerStream::new(listener),
-            shutdown,
-        )
+        .serve_with_incoming_shutdown(incoming(listener), shutdown)
         .await;
     mon.abort();
     r.context("the coordinator's server failed")

@@ -148,6 +148,7 @@ impl Coordinator for Service {
         let Ok((task, input)) = self.shared.task_input(&tref) else {
             return Ok(Response::new(v1::CompleteTaskReply { accepted: false }));
         };
+        let t0 = std::time::Instant::now();
         let mut rx = Receiver::new(&self.shared, &task, &input);
         loop {
             let msg = match stream.message().await {
@@ -182,6 +183,12 @@ impl Coordinator for Service {
                         }
                     };
                     let accepted = self.shared.complete(&tref, out);
+                    tracing::debug!(
+                        task = tref.task_id,
+                        accepted,
+                        seconds = t0.elapsed().as_secs_f64(),
+                        "output received"
+                    );
                     return Ok(Response::new(v1::CompleteTaskReply { accepted }));
                 }
                 _ => return Err(Status::invalid_argument("a second header")),
