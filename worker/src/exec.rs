@@ -10,7 +10,7 @@ use sray_engine::bf::{
 };
 use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
-use sray_engine::render::{Camera, Precision, RayCounts, RenderOptions};
+use sray_engine::render::{Camera, EyeRays, Precision, RayCounts, RenderOptions};
 use sray_engine::sdb::Database;
 use sray_proto::v1::{self, RecordKind, task_output::Part};
 use sray_proto::wire::{pack, records_per_chunk, unpack};
@@ -87,8 +87,11 @@ fn job_thread<R: Real>(
         Ok(db) => db,
         Err(e) => return fail_all(rx, &format!("cannot open the scene: {e}")),
     };
-    let camera = match Camera::new(&db.scene().view, setup.opts.width, setup.opts.height) {
-        Ok(c) => c,
+    let eye = match Camera::new(&db.scene().view, setup.opts.width, setup.opts.height) {
+        Ok(camera) => EyeRays {
+            camera,
+            sampling: setup.opts.sampling(),
+        },
         Err(e) => return fail_all(rx, &e.to_string()),
     };
     let t0 = Instant::now();
@@ -101,7 +104,7 @@ fn job_thread<R: Real>(
         seconds = t0.elapsed().as_secs_f64(),
         "grids built"
     );
-    let corners = setup.opts.corners();
+    let eye_rays = eye.count();
     for w in rx {
         let Work {
             task,
@@ -110,7 +113,7 @@ fn job_thread<R: Real>(
             done,
         } = w;
         let run = std::panic::AssertUnwindSafe(|| {
-            run_task(&mut tracer, &camera, corners, &rt, &task, input, &out)
+            run_task(&mut tracer, &eye, eye_rays, &rt, &task, input, &out)
         });
         let r = std::panic::catch_unwind(run).unwrap_or_else(|p| {
             Err(format!(
@@ -202,8 +205,8 @@ fn read_inputs<R: Real>(
 
 fn run_task<R: Real>(
     tracer: &mut Tracer<R>,
-    camera: &Camera,
-    corners: u64,
+    eye: &EyeRays,
+    eye_rays: u64,
     rt: &tokio::runtime::Handle,
     task: &v1::Task,
     input: Option<tonic::Streaming<v1::RecordChunk>>,
@@ -211,9 +214,9 @@ fn run_task<R: Real>(
 ) -> Result<(), String> {
     let t0 = Instant::now();
     let (first, n) = (task.first_ray, task.ray_count);
-    if task.eye_rays && first.checked_add(n).is_none_or(|end| end > corners) {
+    if task.eye_rays && first.checked_add(n).is_none_or(|end| end > eye_rays) {
         return Err(format!(
-            "eye rays {first}..{} are beyond the image's {corners}",
+            "eye rays {first}..{} are beyond the image's {eye_rays}",
             first.saturating_add(n)
         ));
     }
@@ -233,7 +236,7 @@ fn run_task<R: Real>(
     let rays =
         || -> Result<Box<dyn Iterator<Item = Result<RayRec, sray_engine::Error>> + '_>, String> {
             Ok(match ray_file {
-                None => Box::new((first..first + n).map(|i| Ok(eye_ray(camera, i)))),
+                None => Box::new((first..first + n).map(|i| Ok(eye_ray(eye, i)))),
                 Some(f) => {
                     let mut rd = f.reader().map_err(io)?;
                     Box::new(std::iter::from_fn(move || rd.next().transpose()))

@@ -28,6 +28,7 @@ pub fn to_proto(o: &RenderOptions, store: StoreNumber) -> v1::RenderParams {
             StoreNumber::Fixed(n) => n.max(1),
             StoreNumber::Adaptive => 0,
         },
+        samples: o.samples,
     }
 }
 
@@ -58,6 +59,7 @@ pub fn from_proto(
             Err(_) => return Err(format!("unknown precision {}", p.precision)),
         },
         profile: false,
+        samples: p.samples,
     };
     o.validate().map_err(|e| e.to_string())?;
     let store = match p.store_number {
@@ -82,6 +84,7 @@ mod tests {
             multiple_grids: false,
             precision: Precision::Single,
             threads: 7,
+            samples: 9,
             ..Default::default()
         };
         let (back, store) = from_proto(&to_proto(&o, StoreNumber::Fixed(3)), 7).unwrap();

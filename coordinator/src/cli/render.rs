@@ -50,6 +50,10 @@ pub struct RenderArgs {
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
+    /// Eye rays per pixel: 1 traces the pixel corners (the SPD's sampling);
+    /// 4, 9, 16, ... take that many jittered samples per pixel
+    #[arg(long, default_value_t = 1)]
+    pub samples: u32,
     /// Time the depth-first tracer's intersection queries, to split its
     /// trace time into intersection and shading (costs a little time)
     #[arg(long)]
@@ -128,6 +132,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             multiple_grids: a.grids == Grids::Auto,
             precision: a.precision,
             profile: a.profile,
+            samples: a.samples,
         },
         mode: a.mode,
         memory: a.memory,

@@ -149,18 +149,18 @@ async fn drive(
     let t0 = Instant::now();
     let traffic0 = shared.traffic.snapshot();
     let opts = &job.opts;
-    let corners = opts.corners();
-    let mut frame = Frame::new(opts.width, opts.height);
+    let corners = opts.frame_slots();
+    let mut frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
     let mut tot = Totals {
         counts: RayCounts {
-            eye_rays: corners,
+            eye_rays: opts.eye_rays(),
             ..Default::default()
         },
         ..Default::default()
     };
     let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
     let mut rays: Option<Arc<RecordFile<RayRec>>> = None;
-    let mut n = corners;
+    let mut n = opts.eye_rays();
     let mut round = 1u32;
     while n > 0 {
         tot.rays_per_round.push(n);

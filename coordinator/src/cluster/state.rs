@@ -80,6 +80,7 @@ pub struct TaskInput {
     /// The shard's results (shading).
     pub results: Option<Arc<RecordFile<ResultRec>>>,
     pub objects: u64,
+    /// Frame slots (pixel corners, or pixels): the bound of contributions.
     pub corners: u64,
 }
 

@@ -37,7 +37,9 @@ use crate::error::Error;
 use crate::grid::{GridSpec, choose_resolution, plan_groups};
 use crate::math::Real;
 use crate::progress::Progress;
-use crate::render::{Camera, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats};
+use crate::render::{
+    Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
+};
 use crate::sdb::Database;
 use intersect::{REGISTRATION_BYTES, slot_bytes};
 use serde::Serialize;
@@ -264,10 +266,10 @@ impl RoundRays {
 
     fn iter<'a>(
         &'a self,
-        camera: &'a Camera,
+        eye: &'a EyeRays,
     ) -> Result<Box<dyn Iterator<Item = Result<RayRec, Error>> + 'a>, Error> {
         Ok(match self {
-            RoundRays::Eye(n) => Box::new((0..*n).map(|i| Ok(eye_ray(camera, i)))),
+            RoundRays::Eye(n) => Box::new((0..*n).map(|i| Ok(eye_ray(eye, i)))),
             RoundRays::Held(HeldRays::Memory(v)) => Box::new(v.iter().map(|r| Ok(*r))),
             RoundRays::Held(HeldRays::File(f)) => {
                 let mut rd = f.reader()?;
@@ -291,7 +293,7 @@ pub fn plan_grids(
     memory: u64,
 ) -> (Vec<GridSpec>, crate::grid::Partition) {
     let plan = plan_groups(db.sizes(), opts.multiple_grids);
-    let frame = opts.corners() * 24;
+    let frame = opts.frame_slots() * 24;
     let cap = (memory.saturating_sub(frame) / 8).clamp(1, MAX_CELLS);
     let mut specs = Vec::new();
     for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
@@ -328,16 +330,20 @@ fn render_in<R: Real>(
     bf: &BfOptions,
     progress: &dyn Progress,
 ) -> Result<BfOutput, Error> {
-    let camera = Camera::new(&db.scene().view, opts.width, opts.height)?;
-    let mut tr = Tracer::<R>::new(db, opts, bf, opts.corners(), progress)?;
-    let mut frame = Frame::new(opts.width, opts.height);
+    opts.validate()?;
+    let eye = EyeRays {
+        camera: Camera::new(&db.scene().view, opts.width, opts.height)?,
+        sampling: opts.sampling(),
+    };
+    let mut tr = Tracer::<R>::new(db, opts, bf, opts.frame_slots(), progress)?;
+    let mut frame = Frame::with_sampling(opts.width, opts.height, eye.sampling);
     let mut counts = RayCounts {
-        eye_rays: opts.corners(),
+        eye_rays: eye.count(),
         ..Default::default()
     };
-    // Round 1: the eye rays, generated in corner order; each later round
-    // holds the rays the previous one spawned, in key order.
-    let mut rays = RoundRays::Eye(opts.corners());
+    // Round 1: the eye rays, generated in order; each later round holds
+    // the rays the previous one spawned, in key order.
+    let mut rays = RoundRays::Eye(eye.count());
     let mut round = 1;
     loop {
         let n = rays.len();
@@ -348,12 +354,12 @@ fn render_in<R: Real>(
         progress.set_total(n);
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
         let resident = matches!(rays, RoundRays::Held(HeldRays::Memory(_)));
-        let (mut results, _) = tr.intersect(0, &mut rays.iter(&camera)?, n, resident, progress)?;
+        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, progress)?;
 
         progress.set_message(&format!("round {round}: shading"));
         let (next, count, _) = tr.shade(
             0,
-            &mut rays.iter(&camera)?,
+            &mut rays.iter(&eye)?,
             &mut results,
             &mut |corner, c| frame.add(corner, c),
             &mut counts,

@@ -18,20 +18,21 @@ use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS
 use crate::error::Error;
 use crate::math::Real;
 use crate::progress::Progress;
-use crate::render::{Camera, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
+use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
 use crate::sdb::Database;
 use std::time::Instant;
 
-/// Eye ray `i`: through pixel corner `i`, in corner order.
-pub fn eye_ray(camera: &Camera, i: u64) -> RayRec {
-    let (col, row) = camera.corner_of(i as u32);
+/// Eye ray `i` (see [`EyeRays`]): its colour goes to frame slot
+/// `corner`, its key is its id.
+pub fn eye_ray(eye: &EyeRays, i: u64) -> RayRec {
+    let (d, slot) = eye.ray(i);
     RayRec {
-        o: camera.eye.to_array(),
-        d: camera.direction(col, row).to_array(),
+        o: eye.camera.eye.to_array(),
+        d: d.to_array(),
         t_max: f64::INFINITY,
         key: i,
         payload: [1.0, 0.0, 0.0],
-        corner: i as u32,
+        corner: slot,
         depth: 1,
         kind: RayKind::Eye as u8,
         _pad: [0; 6],

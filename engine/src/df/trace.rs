@@ -7,7 +7,7 @@ use crate::intersect::{RayQ, intersect_prepared, surface_at};
 use crate::math::{Real, Vec3};
 use crate::progress::Progress;
 use crate::render::{
-    Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
+    EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
 };
 use rayon::prelude::*;
 
@@ -81,18 +81,24 @@ fn render_in<R: Real>(
     progress: &dyn Progress,
 ) -> Result<(Frame, RayCounts, KindCounts, f64), Error> {
     let cam = &scene.camera;
-    let mut frame = Frame::new(cam.width, cam.height);
-    let row_len = cam.width as usize + 1;
+    let eye = EyeRays {
+        camera: *cam,
+        sampling: opts.sampling(),
+    };
+    let spp = eye.sampling.per_slot() as u64;
+    let mut frame = Frame::with_sampling(cam.width, cam.height, eye.sampling);
+    let row_len = frame.row_len();
+    let rows = frame.slots.len() / row_len;
     let cache_slots = scene.shade.lights.len() * scene.shade.max_depth as usize;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(thread_count(opts))
         .build()
         .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-    progress.set_total(cam.height as u64 + 1);
+    progress.set_total(rows as u64);
     progress.set_message("tracing");
     let per_row: Vec<(RayCounts, KindCounts, u64)> = pool.install(|| {
         frame
-            .corners
+            .slots
             .par_chunks_mut(row_len)
             .enumerate()
             .map_init(
@@ -103,16 +109,19 @@ fn render_in<R: Real>(
                 },
                 |sc, (row, out)| {
                     sc.shadow_cache.fill(NO_OBJECT);
-                    for col in 0..row_len {
-                        let d = cam.direction(col as u32, row as u32);
-                        sc.rays.eye_rays += 1;
-                        let mut add = |c: [f32; 3]| {
-                            let f = to_fixed(c);
-                            for k in 0..3 {
-                                out[col][k] = out[col][k].saturating_add(f[k]);
-                            }
-                        };
-                        trace::<R>(scene, sc, cam.eye, d, 0.0, 1, 1.0, &mut add);
+                    for (col, acc) in out.iter_mut().enumerate() {
+                        let first = (row * row_len + col) as u64 * spp;
+                        for i in first..first + spp {
+                            let (d, _) = eye.ray(i);
+                            sc.rays.eye_rays += 1;
+                            let mut add = |c: [f32; 3]| {
+                                let f = to_fixed(c);
+                                for k in 0..3 {
+                                    acc[k] = acc[k].saturating_add(f[k]);
+                                }
+                            };
+                            trace::<R>(scene, sc, cam.eye, d, 0.0, 1, 1.0, &mut add);
+                        }
                     }
                     progress.inc(1);
                     (

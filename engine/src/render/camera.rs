@@ -51,18 +51,18 @@ impl Camera {
     /// from the top.
     #[inline]
     pub fn direction(&self, col: u32, row: u32) -> Vec3 {
-        let x = self.half_w * (2.0 * col as f64 / self.width as f64 - 1.0);
-        let y = self.half_h * (1.0 - 2.0 * row as f64 / self.height as f64);
+        self.direction_at(col as f64, row as f64)
+    }
+
+    /// Unit direction of the eye ray through image point (`x`, `y`), in
+    /// pixels from the top left corner (`0..=width`, `0..=height`).
+    #[inline]
+    pub fn direction_at(&self, x: f64, y: f64) -> Vec3 {
+        let x = self.half_w * (2.0 * x / self.width as f64 - 1.0);
+        let y = self.half_h * (1.0 - 2.0 * y / self.height as f64);
         (self.fwd + self.right * x + self.up * y)
             .try_normalize()
             .unwrap_or(self.fwd)
-    }
-
-    /// Corner (col, row) of a corner index.
-    #[inline]
-    pub fn corner_of(&self, index: u32) -> (u32, u32) {
-        let w = self.width + 1;
-        (index % w, index / w)
     }
 }
 

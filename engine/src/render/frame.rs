@@ -1,3 +1,4 @@
+use super::sampling::Sampling;
 use crate::error::Error;
 use crate::fsutil::{persist, temp_beside};
 use std::io::BufWriter;
@@ -19,51 +20,98 @@ pub fn to_fixed(c: [f32; 3]) -> [i64; 3] {
     })
 }
 
-/// Accumulated colour at each pixel corner.
+/// Accumulated colour per frame slot: each pixel corner (corner sampling)
+/// or each pixel (jittered sampling); see [`Sampling`].
 #[derive(Clone, Debug)]
 pub struct Frame {
     pub width: u32,
     pub height: u32,
-    /// Row-major, (width + 1) x (height + 1).
-    pub corners: Vec<[i64; 3]>,
+    pub sampling: Sampling,
+    /// Row-major: (width + 1) x (height + 1) corners, or width x height
+    /// pixels.
+    pub slots: Vec<[i64; 3]>,
 }
 
 impl Frame {
+    /// A frame for corner sampling (the contract's).
     pub fn new(width: u32, height: u32) -> Frame {
+        Frame::with_sampling(width, height, Sampling::Corners)
+    }
+
+    pub fn with_sampling(width: u32, height: u32, sampling: Sampling) -> Frame {
         Frame {
             width,
             height,
-            corners: vec![[0; 3]; (width as usize + 1) * (height as usize + 1)],
+            sampling,
+            slots: vec![[0; 3]; sampling.slots(width, height) as usize],
         }
     }
 
+    /// Slots per row.
+    pub fn row_len(&self) -> usize {
+        self.sampling.slot_grid(self.width, self.height).0 as usize
+    }
+
     #[inline]
-    pub fn add(&mut self, corner: u32, c: [i64; 3]) {
-        let s = &mut self.corners[corner as usize];
+    pub fn add(&mut self, slot: u32, c: [i64; 3]) {
+        let s = &mut self.slots[slot as usize];
         for k in 0..3 {
             s[k] = s[k].saturating_add(c[k]);
         }
     }
 
-    /// 8-bit RGB: each pixel the average of its four corners, clamped to
-    /// [0, 1], scaled to 255 and rounded; no gamma.
+    /// 8-bit RGB: each pixel the average of its four corners (or of its
+    /// samples), clamped to [0, 1], scaled to 255 and rounded; no gamma.
     pub fn to_rgb8(&self) -> Vec<u8> {
         let (w, h) = (self.width as usize, self.height as usize);
         let mut out = Vec::with_capacity(w * h * 3);
+        // Each slot is clamped to a sane range first, so that a sum of
+        // four fits in an i64.
+        let v = |j: usize, k: usize| self.slots[j][k].clamp(-(1 << 60), 1 << 60);
+        let spp = self.sampling.per_slot() as f64;
         for y in 0..h {
             for x in 0..w {
-                let i = y * (w + 1) + x;
-                let q = [i, i + 1, i + w + 1, i + w + 2];
                 for k in 0..3 {
-                    // Each corner is clamped to a sane range first, so the
-                    // sum of four fits in an i64.
-                    let sum: i64 = q
-                        .iter()
-                        .map(|&j| self.corners[j][k].clamp(-(1 << 60), 1 << 60))
-                        .sum();
-                    let v = (sum as f64 * (1.0 / (4.0 * FIXED_ONE))).clamp(0.0, 1.0);
-                    out.push((v * 255.0 + 0.5) as u8);
+                    let mean = match self.sampling {
+                        Sampling::Corners => {
+                            let i = y * (w + 1) + x;
+                            let sum: i64 = [i, i + 1, i + w + 1, i + w + 2]
+                                .iter()
+                                .map(|&j| v(j, k))
+                                .sum();
+                            sum as f64 * (1.0 / 4.0)
+                        }
+                        Sampling::Jittered { .. } => v(y * w + x, k) as f64 / spp,
+                    };
+                    let c = (mean * (1.0 / FIXED_ONE)).clamp(0.0, 1.0);
+                    out.push((c * 255.0 + 0.5) as u8);
                 }
+            }
+        }
+        out
+    }
+
+    /// The image in linear floating point (mean per pixel, unclamped),
+    /// for error measurements.
+    pub fn to_rgb_f64(&self) -> Vec<[f64; 3]> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut out = Vec::with_capacity(w * h);
+        let spp = self.sampling.per_slot() as f64;
+        for y in 0..h {
+            for x in 0..w {
+                out.push(std::array::from_fn(|k| match self.sampling {
+                    Sampling::Corners => {
+                        let i = y * (w + 1) + x;
+                        [i, i + 1, i + w + 1, i + w + 2]
+                            .iter()
+                            .map(|&j| self.slots[j][k] as f64)
+                            .sum::<f64>()
+                            / (4.0 * FIXED_ONE)
+                    }
+                    Sampling::Jittered { .. } => {
+                        self.slots[y * w + x][k] as f64 / (spp * FIXED_ONE)
+                    }
+                }));
             }
         }
         out
@@ -137,6 +185,6 @@ mod tests {
         for c in cs.iter().rev() {
             b.add(0, to_fixed(*c));
         }
-        assert_eq!(a.corners, b.corners);
+        assert_eq!(a.slots, b.slots);
     }
 }

@@ -6,12 +6,14 @@
 mod camera;
 mod frame;
 mod options;
+mod sampling;
 mod shade;
 mod stats;
 
 pub use camera::Camera;
 pub use frame::{FIXED_ONE, Frame, to_fixed};
 pub use options::{GridRes, Mode, Precision, RenderOptions};
+pub use sampling::{EyeRays, MAX_SAMPLES, Sampling};
 pub use shade::{ShadeScene, Spawn, shade};
 pub use stats::{KindCounts, RayCounts, RenderStats};
 

@@ -1,3 +1,4 @@
+use super::sampling::Sampling;
 use crate::error::Error;
 use serde::Serialize;
 
@@ -94,6 +95,9 @@ pub struct RenderOptions {
     /// Time the depth-first tracer's intersection queries, to split its
     /// trace time into intersection and shading (costs a little time).
     pub profile: bool,
+    /// Eye rays per pixel: 1 traces the pixel corners (the contract's
+    /// sampling); a square from 4 up takes jittered samples.
+    pub samples: u32,
 }
 
 impl Default for RenderOptions {
@@ -108,6 +112,7 @@ impl Default for RenderOptions {
             multiple_grids: true,
             precision: Precision::Double,
             profile: false,
+            samples: 1,
         }
     }
 }
@@ -135,6 +140,7 @@ impl RenderOptions {
                 self.grid_density
             )));
         }
+        Sampling::new(self.samples)?;
         if self.max_depth == 0 || self.max_depth > MAX_DEPTH {
             return Err(Error::Invalid(format!(
                 "depth {} is out of range 1..={MAX_DEPTH} (the eye ray is depth 1)",
@@ -144,8 +150,18 @@ impl RenderOptions {
         Ok(())
     }
 
-    /// Number of pixel corners, hence of eye rays.
-    pub fn corners(&self) -> u64 {
-        (self.width as u64 + 1) * (self.height as u64 + 1)
+    /// How eye rays sample the image (`samples` checked by `validate`).
+    pub fn sampling(&self) -> Sampling {
+        Sampling::new(self.samples).unwrap_or(Sampling::Corners)
+    }
+
+    /// Number of eye rays.
+    pub fn eye_rays(&self) -> u64 {
+        self.sampling().eye_rays(self.width, self.height)
+    }
+
+    /// Accumulators of the frame (pixel corners, or pixels).
+    pub fn frame_slots(&self) -> u64 {
+        self.sampling().slots(self.width, self.height)
     }
 }
