@@ -1,6 +1,12 @@
 //! The `sray` binary: a thin shell over the coordinator crate, which owns the
 //! command line.
 
+/// The system allocator, until a depth-first render of a scene larger than
+/// its memory budget turns on file-backed large allocations (see
+/// `sray_engine::paging`).
+#[global_allocator]
+static ALLOC: sray_engine::paging::PagingAlloc = sray_engine::paging::PagingAlloc;
+
 fn main() -> std::process::ExitCode {
     sray_coordinator::cli::main()
 }

@@ -133,8 +133,24 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<Render
             (out.frame, out.stats)
         }
         _ => {
+            // A scene larger than the budget, forced depth-first: its big
+            // arrays go to file-backed memory, which pages as RayShade's
+            // heap did through swap, instead of exceeding the budget.
+            let need = df::estimate_bytes(&scene.db);
+            let paged = need > memory && {
+                let dir = req.tmp_dir.clone().unwrap_or_else(std::env::temp_dir);
+                sray_engine::paging::enable(&dir)
+                    .with_context(|| format!("cannot create a paging file in {}", dir.display()))?
+            };
             let out = df::render(&scene.db, &req.options, &*progress)?;
-            (out.frame, out.stats)
+            let mut stats = out.stats;
+            if paged {
+                stats.details = Some(serde_json::json!({
+                    "df_paged": true,
+                    "df_paged_peak_bytes": sray_engine::paging::mapped_bytes().1,
+                }));
+            }
+            (out.frame, stats)
         }
     };
     drop(progress);

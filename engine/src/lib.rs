@@ -18,6 +18,7 @@ pub mod intersect;
 pub mod math;
 pub mod nff;
 pub mod objects;
+pub mod paging;
 pub mod progress;
 pub mod render;
 pub mod scene;

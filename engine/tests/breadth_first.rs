@@ -103,7 +103,7 @@ fn budgets_from_a_few_hundred_kilobytes_to_plenty() {
         for memory in [600 << 10, 1 << 20, 4 << 20, PLENTY] {
             let got = bf_render(&db, &opts(2, true), StoreNumber::Adaptive, memory);
             assert_same(name, &format!("memory {memory}"), &reference, &got);
-            let extra = got.1.breadth_first.as_ref().unwrap();
+            let extra = got.1.details.as_ref().unwrap();
             spilled |= extra["spill_bytes_written"].as_u64().unwrap() > 0;
             if memory == 600 << 10 {
                 // A tight budget means ray filling: more passes than rays fit.
@@ -162,10 +162,7 @@ fn counts_do_not_depend_on_threads_or_budget() {
                 a.1.intersection_tests_by_kind, b.1.intersection_tests_by_kind,
                 "{name}"
             );
-            let (x, y) = (
-                a.1.breadth_first.as_ref().unwrap(),
-                b.1.breadth_first.as_ref().unwrap(),
-            );
+            let (x, y) = (a.1.details.as_ref().unwrap(), b.1.details.as_ref().unwrap());
             for k in [
                 "ray_voxel_registrations",
                 "tests_skipped_last_voxel",
@@ -201,7 +198,7 @@ fn the_paper_s_rules_do_their_work() {
     );
     let db = Database::open(&path).unwrap();
     let (_, st) = bf_render(&db, &opts(2, true), StoreNumber::Fixed(1), PLENTY);
-    let x = st.breadth_first.unwrap();
+    let x = st.details.unwrap();
     // The last-voxel rule and the mailbox both save tests.
     assert!(x["tests_skipped_last_voxel"].as_u64().unwrap() > 0);
     assert!(x["tests_skipped_mailbox"].as_u64().unwrap() > 0);
@@ -211,7 +208,7 @@ fn the_paper_s_rules_do_their_work() {
     assert!(remaining.len() > 3);
     assert!(remaining.windows(2).all(|w| w[1].as_u64() <= w[0].as_u64()));
     let (_, ad) = bf_render(&db, &opts(2, true), StoreNumber::Adaptive, PLENTY);
-    let y = ad.breadth_first.unwrap();
+    let y = ad.details.unwrap();
     let passes = |v: &serde_json::Value| {
         v["passes"]
             .as_array()

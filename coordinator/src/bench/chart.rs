@@ -22,33 +22,44 @@ fn err(e: impl std::fmt::Display) -> anyhow::Error {
     anyhow::anyhow!("chart: {e}")
 }
 
-/// A line chart with markers; `log_y` puts y on a log scale.
+/// Which axes are logarithmic.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scale {
+    Linear,
+    LogY,
+    LogLog,
+}
+
+/// A line chart with markers.
 pub fn lines(
     path: &Path,
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[Series],
-    log_y: bool,
+    scale: Scale,
 ) -> anyhow::Result<()> {
+    let log_y = scale != Scale::Linear;
+    let log_x = scale == Scale::LogLog;
+    let usable = |x: f64, y: f64| {
+        x.is_finite() && y.is_finite() && (!log_y || y > 0.0) && (!log_x || x > 0.0)
+    };
     let root = SVGBackend::new(path, (760, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(err)?;
-    let pts = series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in pts {
-        if !x.is_finite() || !y.is_finite() || (log_y && y <= 0.0) {
-            continue;
+    for &(x, y) in series.iter().flat_map(|s| s.points.iter()) {
+        if usable(x, y) {
+            x0 = x0.min(x);
+            x1 = x1.max(x);
+            y0 = y0.min(y);
+            y1 = y1.max(y);
         }
-        x0 = x0.min(x);
-        x1 = x1.max(x);
-        y0 = y0.min(y);
-        y1 = y1.max(y);
     }
     if x0 > x1 {
-        (x0, x1, y0, y1) = (0.0, 1.0, 1.0, 10.0);
+        (x0, x1, y0, y1) = (1.0, 10.0, 1.0, 10.0);
     }
     if x1 == x0 {
-        x1 = x0 + 1.0;
+        x1 = x0 * 2.0 + 1.0;
     }
     let mut b = ChartBuilder::on(&root);
     b.caption(title, ("sans-serif", 20))
@@ -70,7 +81,7 @@ pub fn lines(
                     .points
                     .iter()
                     .copied()
-                    .filter(|(x, y)| x.is_finite() && y.is_finite() && (!log_y || *y > 0.0))
+                    .filter(|&(x, y)| usable(x, y))
                     .collect();
                 chart
                     .draw_series(LineSeries::new(p.clone(), c.stroke_width(2)))
@@ -91,17 +102,25 @@ pub fn lines(
                 .map_err(err)?;
         }};
     }
-    if log_y {
-        draw!(
+    match scale {
+        Scale::LogLog => draw!(
+            b.build_cartesian_2d(
+                (x0 * 0.8..x1 * 1.25).log_scale(),
+                (y0 * 0.8..y1 * 1.25).log_scale()
+            )
+            .map_err(err)?
+        ),
+        Scale::LogY => draw!(
             b.build_cartesian_2d(x0..x1, (y0 * 0.8..y1 * 1.25).log_scale())
                 .map_err(err)?
-        );
-    } else {
-        let pad = (y1 - y0).abs().max(1e-12) * 0.08;
-        draw!(
-            b.build_cartesian_2d(x0..x1, (y0 - pad).min(0.0)..y1 + pad)
-                .map_err(err)?
-        );
+        ),
+        Scale::Linear => {
+            let pad = (y1 - y0).abs().max(1e-12) * 0.08;
+            draw!(
+                b.build_cartesian_2d(x0..x1, (y0 - pad).min(0.0)..y1 + pad)
+                    .map_err(err)?
+            )
+        }
     }
     root.present().map_err(err)?;
     Ok(())

@@ -127,3 +127,201 @@ impl Median {
         self.stats()[key].as_f64().unwrap_or(f64::NAN)
     }
 }
+
+/// A memory limit for child processes: a Linux cgroup (v2 `memory.max`,
+/// or v1 `memory.limit_in_bytes`), which needs root.
+pub struct MemoryCap {
+    dir: PathBuf,
+    v2: bool,
+}
+
+/// The outcome of a run under a cap.
+#[derive(Clone, Debug)]
+pub struct Capped {
+    pub measured: Option<Measured>,
+    /// Killed for exceeding the cap (out of memory).
+    pub oom_killed: bool,
+    /// Stopped at the time limit.
+    pub timed_out: bool,
+    /// Most memory the cgroup held (process and page cache), bytes.
+    pub peak_bytes: u64,
+    pub error: Option<String>,
+}
+
+impl MemoryCap {
+    /// A new cgroup limited to `bytes`, or why there cannot be one.
+    pub fn new(bytes: u64) -> Result<MemoryCap, String> {
+        let name = format!("sray-bench-{}-{}", std::process::id(), bytes);
+        let v2_root = Path::new("/sys/fs/cgroup");
+        let v2 = std::fs::read_to_string(v2_root.join("cgroup.controllers"))
+            .map(|c| c.split_whitespace().any(|x| x == "memory"))
+            .unwrap_or(false);
+        let (dir, limit_file) = if v2 {
+            (v2_root.join(&name), "memory.max")
+        } else if Path::new("/sys/fs/cgroup/memory/memory.limit_in_bytes").exists() {
+            (
+                PathBuf::from("/sys/fs/cgroup/memory").join(&name),
+                "memory.limit_in_bytes",
+            )
+        } else {
+            return Err(
+                "no cgroup memory controller found (v2 memory.max or v1 memory.limit_in_bytes)"
+                    .into(),
+            );
+        };
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            format!(
+                "cannot create the cgroup {} ({e}); a memory cap needs root",
+                dir.display()
+            )
+        })?;
+        let cap = MemoryCap { dir, v2 };
+        std::fs::write(cap.dir.join(limit_file), bytes.to_string())
+            .map_err(|e| format!("cannot set {limit_file}: {e}"))?;
+        if v2 {
+            // No swap either: the cap is a cap.
+            let _ = std::fs::write(cap.dir.join("memory.swap.max"), "0");
+        } else {
+            let _ = std::fs::write(cap.dir.join("memory.swappiness"), "0");
+        }
+        Ok(cap)
+    }
+
+    fn read(&self, file: &str) -> Option<String> {
+        std::fs::read_to_string(self.dir.join(file)).ok()
+    }
+
+    fn peak(&self) -> u64 {
+        let f = if self.v2 {
+            "memory.peak"
+        } else {
+            "memory.max_usage_in_bytes"
+        };
+        self.read(f)
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or(0)
+    }
+
+    fn reset_peak(&self) {
+        if !self.v2 {
+            let _ = std::fs::write(self.dir.join("memory.max_usage_in_bytes"), "0");
+        }
+    }
+
+    fn oom_kills(&self) -> u64 {
+        let (file, key) = if self.v2 {
+            ("memory.events", "oom_kill")
+        } else {
+            ("memory.oom_control", "oom_kill")
+        };
+        self.read(file)
+            .and_then(|s| {
+                s.lines()
+                    .find_map(|l| l.strip_prefix(key).and_then(|v| v.trim().parse().ok()))
+            })
+            .unwrap_or(0)
+    }
+
+    /// Runs `program args` inside the cgroup, stopping it after
+    /// `limit_secs`; never fails for the run's own failure (that is
+    /// reported in the result).
+    pub fn run(&self, program: &Path, args: &[String], cwd: &Path, limit_secs: f64) -> Capped {
+        self.reset_peak();
+        let ooms = self.oom_kills();
+        let procs = self.dir.join("cgroup.procs");
+        let report = cwd.join(".bench-time");
+        // The shell joins the cgroup, then becomes the measured program.
+        let mut cmd = Command::new("/bin/sh");
+        cmd.arg("-c")
+            .arg("echo $$ > \"$0\" && exec \"$@\"")
+            .arg(&procs);
+        if let Some(t) = time_program() {
+            cmd.arg(t).arg("-f").arg("%e %M").arg("-o").arg(&report);
+        }
+        cmd.arg(program).args(args).current_dir(cwd);
+        cmd.stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        let start = Instant::now();
+        let mut child = match cmd.spawn() {
+            Ok(c) => c,
+            Err(e) => {
+                return Capped {
+                    measured: None,
+                    oom_killed: false,
+                    timed_out: false,
+                    peak_bytes: 0,
+                    error: Some(format!("cannot run {}: {e}", program.display())),
+                };
+            }
+        };
+        let mut timed_out = false;
+        let status = loop {
+            if let Ok(Some(s)) = child.try_wait() {
+                break Some(s);
+            }
+            if start.elapsed().as_secs_f64() > limit_secs {
+                let _ = child.kill();
+                timed_out = true;
+                break child.wait().ok();
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        };
+        let wall = start.elapsed().as_secs_f64();
+        let mut stderr = String::new();
+        if let Some(mut e) = child.stderr.take() {
+            use std::io::Read;
+            let _ = e.read_to_string(&mut stderr);
+        }
+        let oom_killed = self.oom_kills() > ooms;
+        let ok = status.is_some_and(|s| s.success());
+        let mut peak_kib = 0;
+        if let Ok(s) = std::fs::read_to_string(&report) {
+            peak_kib = s
+                .split_whitespace()
+                .nth(1)
+                .and_then(|k| k.parse().ok())
+                .unwrap_or(0);
+            let _ = std::fs::remove_file(&report);
+        }
+        Capped {
+            measured: ok.then_some(Measured {
+                seconds: wall,
+                peak_kib,
+                stats: None,
+            }),
+            oom_killed,
+            timed_out,
+            peak_bytes: self.peak(),
+            error: (!ok && !timed_out && !oom_killed)
+                .then(|| stderr.lines().rev().take(3).collect::<Vec<_>>().join(" / ")),
+        }
+    }
+}
+
+impl Drop for MemoryCap {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir(&self.dir);
+    }
+}
+
+/// `sray render ARGS` under a memory cap, with its statistics.
+pub fn sray_render_capped(
+    cap: &MemoryCap,
+    args: &[String],
+    cwd: &Path,
+    limit_secs: f64,
+) -> anyhow::Result<Capped> {
+    let stats = cwd.join(".bench-stats.json");
+    let _ = std::fs::remove_file(&stats);
+    let mut a: Vec<String> = vec!["render".into()];
+    a.extend(args.iter().cloned());
+    a.push("--stats".into());
+    a.push(stats.display().to_string());
+    let mut c = cap.run(&sray_exe()?, &a, cwd, limit_secs);
+    if let Some(m) = c.measured.as_mut() {
+        let text = std::fs::read_to_string(&stats)?;
+        m.stats = Some(serde_json::from_str(&text)?);
+        let _ = std::fs::remove_file(&stats);
+    }
+    Ok(c)
+}

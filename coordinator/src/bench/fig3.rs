@@ -124,7 +124,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         "pass",
         "remaining rays",
         &series,
-        true,
+        chart::Scale::LogY,
     )?;
     r.chart(file, "remaining rays per pass");
     Ok(())

@@ -4,13 +4,16 @@
 //! Every timed run is a whole `sray` (or POV-Ray) process, measured with
 //! `/usr/bin/time` for peak memory; figures are medians of several runs.
 
+mod accuracy;
 mod chart;
+mod compressed;
 mod exec;
 mod fig3;
 mod povray;
 mod report;
 mod scaling;
 mod table1;
+mod table2;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
@@ -26,17 +29,26 @@ pub enum Experiment {
     Povray,
     /// The paper's Table 1: depth-first against breadth-first, split
     Table1,
+    /// The paper's Table 2 and Figs. 6-8: time against size under a memory cap
+    Table2,
     /// The paper's Fig. 3: remaining rays per pass, fixed and adaptive store number
     Fig3,
+    /// The paper's Fig. 9 and Table 3: compressed databases, the biggest scenes
+    Compressed,
+    /// Render time against image error over depth, precision and sampling
+    Accuracy,
     /// The cluster: embedded against 1 and 2 local workers, traffic per ray
     Scaling,
 }
 
 impl Experiment {
-    const ALL: [Experiment; 4] = [
+    const ALL: [Experiment; 7] = [
         Experiment::Povray,
         Experiment::Table1,
+        Experiment::Table2,
         Experiment::Fig3,
+        Experiment::Compressed,
+        Experiment::Accuracy,
         Experiment::Scaling,
     ];
 }
@@ -155,7 +167,10 @@ fn plan(e: Experiment, ctx: &Ctx) -> Plan {
     match e {
         Experiment::Povray => povray::plan(ctx),
         Experiment::Table1 => table1::plan(ctx),
+        Experiment::Table2 => table2::plan(ctx),
         Experiment::Fig3 => fig3::plan(ctx),
+        Experiment::Compressed => compressed::plan(ctx),
+        Experiment::Accuracy => accuracy::plan(ctx),
         Experiment::Scaling => scaling::plan(ctx),
     }
 }
@@ -164,7 +179,10 @@ fn run_one(e: Experiment, ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     match e {
         Experiment::Povray => povray::run(ctx, r),
         Experiment::Table1 => table1::run(ctx, r),
+        Experiment::Table2 => table2::run(ctx, r),
         Experiment::Fig3 => fig3::run(ctx, r),
+        Experiment::Compressed => compressed::run(ctx, r),
+        Experiment::Accuracy => accuracy::run(ctx, r),
         Experiment::Scaling => scaling::run(ctx, r),
     }
 }

@@ -476,7 +476,7 @@ fn job_stats(
         shade_seconds: Some(tot.shade_seconds),
         total_seconds: seconds,
         peak_rss_bytes: sray_engine::sys::peak_rss_bytes(),
-        breadth_first: Some(cluster),
+        details: Some(cluster),
         ..Default::default()
     }
 }

@@ -394,7 +394,7 @@ fn render_in<R: Real>(
         intersect_seconds: Some(tr.intersect_seconds),
         shade_seconds: Some(tr.shade_seconds),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
-        breadth_first: Some(serde_json::to_value(&st).map_err(|e| Error::Invalid(e.to_string()))?),
+        details: Some(serde_json::to_value(&st).map_err(|e| Error::Invalid(e.to_string()))?),
         ..Default::default()
     };
     Ok(BfOutput { frame, stats })

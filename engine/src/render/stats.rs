@@ -87,6 +87,8 @@ pub struct RenderStats {
     pub shade_seconds: Option<f64>,
     pub total_seconds: f64,
     pub peak_rss_bytes: u64,
+    /// Statistics of one tracer (breadth-first passes, the cluster's
+    /// traffic, depth-first paging), flattened into the same object.
     #[serde(flatten)]
-    pub breadth_first: Option<serde_json::Value>,
+    pub details: Option<serde_json::Value>,
 }

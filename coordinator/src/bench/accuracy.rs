@@ -1,0 +1,201 @@
+//! Speed against accuracy: for each default scene, render time against the
+//! image's error from a converged reference, over the knobs that trade
+//! them: the maximum depth, single against double precision, and corner
+//! sampling against jittered supersampling.
+
+use super::chart::{self, Scale, Series};
+use super::exec;
+use super::report::{Report, num};
+use super::{Ctx, Plan};
+use anyhow::Context;
+use std::path::Path;
+
+/// A render setting: label, knob, arguments.
+struct Variant {
+    knob: &'static str,
+    label: String,
+    args: Vec<String>,
+}
+
+fn variants() -> Vec<Variant> {
+    let mut v = Vec::new();
+    for d in 1..=5 {
+        v.push(Variant {
+            knob: "depth",
+            label: format!("depth {d}"),
+            args: vec!["--depth".into(), d.to_string()],
+        });
+    }
+    for p in ["single", "double"] {
+        v.push(Variant {
+            knob: "precision",
+            label: format!("{p} precision"),
+            args: vec!["--precision".into(), p.into()],
+        });
+    }
+    for s in [1, 4, 16] {
+        v.push(Variant {
+            knob: "samples",
+            label: if s == 1 {
+                "pixel corners".into()
+            } else {
+                format!("{s} jittered samples")
+            },
+            args: vec!["--samples".into(), s.to_string()],
+        });
+    }
+    v
+}
+
+/// The converged reference: deep rays, many jittered samples.
+const REFERENCE: [&str; 4] = ["--depth", "12", "--samples", "64"];
+
+pub(super) fn plan(ctx: &Ctx) -> Plan {
+    let scenes = ctx.scenes().len();
+    let steps = scenes * (1 + variants().len());
+    Plan {
+        steps,
+        seconds: if ctx.quick {
+            steps as f64 * 0.1
+        } else {
+            scenes as f64 * 60.0
+        },
+    }
+}
+
+/// 8-bit RGB pixels of a PNG.
+fn pixels(path: &Path) -> anyhow::Result<Vec<u8>> {
+    let dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(path).with_context(|| path.display().to_string())?,
+    ));
+    let mut rd = dec.read_info()?;
+    let mut buf = vec![0; rd.output_buffer_size().context("image too large")?];
+    let info = rd.next_frame(&mut buf)?;
+    buf.truncate(info.buffer_size());
+    Ok(buf)
+}
+
+/// Root mean square difference, in units of full scale (0..1).
+fn rmse(a: &[u8], b: &[u8]) -> f64 {
+    let s: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| {
+            let d = (*x as f64 - *y as f64) / 255.0;
+            d * d
+        })
+        .sum();
+    (s / a.len().max(1) as f64).sqrt()
+}
+
+pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
+    let side: u32 = if ctx.quick { 32 } else { 256 };
+    r.section("Speed against accuracy");
+    r.para(&format!(
+        "Each default scene at {side}x{side}, depth-first, both cores; whole-process time (median of {} \
+         run(s)) against the root-mean-square error of the 8-bit image from a converged reference \
+         (depth 12, 64 jittered samples per pixel, double precision), in units of full scale. Each \
+         knob is varied from the default (depth 5, pixel corners, double precision) on its own.",
+        ctx.runs
+    ));
+    let mut rows = Vec::new();
+    let mut data = Vec::new();
+    let mut verdicts = Vec::new();
+    for (scene, size) in ctx.scenes() {
+        let name = format!("{}{size}", scene.name());
+        let sdb = ctx.scene_file(scene, size, "sdb")?;
+        let base = |out: &str| -> Vec<String> {
+            vec![
+                sdb.display().to_string(),
+                "-o".into(),
+                ctx.work().join(out).display().to_string(),
+                "--mode".into(),
+                "df".into(),
+                "--width".into(),
+                side.to_string(),
+                "--height".into(),
+                side.to_string(),
+            ]
+        };
+        ctx.step(&format!("accuracy: {name} reference"));
+        let mut ref_args = base("ref.png");
+        ref_args.extend(REFERENCE.iter().map(|s| s.to_string()));
+        exec::sray_render(&ref_args, ctx.work())?;
+        let reference = pixels(&ctx.work().join("ref.png"))?;
+        let mut points: Vec<(&'static str, String, f64, f64)> = Vec::new();
+        for v in variants() {
+            let mut args = base("var.png");
+            args.extend(v.args.iter().cloned());
+            let m = ctx.median(&format!("accuracy: {name} {}", v.label), || {
+                exec::sray_render(&args, ctx.work())
+            })?;
+            let err = rmse(&pixels(&ctx.work().join("var.png"))?, &reference);
+            rows.push(vec![
+                name.clone(),
+                v.label.clone(),
+                num(m.seconds(), 3),
+                format!("{err:.5}"),
+            ]);
+            data.push(serde_json::json!({
+                "scene": name, "knob": v.knob, "setting": v.label, "seconds": m.seconds(), "rmse": err,
+            }));
+            points.push((v.knob, v.label, m.seconds(), err));
+        }
+        let series: Vec<Series> = ["depth", "precision", "samples"]
+            .iter()
+            .map(|k| Series {
+                name: match *k {
+                    "depth" => "depth 1 to 5".into(),
+                    "precision" => "single, double precision".into(),
+                    _ => "corners, 4, 16 samples".into(),
+                },
+                points: points
+                    .iter()
+                    .filter(|p| p.0 == *k)
+                    .map(|p| (p.2, p.3))
+                    .collect(),
+            })
+            .collect();
+        let file = format!("speed_accuracy_{name}.svg");
+        chart::lines(
+            &r.path(&file),
+            &format!("{name}: time against error"),
+            "seconds",
+            "RMS error from the reference",
+            &series,
+            Scale::LogY,
+        )?;
+        // Error removed per second spent, from each knob's cheapest setting
+        // to its dearest.
+        let gain = |k: &str| {
+            let p: Vec<_> = points.iter().filter(|p| p.0 == k).collect();
+            let (lo, hi) = (p.first().expect("settings"), p.last().expect("settings"));
+            (lo.3 - hi.3) / (hi.2 - lo.2).max(1e-3)
+        };
+        let gains = [
+            ("depth", gain("depth")),
+            ("precision", gain("precision")),
+            ("samples", gain("samples")),
+        ];
+        let best = gains
+            .iter()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .expect("three knobs");
+        verdicts.push(format!(
+            "{name}: {} (error removed per extra second: depth {:.4}, precision {:.4}, samples {:.4})",
+            best.0, gains[0].1, gains[1].1, gains[2].1
+        ));
+        r.chart(&file, &format!("speed against accuracy, {name}"));
+    }
+    r.table(
+        "speed_accuracy",
+        &["scene", "setting", "seconds", "RMS error"],
+        &rows,
+    )?;
+    r.json("speed_accuracy", &serde_json::Value::Array(data))?;
+    r.para(&format!(
+        "Which knob buys the most accuracy per second, from its cheapest setting to its dearest:\n\n- {}",
+        verdicts.join("\n- ")
+    ));
+    Ok(())
+}

@@ -1,0 +1,219 @@
+//! File-backed memory for large allocations, so that a depth-first render
+//! of a scene larger than memory pages to disk, as the paper's RayShade
+//! did through swap, instead of being killed.
+//!
+//! [`PagingAlloc`] is a global allocator that passes every allocation to
+//! the system allocator until [`enable`] is called; from then on, each
+//! allocation of [`THRESHOLD`] bytes or more is a shared mapping of a fresh
+//! region of one unnamed temporary file. Those pages are ordinary page
+//! cache: under memory pressure (a cgroup limit, say) the kernel writes
+//! them back to the file and drops them, and faults them in again on use.
+//! Regions are reserved on disk when they are mapped (`fallocate`), so a
+//! full disk is a failed mapping, which falls back to the system allocator,
+//! and never a `SIGBUS` later; freed regions are unmapped and their disk
+//! space released (`FALLOC_FL_PUNCH_HOLE`). File offsets are never reused,
+//! so a new region is all zeroes.
+//!
+//! The binary installs the allocator (`src/main.rs`); libraries and tests
+//! that do not install it see [`enable`] return `false`.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, AtomicUsize, Ordering};
+
+/// Allocations at least this large are file-backed once paging is on.
+pub const THRESHOLD: usize = 1 << 20;
+const PAGE: usize = 4096;
+/// Most file-backed regions alive at once; beyond, the system allocator.
+const MAX_REGIONS: usize = 4096;
+
+/// The allocator. Install with `#[global_allocator]`.
+pub struct PagingAlloc;
+
+static INSTALLED: AtomicBool = AtomicBool::new(false);
+static FD: AtomicI32 = AtomicI32::new(-1);
+static NEXT: AtomicU64 = AtomicU64::new(0);
+static MAPPED: AtomicU64 = AtomicU64::new(0);
+static PEAK_MAPPED: AtomicU64 = AtomicU64::new(0);
+
+/// Live regions: start address (0 = free slot), length, file offset.
+struct Region {
+    ptr: AtomicUsize,
+    len: AtomicUsize,
+    off: AtomicU64,
+}
+
+#[allow(clippy::declare_interior_mutable_const)]
+const FREE: Region = Region {
+    ptr: AtomicUsize::new(0),
+    len: AtomicUsize::new(0),
+    off: AtomicU64::new(0),
+};
+static REGIONS: [Region; MAX_REGIONS] = [FREE; MAX_REGIONS];
+
+/// Turns paging on: large allocations from now on live in an unnamed file
+/// in `dir`. Returns false if [`PagingAlloc`] is not the global allocator
+/// (nothing changes then).
+pub fn enable(dir: &Path) -> std::io::Result<bool> {
+    // Any allocation made through the allocator marks it installed; make
+    // one to be sure the flag reflects this process.
+    drop(std::hint::black_box(Vec::<u8>::with_capacity(1)));
+    if !INSTALLED.load(Ordering::Relaxed) {
+        return Ok(false);
+    }
+    if FD.load(Ordering::Acquire) >= 0 {
+        return Ok(true);
+    }
+    let f = tempfile::tempfile_in(dir)?;
+    let fd = std::os::fd::AsRawFd::as_raw_fd(&f);
+    if FD
+        .compare_exchange(-1, fd, Ordering::AcqRel, Ordering::Acquire)
+        .is_ok()
+    {
+        // The file stays open (and mapped) for the rest of the process.
+        std::mem::forget(f);
+    }
+    Ok(true)
+}
+
+/// Whether large allocations are file-backed now.
+pub fn enabled() -> bool {
+    FD.load(Ordering::Relaxed) >= 0
+}
+
+/// Bytes in file-backed regions now, and at most so far.
+pub fn mapped_bytes() -> (u64, u64) {
+    (
+        MAPPED.load(Ordering::Relaxed),
+        PEAK_MAPPED.load(Ordering::Relaxed),
+    )
+}
+
+/// A slot being filled: never a valid address.
+const CLAIMED: usize = 1;
+
+fn register(ptr: usize, len: usize, off: u64) -> bool {
+    for r in REGIONS.iter() {
+        // Claim the slot, fill it, then publish the address: a reader that
+        // sees the address sees the length and offset too.
+        if r.ptr
+            .compare_exchange(0, CLAIMED, Ordering::Acquire, Ordering::Relaxed)
+            .is_ok()
+        {
+            r.len.store(len, Ordering::Relaxed);
+            r.off.store(off, Ordering::Relaxed);
+            r.ptr.store(ptr, Ordering::Release);
+            return true;
+        }
+    }
+    false
+}
+
+fn unregister(ptr: usize) -> Option<(usize, u64)> {
+    for r in REGIONS.iter() {
+        if r.ptr.load(Ordering::Acquire) == ptr {
+            let found = (r.len.load(Ordering::Relaxed), r.off.load(Ordering::Relaxed));
+            r.ptr.store(0, Ordering::Release);
+            return Some(found);
+        }
+    }
+    None
+}
+
+impl PagingAlloc {
+    /// A file-backed region for `layout`, or None (then the system
+    /// allocator serves it).
+    fn map(&self, layout: Layout) -> Option<*mut u8> {
+        let fd = FD.load(Ordering::Acquire);
+        if fd < 0 || layout.size() < THRESHOLD || layout.align() > PAGE {
+            return None;
+        }
+        let len = layout.size().checked_add(PAGE - 1)? & !(PAGE - 1);
+        let off = NEXT.fetch_add(len as u64, Ordering::Relaxed);
+        // SAFETY (both calls): plain system calls on our own descriptor
+        // with integer arguments; they touch no memory of ours. The
+        // mapping is new (address chosen by the kernel), so it aliases
+        // nothing; the file is unnamed and private to this process, so
+        // no one else can change or truncate what is mapped.
+        let p = unsafe {
+            if libc::fallocate(fd, 0, off as libc::off_t, len as libc::off_t) != 0 {
+                return None;
+            }
+            let p = libc::mmap(
+                std::ptr::null_mut(),
+                len,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_SHARED,
+                fd,
+                off as libc::off_t,
+            );
+            if p == libc::MAP_FAILED {
+                libc::fallocate(
+                    fd,
+                    libc::FALLOC_FL_PUNCH_HOLE | libc::FALLOC_FL_KEEP_SIZE,
+                    off as libc::off_t,
+                    len as libc::off_t,
+                );
+                return None;
+            }
+            if !register(p as usize, len, off) {
+                libc::munmap(p, len);
+                return None;
+            }
+            p
+        };
+        let now = MAPPED.fetch_add(len as u64, Ordering::Relaxed) + len as u64;
+        PEAK_MAPPED.fetch_max(now, Ordering::Relaxed);
+        Some(p.cast())
+    }
+}
+
+// SAFETY: every block returned is either the system allocator's (for the
+// same layout) or a fresh page-aligned mapping at least `layout.size()`
+// long, used only for layouts aligned to a page or less; `dealloc` tells
+// the two apart by the live-region table (only blocks of at least
+// THRESHOLD bytes can be mappings) and returns each to where it came
+// from. Nothing here allocates, panics or unwinds.
+unsafe impl GlobalAlloc for PagingAlloc {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        INSTALLED.store(true, Ordering::Relaxed);
+        match self.map(layout) {
+            Some(p) => p,
+            // SAFETY: the caller's contract for `alloc` is passed on.
+            None => unsafe { System.alloc(layout) },
+        }
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        INSTALLED.store(true, Ordering::Relaxed);
+        match self.map(layout) {
+            // A fresh region of the file reads as zeroes.
+            Some(p) => p,
+            // SAFETY: the caller's contract is passed on.
+            None => unsafe { System.alloc_zeroed(layout) },
+        }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        if layout.size() >= THRESHOLD
+            && let Some((len, off)) = unregister(ptr as usize)
+        {
+            let fd = FD.load(Ordering::Acquire);
+            // SAFETY: `ptr..ptr + len` is a mapping we made and the caller
+            // gives up; releasing its disk space touches only our file.
+            unsafe {
+                libc::munmap(ptr.cast(), len);
+                libc::fallocate(
+                    fd,
+                    libc::FALLOC_FL_PUNCH_HOLE | libc::FALLOC_FL_KEEP_SIZE,
+                    off as libc::off_t,
+                    len as libc::off_t,
+                );
+            }
+            MAPPED.fetch_sub(len as u64, Ordering::Relaxed);
+            return;
+        }
+        // SAFETY: not a mapping of ours, so the system allocator's block.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
