@@ -412,3 +412,49 @@ fn tls_end_to_end() {
     );
     assert!(err.contains("--tls-ca"), "{err}");
 }
+
+/// Worker count and shard size change nothing: the seven scenes of
+/// ../shared/spd, embedded against one worker with one shard per depth and
+/// against three workers with the smallest shards (256 rays) (so that shards complete in any
+/// order and every merge has many inputs).
+#[test]
+fn seven_scenes_any_worker_count_and_shard_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "cluster-secret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token"]);
+    let mut workers = vec![worker(d, &url, "w0", "token")];
+    worker_id(&coord, "w0");
+    let scenes: Vec<(String, (Vec<u8>, serde_json::Value))> = [
+        "balls4", "gears4", "mount6", "rings7", "tetra6", "tree11", "teapot12",
+    ]
+    .iter()
+    .map(|n| {
+        let nff = common::shared_spd().join(format!("{n}.nff"));
+        let nff = nff.to_str().unwrap().to_string();
+        let want = embedded(d, &nff, "40");
+        (nff, want)
+    })
+    .collect();
+    for (workers_now, shard) in [(1, "100000"), (3, "256")] {
+        while workers.len() < workers_now {
+            let name = format!("w{}", workers.len());
+            workers.push(worker(d, &url, &name, "token"));
+            worker_id(&coord, &name);
+        }
+        for (nff, want) in &scenes {
+            let mut args = render_args(nff, &url, "token", "c.png", "40");
+            let at = args.iter().position(|a| *a == "--shard-rays").unwrap();
+            args[at + 1] = shard;
+            ok(d, &args);
+            let s = cluster_stats(d);
+            same(
+                &format!("{nff}, {workers_now} workers, shards of {shard} rays"),
+                &std::fs::read(d.join("c.png")).unwrap(),
+                &s,
+                want,
+            );
+            assert_eq!(s["workers"], workers_now);
+        }
+    }
+}
