@@ -8,5 +8,6 @@
 static ALLOC: sray_engine::paging::PagingAlloc = sray_engine::paging::PagingAlloc;
 
 fn main() -> std::process::ExitCode {
+    sray_engine::sys::report_file_size_limit_as_error();
     sray_coordinator::cli::main()
 }

@@ -159,19 +159,3 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<Render
     stats.total_seconds = t0.elapsed().as_secs_f64();
     Ok(RenderResult { frame, stats })
 }
-
-/// Writes the image and, if asked, the statistics (each atomically).
-pub fn write_outputs(
-    result: &RenderResult,
-    image: &Path,
-    stats: Option<&Path>,
-) -> anyhow::Result<()> {
-    result.frame.write_png(image)?;
-    if let Some(p) = stats {
-        let tmp = sray_engine::fsutil::temp_beside(p)?;
-        serde_json::to_writer_pretty(tmp.as_file(), &result.stats)
-            .with_context(|| p.display().to_string())?;
-        sray_engine::fsutil::persist(tmp, p)?;
-    }
-    Ok(())
-}

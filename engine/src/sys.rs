@@ -55,3 +55,19 @@ fn meminfo_bytes(key: &str) -> Option<u64> {
 pub fn default_memory_budget() -> u64 {
     mem_available_bytes().map_or(1 << 30, |m| (m / 2).max(64 << 20))
 }
+
+/// Makes a write past the file-size limit (`ulimit -f`, RLIMIT_FSIZE) fail
+/// with EFBIG, which the renderer reports and cleans up after, instead of
+/// killing the process with SIGXFSZ and leaving partial files behind.
+#[cfg(unix)]
+pub fn report_file_size_limit_as_error() {
+    // SAFETY: `signal` with SIG_IGN installs no handler code, so nothing can
+    // run in signal context; SIGXFSZ is a valid signal number. Called once
+    // at start-up, before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
+#[cfg(not(unix))]
+pub fn report_file_size_limit_as_error() {}

@@ -5,6 +5,7 @@ mod cluster_cmd;
 mod convert;
 mod gen_cmd;
 mod info_cmd;
+mod outputs;
 mod render;
 mod verify;
 

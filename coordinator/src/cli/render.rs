@@ -1,7 +1,8 @@
 //! `sray render`: a scene to a PNG.
 
 use super::bar::Bar;
-use crate::job::{RenderRequest, Stages, render, write_outputs};
+use super::outputs::Outputs;
+use crate::job::{RenderRequest, Stages, render};
 use clap::Args;
 use sray_engine::bf::StoreNumber;
 use sray_engine::progress::Progress;
@@ -20,25 +21,25 @@ pub struct RenderArgs {
     #[arg(long, default_value = "auto")]
     pub mode: Mode,
     /// Image width in pixels
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 512)]
     pub width: u32,
     /// Image height in pixels
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 512)]
     pub height: u32,
     /// Maximum depth of the ray tree (the eye ray is depth 1)
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 5)]
     pub depth: u8,
     /// Grid resolution: auto, N (per axis) or NxMxK
     #[arg(long, default_value = "auto")]
     pub grid_res: GridRes,
     /// Voxels per object when the grid resolution is auto
-    #[arg(long, default_value_t = sray_engine::df::GRID_DENSITY)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = sray_engine::df::GRID_DENSITY)]
     pub grid_density: f64,
     /// Grids: auto (set huge objects apart in their own grid) or 1
     #[arg(long, value_enum, default_value_t = Grids::Auto)]
     pub grids: Grids,
     /// Worker threads (default: all cores)
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub threads: Option<usize>,
     /// Memory budget for everything the render holds (e.g. 64MiB, 2GiB;
     /// default: half of the available memory)
@@ -52,7 +53,7 @@ pub struct RenderArgs {
     pub precision: Precision,
     /// Eye rays per pixel: 1 traces the pixel corners (the SPD's sampling);
     /// 4, 9, 16, ... take that many jittered samples per pixel
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     pub samples: u32,
     /// Time the depth-first tracer's intersection queries, to split its
     /// trace time into intersection and shading (costs a little time)
@@ -69,10 +70,10 @@ pub struct RenderArgs {
     #[arg(long, conflicts_with = "local_workers")]
     pub coordinator: Option<String>,
     /// Start N worker processes on this machine, render on them, stop them
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub local_workers: Option<usize>,
     /// Rays per shard on a cluster (default: the coordinator's, 65536)
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub shard_rays: Option<u64>,
     /// File holding the cluster's shared token
     #[arg(long)]
@@ -139,16 +140,16 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         store: a.store_number,
         tmp_dir: a.tmp_dir.clone(),
     };
+    let outputs = Outputs::open(&a.output, a.stats.as_deref())?;
     if a.coordinator.is_some() || a.local_workers.is_some() {
-        return run_cluster(&a, &req);
+        return run_cluster(&a, &req, outputs);
     }
     let result = render(&req, &BarStages)?;
-    write_outputs(&result, &a.output, a.stats.as_deref())?;
-    Ok(())
+    outputs.write(&result.frame.png_bytes()?, &result.stats)
 }
 
 /// Renders on a cluster: a remote coordinator, or local worker processes.
-fn run_cluster(a: &RenderArgs, req: &RenderRequest) -> anyhow::Result<()> {
+fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow::Result<()> {
     use crate::cluster::{client, local};
     if req.mode == Mode::Df {
         anyhow::bail!(
@@ -202,19 +203,5 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest) -> anyhow::Result<()> {
     let mut result = result?;
     result.stats["convert_seconds"] = scene.convert_seconds.into();
     result.stats["client_seconds"] = t0.elapsed().as_secs_f64().into();
-    write_file(&a.output, &result.png)?;
-    if let Some(p) = &a.stats {
-        write_file(p, &serde_json::to_vec_pretty(&result.stats)?)?;
-    }
-    Ok(())
-}
-
-/// Writes bytes atomically.
-fn write_file(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use std::io::Write;
-    let mut tmp = sray_engine::fsutil::temp_beside(path)?;
-    tmp.write_all(bytes)
-        .map_err(|e| sray_engine::Error::io(path, e))?;
-    sray_engine::fsutil::persist(tmp, path)?;
-    Ok(())
+    outputs.write(&result.png, &result.stats)
 }

@@ -131,15 +131,17 @@ impl<T: Pod> Drop for RecordWriter<T> {
 
 /// A full spill disk is the commonest failure here; say so plainly.
 fn spill_error(path: &Path, e: std::io::Error) -> Error {
-    if e.raw_os_error() == Some(28) {
-        Error::Io {
-            path: path.to_path_buf(),
-            err: std::io::Error::other(
-                "no space left on the spill device (use --tmp-dir, or a larger --memory to spill less)",
-            ),
-        }
-    } else {
-        Error::io(path, e)
+    let full = match e.raw_os_error() {
+        Some(libc::ENOSPC) => "no space left on the spill device",
+        Some(libc::EFBIG) => "the file-size limit (ulimit -f) stops the spill file",
+        Some(libc::EDQUOT) => "the disk quota of the spill device is used up",
+        _ => return Error::io(path, e),
+    };
+    Error::Io {
+        path: path.to_path_buf(),
+        err: std::io::Error::other(format!(
+            "{full} (use --tmp-dir, or a larger --memory to spill less)"
+        )),
     }
 }
 

@@ -119,7 +119,9 @@ fn huge_split(sizes: &SizeSummary, total: u64, all: &Aabb) -> Option<u8> {
 /// voxels per object, shared among the axes in proportion to the box's
 /// extents (a flat box gets a flat grid), at most `max_cells` in all.
 pub fn choose_resolution(bounds: &Aabb, objects: u64, density: f64, max_cells: u64) -> [u32; 3] {
-    // A handful of objects gains nothing from subdivision.
+    // A handful of objects gains nothing from subdivision; nor does a
+    // budget too small for more than one voxel.
+    let max_cells = max_cells.max(1);
     if bounds.is_empty() || objects <= 8 {
         return [1, 1, 1];
     }

@@ -1,0 +1,60 @@
+//! The files a render writes: the image and, when asked, the statistics.
+//! Both are opened (as temporary files beside their targets) before the
+//! render starts, so that an unwritable path fails at once instead of after
+//! an hour of tracing; both are renamed into place only when both are
+//! complete, so a failure never leaves one without the other or a partial
+//! file under either name.
+
+use sray_engine::fsutil::{persist, temp_beside};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use tempfile::NamedTempFile;
+
+pub struct Outputs {
+    image: (PathBuf, NamedTempFile),
+    stats: Option<(PathBuf, NamedTempFile)>,
+}
+
+impl Outputs {
+    pub fn open(image: &Path, stats: Option<&Path>) -> anyhow::Result<Outputs> {
+        if stats == Some(image) {
+            anyhow::bail!("--stats and -o name the same file, {}", image.display());
+        }
+        Ok(Outputs {
+            image: (image.to_path_buf(), temp_beside(image)?),
+            stats: stats
+                .map(|p| Ok::<_, anyhow::Error>((p.to_path_buf(), temp_beside(p)?)))
+                .transpose()?,
+        })
+    }
+
+    /// Writes the PNG bytes and the statistics, then moves both into place.
+    /// Unwritten temporary files are removed when dropped.
+    pub fn write(self, png: &[u8], stats: &impl serde::Serialize) -> anyhow::Result<()> {
+        let (image_path, mut image) = self.image;
+        image
+            .write_all(png)
+            .map_err(|e| sray_engine::Error::io(&image_path, e))?;
+        let stats = match self.stats {
+            Some((p, mut tmp)) => {
+                let mut text = serde_json::to_vec_pretty(stats)?;
+                text.push(b'\n');
+                tmp.write_all(&text)
+                    .map_err(|e| sray_engine::Error::io(&p, e))?;
+                tmp.as_file()
+                    .sync_all()
+                    .map_err(|e| sray_engine::Error::io(&p, e))?;
+                Some((p, tmp))
+            }
+            None => None,
+        };
+        persist(image, &image_path)?;
+        if let Some((p, tmp)) = stats {
+            if let Err(e) = persist(tmp, &p) {
+                let _ = std::fs::remove_file(&image_path);
+                return Err(e.into());
+            }
+        }
+        Ok(())
+    }
+}
