@@ -49,11 +49,11 @@ impl Outputs {
             None => None,
         };
         persist(image, &image_path)?;
-        if let Some((p, tmp)) = stats {
-            if let Err(e) = persist(tmp, &p) {
-                let _ = std::fs::remove_file(&image_path);
-                return Err(e.into());
-            }
+        if let Some((p, tmp)) = stats
+            && let Err(e) = persist(tmp, &p)
+        {
+            let _ = std::fs::remove_file(&image_path);
+            return Err(e.into());
         }
         Ok(())
     }

@@ -1,0 +1,30 @@
+//! The object database reader on arbitrary bytes: opening, scanning every
+//! block and intersecting every record it accepts must end in a value or
+//! an error naming the block, never a panic or an unbounded allocation.
+//! Checksums are off in fuzzing builds (see `sdb::reader`), so mutations
+//! reach the decoding behind them.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use sray_engine::intersect::{RayQ, intersect, prepare};
+use sray_engine::math::Vec3;
+use sray_engine::sdb::Database;
+use std::io::Write;
+
+fuzz_target!(|data: &[u8]| {
+    let mut f = tempfile::NamedTempFile::new().expect("temporary file");
+    f.write_all(data).expect("write");
+    let Ok(db) = Database::open(f.path()) else {
+        return;
+    };
+    let _ = db.bbox();
+    let Ok(mut scan) = db.scan() else { return };
+    let ray = RayQ::new(Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
+    while let Ok(Some(block)) = scan.next_block() {
+        for o in block.objects() {
+            let _ = prepare(&o.shape);
+            let _ = intersect::<f64>(&o.shape, &o.bbox, &ray, 0.0, f64::INFINITY);
+            let _ = (o.id, o.material);
+        }
+    }
+});
