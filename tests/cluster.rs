@@ -425,12 +425,31 @@ fn seven_scenes_any_worker_count_and_shard_size() {
     let (coord, url) = coordinator(d, &["--token-file", "token"]);
     let mut workers = vec![worker(d, &url, "w0", "token")];
     worker_id(&coord, "w0");
+    // Coincident surfaces too: the first object wins on the cluster as in
+    // the embedded tracers.
+    std::fs::write(
+        d.join("coincident.nff"),
+        "b 0 0 0\nv\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 60\nhither 0.01\n\
+         resolution 8 8\nl 0 0 10\nf 1 0 0 1 0 0 0 1\np 4\n-2 -2 0\n0 -2 0\n0 2 0\n-2 2 0\n\
+         s 1 0 0 0.9\nf 0 1 0 1 0 0 0 1\np 4\n-2 -2 0\n0 -2 0\n0 2 0\n-2 2 0\ns 1 0 0 0.9\n",
+    )
+    .unwrap();
     let scenes: Vec<(String, (Vec<u8>, serde_json::Value))> = [
-        "balls4", "gears4", "mount6", "rings7", "tetra6", "tree11", "teapot12",
+        "balls4",
+        "gears4",
+        "mount6",
+        "rings7",
+        "tetra6",
+        "tree11",
+        "teapot12",
+        "coincident",
     ]
     .iter()
     .map(|n| {
-        let nff = common::shared_spd().join(format!("{n}.nff"));
+        let nff = match *n {
+            "coincident" => d.join("coincident.nff"),
+            _ => common::shared_spd().join(format!("{n}.nff")),
+        };
         let nff = nff.to_str().unwrap().to_string();
         let want = embedded(d, &nff, "40");
         (nff, want)
