@@ -292,6 +292,18 @@ impl<R: Real> Slots<R> {
         }
     }
 
+    /// Gives the slots' memory back at the end of a round's intersection,
+    /// so that shading can use the same share of the budget.
+    pub fn release(&mut self) {
+        for sh in self.shards.iter_mut() {
+            sh.hot = Vec::new();
+            sh.q = Vec::new();
+            sh.cold = Vec::new();
+            sh.done = Vec::new();
+            sh.regs = Default::default();
+        }
+    }
+
     /// Makes room for `n` rays in all, split evenly over the shards.
     fn ensure(&mut self, n: usize) {
         let per = n.div_ceil(self.shards.len()).max(1);

@@ -71,9 +71,11 @@ pub struct Budget {
     pub shared: u64,
     /// Bytes of one ray slot with its planned registrations.
     pub slot_bytes: u64,
-    /// Hits per shading set.
+    /// Bytes of a shading set: the hits, their radix-sort copy and the
+    /// rays they spawn (see [`Budget::shading_set_hits`]).
     pub shading_set: u64,
-    /// Records the next-round sorter holds in memory.
+    /// Records the next-round sorter holds in memory (with a radix-sort
+    /// copy of them when it spills a run).
     pub next_ray_sort_records: u64,
 }
 
@@ -141,9 +143,19 @@ impl Budget {
             io_buffers: io,
             shared,
             slot_bytes,
-            shading_set: part(SET_SHARE, std::mem::size_of::<records::HitRec>()),
-            next_ray_sort_records: part(NEXT_SHARE, std::mem::size_of::<RayRec>()),
+            shading_set: (shared as f64 * SET_SHARE) as u64,
+            next_ray_sort_records: part(NEXT_SHARE, 2 * std::mem::size_of::<RayRec>()),
         })
+    }
+
+    /// Hits per shading set in a scene of `lights` lights: each hit costs
+    /// its record, the record's copy while the set is sorted by object, and
+    /// the rays it may spawn (a shadow ray per light, a reflection and a
+    /// refraction).
+    pub fn shading_set_hits(&self, lights: usize) -> usize {
+        let per_hit = 2 * std::mem::size_of::<records::HitRec>()
+            + (lights + 2) * std::mem::size_of::<RayRec>();
+        ((self.shading_set / per_hit as u64) as usize).max(16)
     }
 
     /// Largest grid that gets a dense voxel index (four bytes per voxel per

@@ -269,6 +269,9 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
         self.tests += ist.intersection_tests;
+        // The phases take turns with the budget: shading gets the slots'
+        // share.
+        self.slots.release();
         let reader = match results {
             Results::Dense { v, .. } => ResultReader::Dense(v.into_iter()),
             Results::Sort(s) => ResultReader::Sorted(s.finish()?),
@@ -323,7 +326,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             radix: &mut self.radix,
             materials: &self.db.scene().materials,
             shade: &self.shade_scene,
-            set_cap: self.budget.shading_set as usize,
+            set_cap: self.budget.shading_set_hits(self.shade_scene.lights.len()),
         };
         let mut next_result = || results.next_result();
         let sst = shade_round(
@@ -338,6 +341,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         )?;
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
+        // The hit set and its outputs are the shading phase's; the next
+        // intersection gets their share back.
+        self.set_buf = Vec::new();
+        self.shade_outputs = Vec::new();
+        self.radix = Default::default();
         let count = next.len();
         let sorted = next.finish()?;
         self.shade_seconds += ts.elapsed().as_secs_f64();
