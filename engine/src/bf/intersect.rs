@@ -292,6 +292,21 @@ impl<R: Real> Slots<R> {
         }
     }
 
+    /// Bytes the slots hold.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.shards
+            .iter()
+            .map(|sh| {
+                sh.hot.capacity() * size_of::<Hot<R>>()
+                    + sh.q.capacity() * size_of::<RayQ<R>>()
+                    + sh.cold.capacity() * size_of::<Cold>()
+                    + sh.done.capacity() * size_of::<ResultRec>()
+                    + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
+            })
+            .sum()
+    }
+
     /// Gives the slots' memory back at the end of a round's intersection,
     /// so that shading can use the same share of the budget.
     pub fn release(&mut self) {

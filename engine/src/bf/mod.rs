@@ -86,6 +86,9 @@ const SLOTS_SHARE: f64 = 0.45;
 const DENSE_SHARE: f64 = 0.10;
 const SET_SHARE: f64 = 0.25;
 const NEXT_SHARE: f64 = 0.30;
+/// Left over by both phases: the buffers of the phase not running may keep
+/// this much (see [`Budget::idle_allowance`]).
+const IDLE_SHARE: f64 = 0.05;
 
 /// Record file buffers at any moment (a round's rays read, results and
 /// next-round rays written, a merge's readers), and a margin for small
@@ -146,6 +149,12 @@ impl Budget {
             shading_set: (shared as f64 * SET_SHARE) as u64,
             next_ray_sort_records: part(NEXT_SHARE, 2 * std::mem::size_of::<RayRec>()),
         })
+    }
+
+    /// What one phase's buffers may keep while the other phase runs: the
+    /// shares of either phase add up to 95 % of [`Budget::shared`].
+    pub fn idle_allowance(&self) -> u64 {
+        (self.shared as f64 * IDLE_SHARE) as u64
     }
 
     /// Hits per shading set in a scene of `lights` lights: each hit costs

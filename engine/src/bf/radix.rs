@@ -15,6 +15,14 @@ pub struct Scratch {
     idx2: Vec<u32>,
 }
 
+impl Scratch {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        8 * (self.keys.capacity() + self.keys2.capacity())
+            + 4 * (self.idx.capacity() + self.idx2.capacity())
+    }
+}
+
 /// Sorts `v` by `key`, keeping the order of equal keys.
 pub fn sort_by_key<T: Copy>(v: &mut [T], key: impl Fn(&T) -> u64, sc: &mut Scratch) {
     let n = v.len();

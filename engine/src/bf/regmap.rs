@@ -33,6 +33,15 @@ fn hash(v: u32) -> usize {
 }
 
 impl RegMap {
+    /// Bytes allocated.
+    pub fn bytes(&self) -> usize {
+        4 * (self.dense.capacity()
+            + self.table.capacity()
+            + self.voxels.capacity()
+            + self.heads.capacity())
+            + 8 * self.links.capacity()
+    }
+
     /// Empties the map, sized for about `expected` registrations; with
     /// `dense_cells > 0`, indexes voxels directly.
     pub fn clear(&mut self, expected: usize, dense_cells: usize) {

@@ -270,8 +270,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
         self.tests += ist.intersection_tests;
         // The phases take turns with the budget: shading gets the slots'
-        // share.
-        self.slots.release();
+        // share, unless they are small beside the budget (then keeping them
+        // saves page faults in the next round).
+        if self.slots.bytes() as u64 > self.budget.idle_allowance() {
+            self.slots.release();
+        }
         let reader = match results {
             Results::Dense { v, .. } => ResultReader::Dense(v.into_iter()),
             Results::Sort(s) => ResultReader::Sorted(s.finish()?),
@@ -342,10 +345,19 @@ impl<'db, R: Real> Tracer<'db, R> {
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
         // The hit set and its outputs are the shading phase's; the next
-        // intersection gets their share back.
-        self.set_buf = Vec::new();
-        self.shade_outputs = Vec::new();
-        self.radix = Default::default();
+        // intersection gets their share back (unless they are small).
+        let held = self.set_buf.capacity() * std::mem::size_of::<super::records::HitRec>()
+            + self
+                .shade_outputs
+                .iter()
+                .map(|(v, _)| v.capacity() * std::mem::size_of::<RayRec>())
+                .sum::<usize>()
+            + self.radix.bytes();
+        if held as u64 > self.budget.idle_allowance() {
+            self.set_buf = Vec::new();
+            self.shade_outputs = Vec::new();
+            self.radix = Default::default();
+        }
         let count = next.len();
         let sorted = next.finish()?;
         self.shade_seconds += ts.elapsed().as_secs_f64();
