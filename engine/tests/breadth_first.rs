@@ -39,24 +39,10 @@ fn opts(threads: usize, grids: bool) -> RenderOptions {
 }
 
 fn df_render(db: &Database) -> (Vec<u8>, RenderStats) {
-    let out = df::render(db, &opts(2, true), &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
+    common::df_render(db, &opts(2, true))
 }
 
-fn bf_render(
-    db: &Database,
-    o: &RenderOptions,
-    store: StoreNumber,
-    memory: u64,
-) -> (Vec<u8>, RenderStats) {
-    let b = BfOptions {
-        memory,
-        store,
-        spill_dir: None,
-    };
-    let out = bf::render(db, o, &b, &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
-}
+use common::bf_render;
 
 fn assert_same(name: &str, what: &str, a: &(Vec<u8>, RenderStats), b: &(Vec<u8>, RenderStats)) {
     assert!(a.0 == b.0, "{name} ({what}): images differ");

@@ -34,3 +34,28 @@ pub const DEFAULT_SCENES: [(&str, u32); 7] = [
     ("tree", 11),
     ("teapot", 12),
 ];
+
+use sray_engine::bf::{self, BfOptions, StoreNumber};
+use sray_engine::progress::NoProgress;
+use sray_engine::render::{RenderOptions, RenderStats};
+use sray_engine::sdb::Database;
+
+/// An image's RGB bytes and the render's statistics.
+pub type Render = (Vec<u8>, RenderStats);
+
+/// A depth-first render.
+pub fn df_render(db: &Database, o: &RenderOptions) -> Render {
+    let out = sray_engine::df::render(db, o, &NoProgress).unwrap();
+    (out.frame.to_rgb8(), out.stats)
+}
+
+/// A breadth-first render with the given store number and budget.
+pub fn bf_render(db: &Database, o: &RenderOptions, store: StoreNumber, memory: u64) -> Render {
+    let b = BfOptions {
+        memory,
+        store,
+        spill_dir: None,
+    };
+    let out = bf::render(db, o, &b, &NoProgress).unwrap();
+    (out.frame.to_rgb8(), out.stats)
+}

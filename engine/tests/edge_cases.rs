@@ -6,16 +6,17 @@
 //! counts, and by a one-voxel grid (every ray against every object, nothing
 //! for a grid walk to get wrong); all must give the same image and counts.
 
-use sray_engine::bf::{self, BfOptions, StoreNumber};
-use sray_engine::df;
+use sray_engine::bf::StoreNumber;
 use sray_engine::nff::read_nff_from;
 use sray_engine::progress::NoProgress;
-use sray_engine::render::{GridRes, RenderOptions, RenderStats};
+use sray_engine::render::{GridRes, RenderOptions};
 use sray_engine::sdb::{Compression, Database, DbWriter};
 use std::fmt::Write;
 use std::path::Path;
 
-type Render = (Vec<u8>, RenderStats);
+mod common;
+
+use common::{Render, bf_render, df_render};
 
 struct Scene {
     db: Database,
@@ -43,21 +44,6 @@ fn opts(side: u32, grid: GridRes, threads: usize, grids: bool) -> RenderOptions 
         multiple_grids: grids,
         ..Default::default()
     }
-}
-
-fn df_render(db: &Database, o: &RenderOptions) -> Render {
-    let out = df::render(db, o, &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
-}
-
-fn bf_render(db: &Database, o: &RenderOptions, store: StoreNumber, memory: u64) -> Render {
-    let b = BfOptions {
-        memory,
-        store,
-        spill_dir: None,
-    };
-    let out = bf::render(db, o, &b, &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
 }
 
 /// Renders `nff` every way; all must agree with the one-voxel depth-first

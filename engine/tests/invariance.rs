@@ -9,11 +9,10 @@
 
 mod common;
 
-use sray_engine::bf::{self, BfOptions, StoreNumber};
-use sray_engine::df;
+use sray_engine::bf::StoreNumber;
 use sray_engine::nff::read_nff;
 use sray_engine::progress::NoProgress;
-use sray_engine::render::{GridRes, RenderOptions, RenderStats};
+use sray_engine::render::{GridRes, RenderOptions};
 use sray_engine::scene::SceneSink;
 use sray_engine::scene::record::{Event, OwnedShape, Recorder};
 use sray_engine::sdb::{Compression, Database, DbWriter};
@@ -22,7 +21,7 @@ use std::path::{Path, PathBuf};
 const SIZE: u32 = 24;
 const PLENTY: u64 = 1 << 30;
 
-type Render = (Vec<u8>, RenderStats);
+use common::{Render, bf_render, df_render};
 
 fn record(name: &str, size: u32) -> Recorder {
     let mut r = Recorder::default();
@@ -49,21 +48,6 @@ fn opts() -> RenderOptions {
         threads: 2,
         ..Default::default()
     }
-}
-
-fn df_render(db: &Database, o: &RenderOptions) -> Render {
-    let out = df::render(db, o, &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
-}
-
-fn bf_render(db: &Database, o: &RenderOptions, store: StoreNumber, memory: u64) -> Render {
-    let b = BfOptions {
-        memory,
-        store,
-        spill_dir: None,
-    };
-    let out = bf::render(db, o, &b, &NoProgress).unwrap();
-    (out.frame.to_rgb8(), out.stats)
 }
 
 fn assert_same(scene: &str, what: &str, want: &Render, got: &Render) {
