@@ -94,16 +94,7 @@ fn render(
         ctx.work().display().to_string(),
     ]
     .into();
-    match cap {
-        Some(c) => exec::sray_render_capped(c, &args, ctx.work(), s.limit_secs),
-        None => Ok(Capped {
-            measured: Some(exec::sray_render(&args, ctx.work())?),
-            oom_killed: false,
-            timed_out: false,
-            peak_bytes: 0,
-            error: None,
-        }),
-    }
+    exec::sray_render_maybe_capped(cap, &args, ctx.work(), s.limit_secs)
 }
 
 /// Generates a database with `sray gen`, timed.

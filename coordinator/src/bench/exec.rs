@@ -325,3 +325,23 @@ pub fn sray_render_capped(
     }
     Ok(c)
 }
+
+/// `sray render ARGS` under `cap` when there is one (stopped after
+/// `limit_secs`), else as a plain measured run.
+pub fn sray_render_maybe_capped(
+    cap: Option<&MemoryCap>,
+    args: &[String],
+    cwd: &Path,
+    limit_secs: f64,
+) -> anyhow::Result<Capped> {
+    match cap {
+        Some(c) => sray_render_capped(c, args, cwd, limit_secs),
+        None => Ok(Capped {
+            measured: Some(sray_render(args, cwd)?),
+            oom_killed: false,
+            timed_out: false,
+            peak_bytes: 0,
+            error: None,
+        }),
+    }
+}

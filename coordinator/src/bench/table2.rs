@@ -69,21 +69,7 @@ fn measure(
     args: &[String],
     limit: f64,
 ) -> anyhow::Result<Capped> {
-    let once = || -> anyhow::Result<Capped> {
-        match cap {
-            Some(c) => exec::sray_render_capped(c, args, ctx.work(), limit),
-            None => {
-                let m = exec::sray_render(args, ctx.work())?;
-                Ok(Capped {
-                    measured: Some(m),
-                    oom_killed: false,
-                    timed_out: false,
-                    peak_bytes: 0,
-                    error: None,
-                })
-            }
-        }
-    };
+    let once = || exec::sray_render_maybe_capped(cap, args, ctx.work(), limit);
     let first = once()?;
     let short = first.measured.as_ref().is_some_and(|m| m.seconds < 20.0);
     if !short || ctx.runs < 2 {
