@@ -1,5 +1,7 @@
-//! The `sray` binary: a thin shell over the coordinator crate, which owns the
-//! command line.
+//! The `sray` binary: the command line ([`cli`]) over the engine, the
+//! cluster's coordinator and worker, and the benchmarks.
+
+mod cli;
 
 /// The system allocator, until a depth-first render of a scene larger than
 /// its memory budget turns on file-backed large allocations (see
@@ -9,5 +11,5 @@ static ALLOC: sray_engine::paging::PagingAlloc = sray_engine::paging::PagingAllo
 
 fn main() -> std::process::ExitCode {
     sray_engine::sys::report_file_size_limit_as_error();
-    sray_coordinator::cli::main()
+    cli::main()
 }

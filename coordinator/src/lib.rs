@@ -1,6 +1,14 @@
-//! The coordinator: drives renders and hosts the `sray` command line.
+//! The cluster coordinator: workers register here, clients submit renders
+//! here, and each job's rounds are sharded over the workers.
+//!
+//! - [`state`]: workers, the task queue, jobs;
+//! - [`service`]: the gRPC calls of `sray.proto`;
+//! - [`driver`]: a job's round loop, sharded over the workers;
+//! - [`scenes`]: object databases served by content hash;
+//! - [`server`]: listening, TLS, the token.
 
-pub mod bench;
-pub mod cli;
-pub mod cluster;
-pub mod job;
+pub mod driver;
+pub mod scenes;
+pub mod server;
+pub mod service;
+pub mod state;

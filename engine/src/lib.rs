@@ -15,6 +15,7 @@ pub mod fsutil;
 pub mod grid;
 pub mod info;
 pub mod intersect;
+pub mod job;
 pub mod math;
 pub mod nff;
 pub mod objects;
@@ -25,6 +26,8 @@ pub mod scene;
 pub mod sdb;
 pub mod source;
 pub mod spd;
+pub mod spill;
 pub mod sys;
+pub mod units;
 
 pub use error::Error;

@@ -5,13 +5,12 @@
 //! the network never waits on the tracer nor the tracer on the network,
 //! beyond the few chunks the channels hold.
 
-use sray_engine::bf::{
-    BfOptions, Contribution, RayRec, RecordWriter, ResultReader, ResultRec, Tracer, eye_ray,
-};
+use sray_engine::bf::{BfOptions, Contribution, RayRec, ResultReader, ResultRec, Tracer, eye_ray};
 use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, EyeRays, Precision, RayCounts, RenderOptions};
 use sray_engine::sdb::Database;
+use sray_engine::spill::RecordWriter;
 use sray_proto::v1::{self, RecordKind, task_output::Part};
 use sray_proto::wire::{pack, records_per_chunk, unpack};
 use std::path::PathBuf;
@@ -156,8 +155,8 @@ fn send_records<T: bytemuck::Pod>(
 
 /// The input stream's records of one kind, written to a local file.
 struct Inputs {
-    rays: Option<sray_engine::bf::RecordFile<RayRec>>,
-    results: Option<sray_engine::bf::RecordFile<ResultRec>>,
+    rays: Option<sray_engine::spill::RecordFile<RayRec>>,
+    results: Option<sray_engine::spill::RecordFile<ResultRec>>,
 }
 
 fn read_inputs<R: Real>(

@@ -17,16 +17,13 @@
 //!
 //! Everything the render holds is bounded by `--memory`; see [`Budget`].
 
-mod files;
 mod intersect;
-mod radix;
 mod records;
 mod regmap;
 mod shade;
 mod tracer;
 mod voxels;
 
-pub use files::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
 pub use records::{Contribution, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
@@ -34,13 +31,15 @@ pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};
 
 use crate::error::Error;
-use crate::grid::{GridSpec, choose_resolution, plan_groups};
+use crate::grid::{GridSpec, MAX_CELLS, choose_resolution, plan_groups};
 use crate::math::Real;
 use crate::progress::Progress;
 use crate::render::{
     Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
 };
 use crate::sdb::Database;
+use crate::spill;
+use crate::units::fmt_bytes;
 use intersect::{REGISTRATION_BYTES, slot_bytes};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -94,7 +93,7 @@ const IDLE_SHARE: f64 = 0.05;
 /// next-round rays written, a merge's readers), and a margin for small
 /// allocations; the database's block buffers come on top.
 const IO_BYTES: u64 =
-    5 * files::IO_BUFFER as u64 + (files::MERGE_FANIN * files::MERGE_BUFFER) as u64 + (64 << 10);
+    5 * spill::IO_BUFFER as u64 + (spill::MERGE_FANIN * spill::MERGE_BUFFER) as u64 + (64 << 10);
 /// Fewest rays worth a pass.
 const MIN_SLOTS: u64 = 64;
 /// Registrations planned per ray in memory.
@@ -105,8 +104,6 @@ const CHEAP_SCAN_BYTES: u64 = 256 << 20;
 /// measured faster than holding every ray (the scan's accesses to rays stay
 /// in cache).
 const CACHE_SLOTS: u64 = 1 << 17;
-/// Most voxels in the breadth-first grids.
-const MAX_CELLS: u64 = 1 << 27;
 
 impl Budget {
     /// Splits `total` bytes for a render of `corners` pixel corners with
@@ -201,51 +198,6 @@ impl Budget {
         }
         (((self.shared as f64) * f) as u64 / self.slot_bytes).max(MIN_SLOTS)
     }
-}
-
-/// `1.5 MiB` and the like.
-pub fn fmt_bytes(b: u64) -> String {
-    const U: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = b as f64;
-    let mut i = 0;
-    while v >= 1024.0 && i < U.len() - 1 {
-        v /= 1024.0;
-        i += 1;
-    }
-    if i == 0 {
-        format!("{b} B")
-    } else {
-        format!("{v:.1} {}", U[i])
-    }
-}
-
-/// Parses `64MiB`, `2GiB`, `512M`, `1G`, `1048576`.
-pub fn parse_bytes(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let split = t
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(t.len());
-    let (num, unit) = t.split_at(split);
-    let v: f64 = num
-        .parse()
-        .map_err(|_| format!("'{s}' is not a size (e.g. 64MiB, 2GiB)"))?;
-    let mul: u64 = match unit.trim().to_ascii_lowercase().as_str() {
-        "" | "b" => 1,
-        "k" | "kb" | "kib" => 1 << 10,
-        "m" | "mb" | "mib" => 1 << 20,
-        "g" | "gb" | "gib" => 1 << 30,
-        "t" | "tb" | "tib" => 1 << 40,
-        u => {
-            return Err(format!(
-                "unknown size unit '{u}' in '{s}' (use KiB, MiB, GiB)"
-            ));
-        }
-    };
-    let b = v * mul as f64;
-    if !(1.0..1.8e19).contains(&b) {
-        return Err(format!("size '{s}' is out of range"));
-    }
-    Ok(b as u64)
 }
 
 /// Statistics of a breadth-first render (added to `--stats`).
@@ -424,18 +376,6 @@ fn render_in<R: Real>(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sizes_parse() {
-        assert_eq!(parse_bytes("64MiB"), Ok(64 << 20));
-        assert_eq!(parse_bytes("2GiB"), Ok(2 << 30));
-        assert_eq!(parse_bytes("512k"), Ok(512 << 10));
-        assert_eq!(parse_bytes("1.5G"), Ok(3 << 29));
-        assert_eq!(parse_bytes("1000"), Ok(1000));
-        assert!(parse_bytes("lots").is_err());
-        assert!(parse_bytes("5 parsecs").is_err());
-        assert!(parse_bytes("0").is_err());
-    }
 
     #[test]
     fn too_small_a_budget_names_the_minimum() {

@@ -5,7 +5,6 @@
 //! the objects, where they are shaded. The rays they spawn go to an
 //! external sort that puts the next round in a fixed order.
 
-use super::files::ExternalSorter;
 use super::records::{HitRec, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 use crate::error::Error;
 use crate::intersect::{RayQ, surface_at};
@@ -13,6 +12,7 @@ use crate::math::Vec3;
 use crate::render::{RayCounts, ShadeScene, Spawn, shade, to_fixed};
 use crate::scene::Material;
 use crate::sdb::{Database, ObjectRef};
+use crate::spill::ExternalSorter;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -30,7 +30,7 @@ pub struct ShadeSetup<'a> {
     pub set: &'a mut Vec<HitRec>,
     /// Per-chunk outputs of the parallel shading, reused.
     pub outputs: &'a mut Vec<(Vec<RayRec>, RayCounts)>,
-    pub radix: &'a mut super::radix::Scratch,
+    pub radix: &'a mut crate::spill::RadixScratch,
     pub materials: &'a [Material],
     pub shade: &'a ShadeScene,
     /// Hits per set.
@@ -115,7 +115,7 @@ fn shade_set(
 ) -> Result<(), Error> {
     // Hits arrive in ray order; a stable sort by object keeps that order
     // within each object.
-    super::radix::sort_by_key(set, |h| h.object as u64, setup.radix);
+    crate::spill::radix_sort_by_key(set, |h| h.object as u64, setup.radix);
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;

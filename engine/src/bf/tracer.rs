@@ -9,7 +9,6 @@
 //! same results, because a ray's intersection depends only on the ray, and
 //! a ray's spawn keys only on its id in the round.
 
-use super::files::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
 use super::records::{NO_HIT, RayKind, RayRec, ResultRec};
 use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
@@ -20,6 +19,7 @@ use crate::math::Real;
 use crate::progress::Progress;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
 use crate::sdb::Database;
+use crate::spill::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 use std::time::Instant;
 
 /// Eye ray `i` (see [`EyeRays`]): its colour goes to frame slot
@@ -111,7 +111,7 @@ pub struct Tracer<'db, R: Real> {
     spare_rays: Vec<RayRec>,
     set_buf: Vec<super::records::HitRec>,
     shade_outputs: Vec<(Vec<RayRec>, RayCounts)>,
-    radix: super::radix::Scratch,
+    radix: crate::spill::RadixScratch,
     /// Accumulated over every call.
     pub stats: BfStats,
     pub tests: KindCounts,

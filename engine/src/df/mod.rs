@@ -9,7 +9,7 @@ mod trace;
 pub use object_grid::ObjectGrid;
 
 use crate::error::Error;
-use crate::grid::{GridStat, choose_resolution, plan_groups};
+use crate::grid::{DEFAULT_DENSITY, GridStat, MAX_CELLS, choose_resolution, plan_groups};
 use crate::intersect::{Prepared, prepare};
 use crate::objects::ObjectTable;
 use crate::progress::Progress;
@@ -20,11 +20,6 @@ use std::time::Instant;
 
 /// `prep_of` entry of objects without prepared data.
 const PLAIN: u32 = u32::MAX;
-
-/// Voxels per object of the automatic grid resolution.
-pub const GRID_DENSITY: f64 = 4.0;
-/// Most voxels a depth-first grid may have.
-pub const MAX_CELLS: u64 = 1 << 24;
 
 /// A scene ready for depth-first tracing, borrowing its objects' geometry
 /// from an [`ObjectTable`].
@@ -47,7 +42,7 @@ pub struct DfScene<'t> {
 /// Memory the depth-first tracer needs for `db`, roughly.
 pub fn estimate_bytes(db: &Database) -> u64 {
     let n = db.object_count();
-    let cells = (n as f64 * GRID_DENSITY).min(MAX_CELLS as f64) as u64;
+    let cells = (n as f64 * DEFAULT_DENSITY).min(MAX_CELLS as f64) as u64;
     // Records and offsets; decoded shapes, boxes and materials; voxel
     // starts and about two voxel entries per object; a mailbox per thread.
     ObjectTable::estimate_bytes(db)

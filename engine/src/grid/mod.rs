@@ -16,6 +16,16 @@ use crate::math::Vec3;
 use crate::scene::Aabb;
 use serde::Serialize;
 
+/// Voxels per object of the automatic grid resolution (measured with
+/// callgrind over the seven SPD scenes; see BENCHMARKS.md).
+pub const DEFAULT_DENSITY: f64 = 4.0;
+
+/// Most voxels any grid may have, in either tracer: voxel indices are
+/// `u32` throughout, and the breadth-first tracer keeps a flag byte per
+/// voxel and the depth-first one a four-byte list start. The automatic
+/// resolution stays below it; a fixed `--grid-res` above it is refused.
+pub const MAX_CELLS: u64 = 1 << 27;
+
 /// Margin, in voxels, added around a box before it is voxelized, so that an
 /// object touching a voxel face (within rounding) is listed on both sides.
 const VOXEL_MARGIN: f64 = 1e-6;

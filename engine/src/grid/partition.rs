@@ -87,7 +87,7 @@ pub fn plan_groups(sizes: &SizeSummary, allow_split: bool) -> GroupPlan {
 
 /// The smallest size class of the huge objects, if setting them apart
 /// pays: the largest classes, few objects, and leaving them out shrinks
-/// the rest's box to at most half the scene's diagonal.
+/// the rest's box to at most SHRINK (0.6) of the scene's diagonal.
 fn huge_split(sizes: &SizeSummary, total: u64, all: &Aabb) -> Option<u8> {
     let limit = MAX_HUGE_FEW.max((total as f64 * MAX_HUGE_SHARE) as u64);
     let full = all.diagonal();

@@ -108,7 +108,7 @@ impl Default for RenderOptions {
             max_depth: 5,
             threads: 0,
             grid_res: GridRes::Auto,
-            grid_density: crate::df::GRID_DENSITY,
+            grid_density: crate::grid::DEFAULT_DENSITY,
             multiple_grids: true,
             precision: Precision::Double,
             profile: false,
@@ -139,6 +139,18 @@ impl RenderOptions {
                 "grid density {} is out of range (0, 1000] voxels per object",
                 self.grid_density
             )));
+        }
+        if let GridRes::Fixed(r) = self.grid_res {
+            let cells: u64 = r.iter().map(|&n| n as u64).product();
+            if cells > crate::grid::MAX_CELLS {
+                return Err(Error::Invalid(format!(
+                    "grid resolution {}x{}x{} has {cells} voxels, more than the {} a grid may have; choose a coarser --grid-res",
+                    r[0],
+                    r[1],
+                    r[2],
+                    crate::grid::MAX_CELLS
+                )));
+            }
         }
         Sampling::new(self.samples)?;
         if self.max_depth == 0 || self.max_depth > MAX_DEPTH {

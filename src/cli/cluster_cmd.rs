@@ -2,10 +2,10 @@
 //! a cluster. Both log to stderr (`RUST_LOG` filters, default `info`) and
 //! stop on Ctrl-C or SIGTERM.
 
-use crate::cluster::server::{Security, serve};
-use crate::cluster::state::{Config, Shared};
 use anyhow::Context;
 use clap::Args;
+use sray_coordinator::server::{Security, serve};
+use sray_coordinator::state::{Config, Shared};
 use sray_proto::auth::Token;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -53,7 +53,7 @@ pub struct WorkerArgs {
     #[arg(long)]
     pub threads: Option<usize>,
     /// Memory budget of the tracer (e.g. 2GiB; default: half of the available memory)
-    #[arg(long, value_parser = |s: &str| sray_engine::bf::parse_bytes(s))]
+    #[arg(long, value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub memory: Option<u64>,
     /// Where scenes are cached, by content hash
     #[arg(long, default_value = "sray-cache")]

@@ -13,13 +13,14 @@
 //! are therefore those of the embedded render, whatever the workers, the
 //! shard size or the order of completion.
 
-use super::state::{Shared, TaskEvent, TaskInput, TaskOutput};
+use crate::state::{Shared, TaskEvent, TaskInput, TaskOutput};
 use anyhow::{Context, bail};
-use sray_engine::bf::{ExternalSorter, RayRec, RecordFile, RecordWriter, plan_grids};
+use sray_engine::bf::{RayRec, plan_grids};
 use sray_engine::render::{
     Camera, Frame, GridRes, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
 };
 use sray_engine::sdb::Database;
+use sray_engine::spill::{ExternalSorter, RecordFile, RecordWriter};
 use sray_proto::v1;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -27,7 +28,7 @@ use tokio::sync::mpsc;
 
 /// A checked job, ready to run.
 pub struct Job {
-    pub scene: Arc<super::scenes::Scene>,
+    pub scene: Arc<crate::scenes::Scene>,
     pub hash: String,
     pub params: v1::RenderParams,
     pub opts: RenderOptions,
@@ -392,7 +393,7 @@ fn stage_name(s: v1::Stage) -> &'static str {
 fn merge_shade(
     mut frame: Frame,
     outs: Vec<TaskOutput>,
-    spill: &sray_engine::bf::SpillDir,
+    spill: &sray_engine::spill::SpillDir,
 ) -> anyhow::Result<(Frame, Option<RecordFile<RayRec>>)> {
     let key = (|r: &RayRec| r.key) as fn(&RayRec) -> u64;
     let mut sorter = ExternalSorter::new(spill, "next", 16, key);

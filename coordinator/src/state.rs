@@ -8,8 +8,9 @@
 //! output stream breaks, has its task queued again; a task that fails
 //! `max_attempts` times fails its job.
 
-use super::scenes::SceneStore;
-use sray_engine::bf::{Contribution, RayRec, RecordFile, ResultRec, SpillDir};
+use crate::scenes::SceneStore;
+use sray_engine::bf::{Contribution, RayRec, ResultRec};
+use sray_engine::spill::{RecordFile, SpillDir};
 use sray_proto::v1;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::path::PathBuf;

@@ -1,13 +1,14 @@
 //! One render, start to finish: resolve the scene into an object database,
 //! pick the tracer, trace, write the image and statistics.
 
-use anyhow::Context;
-use sray_engine::bf::{self, BfOptions, StoreNumber, fmt_bytes};
-use sray_engine::df;
-use sray_engine::progress::Progress;
-use sray_engine::render::{Frame, Mode, RenderOptions, RenderStats};
-use sray_engine::sdb::{Compression, Database, DbWriter};
-use sray_engine::source::SceneSource;
+use crate::bf::{self, BfOptions, StoreNumber};
+use crate::df;
+use crate::error::{Error, IoContext};
+use crate::progress::Progress;
+use crate::render::{Frame, Mode, RenderOptions, RenderStats};
+use crate::sdb::{Compression, Database, DbWriter};
+use crate::source::SceneSource;
+use crate::units::fmt_bytes;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -50,7 +51,7 @@ pub fn prepare(
     scene: &SceneSource,
     tmp_dir: Option<&Path>,
     stages: &dyn Stages,
-) -> anyhow::Result<PreparedScene> {
+) -> Result<PreparedScene, Error> {
     if let SceneSource::Database(p) = scene {
         return Ok(PreparedScene {
             db: Database::open(p)?,
@@ -60,10 +61,15 @@ pub fn prepare(
     }
     let t = Instant::now();
     let dir = match tmp_dir {
-        Some(d) => tempfile::Builder::new().prefix("sray-").tempdir_in(d),
-        None => tempfile::Builder::new().prefix("sray-").tempdir(),
-    }
-    .context("cannot create a temporary directory for the scene database")?;
+        Some(d) => tempfile::Builder::new()
+            .prefix("sray-")
+            .tempdir_in(d)
+            .at(d)?,
+        None => tempfile::Builder::new()
+            .prefix("sray-")
+            .tempdir()
+            .at(std::env::temp_dir())?,
+    };
     let path = dir.path().join("scene.sdb");
     let progress = stages.stage("preparing scene");
     let mut w = DbWriter::create(&path, Compression::None)?;
@@ -109,12 +115,10 @@ pub fn choose_mode(mode: Mode, db: &Database, memory: u64) -> (Mode, String) {
 }
 
 /// Renders a request.
-pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<RenderResult> {
+pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, Error> {
     let t0 = Instant::now();
     req.options.validate()?;
-    let memory = req
-        .memory
-        .unwrap_or_else(sray_engine::sys::default_memory_budget);
+    let memory = req.memory.unwrap_or_else(crate::sys::default_memory_budget);
     let scene = prepare(&req.scene, req.tmp_dir.as_deref(), stages)?;
     let (mode, reason) = choose_mode(req.mode, &scene.db, memory);
     let progress = stages.stage("rendering");
@@ -139,15 +143,14 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> anyhow::Result<Render
             let need = df::estimate_bytes(&scene.db);
             let paged = need > memory && {
                 let dir = req.tmp_dir.clone().unwrap_or_else(std::env::temp_dir);
-                sray_engine::paging::enable(&dir)
-                    .with_context(|| format!("cannot create a paging file in {}", dir.display()))?
+                crate::paging::enable(&dir).at(&dir)?
             };
             let out = df::render(&scene.db, &req.options, &*progress)?;
             let mut stats = out.stats;
             if paged {
                 stats.details = Some(serde_json::json!({
                     "df_paged": true,
-                    "df_paged_peak_bytes": sray_engine::paging::mapped_bytes().1,
+                    "df_paged_peak_bytes": crate::paging::mapped_bytes().1,
                 }));
             }
             (out.frame, stats)

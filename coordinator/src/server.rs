@@ -1,8 +1,8 @@
 //! Serving the coordinator: the gRPC service on a listener, with the token
 //! check, TLS when given a certificate, and the heartbeat monitor.
 
-use super::service::Service;
-use super::state::{Shared, monitor};
+use crate::service::Service;
+use crate::state::{Shared, monitor};
 use anyhow::Context;
 use sray_proto::auth::{Check, Token};
 use sray_proto::v1::coordinator_server::CoordinatorServer;

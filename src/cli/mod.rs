@@ -1,6 +1,7 @@
 //! The `sray` command line.
 
 mod bar;
+mod cluster;
 mod cluster_cmd;
 mod convert;
 mod gen_cmd;
@@ -42,7 +43,7 @@ enum Command {
     /// Join a cluster: take intersection and shading work from a coordinator
     Worker(cluster_cmd::WorkerArgs),
     /// Run the benchmarks (the paper's experiments, POV-Ray, speed against accuracy)
-    Bench(crate::bench::BenchArgs),
+    Bench(sray_bench::BenchArgs),
 }
 
 /// Runs the command line; errors are printed and turned into exit code 1.
@@ -54,7 +55,7 @@ pub fn main() -> ExitCode {
         Command::Convert(a) => convert::run(a),
         Command::Info(a) => info_cmd::run(a),
         Command::Verify(a) => verify::run(a),
-        Command::Bench(a) => crate::bench::run(a),
+        Command::Bench(a) => sray_bench::run(a),
         Command::Coordinator(a) => cluster_cmd::coordinator(a),
         Command::Worker(a) => cluster_cmd::worker(a),
     };

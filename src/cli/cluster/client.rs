@@ -2,8 +2,8 @@
 //! coordinator has it (by content hash), submit the job, follow its
 //! progress, and take the image and statistics. Ctrl-C cancels the job.
 
-use super::scenes::hash_file;
 use anyhow::{Context, bail};
+use sray_coordinator::scenes::hash_file;
 use sray_engine::progress::Progress;
 use sray_proto::net::{Client, Target};
 use sray_proto::v1;

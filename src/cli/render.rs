@@ -2,9 +2,9 @@
 
 use super::bar::Bar;
 use super::outputs::Outputs;
-use crate::job::{RenderRequest, Stages, render};
 use clap::Args;
 use sray_engine::bf::StoreNumber;
+use sray_engine::job::{RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
 use sray_engine::source::SceneSource;
@@ -33,7 +33,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "auto")]
     pub grid_res: GridRes,
     /// Voxels per object when the grid resolution is auto
-    #[arg(long, allow_negative_numbers = true, default_value_t = sray_engine::df::GRID_DENSITY)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = sray_engine::grid::DEFAULT_DENSITY)]
     pub grid_density: f64,
     /// Grids: auto (set huge objects apart in their own grid) or 1
     #[arg(long, value_enum, default_value_t = Grids::Auto)]
@@ -84,7 +84,7 @@ pub struct RenderArgs {
 }
 
 fn parse_memory(s: &str) -> Result<u64, String> {
-    sray_engine::bf::parse_bytes(s)
+    sray_engine::units::parse_bytes(s)
 }
 
 fn parse_store(s: &str) -> Result<StoreNumber, String> {
@@ -150,7 +150,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
 
 /// Renders on a cluster: a remote coordinator, or local worker processes.
 fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow::Result<()> {
-    use crate::cluster::{client, local};
+    use super::cluster::{client, local};
     if req.mode == Mode::Df {
         anyhow::bail!(
             "a cluster renders breadth-first: --mode df cannot be used with --coordinator or --local-workers"
@@ -161,7 +161,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     }
     req.options.validate()?;
     let t0 = std::time::Instant::now();
-    let scene = crate::job::prepare(&req.scene, req.tmp_dir.as_deref(), &BarStages)?;
+    let scene = sray_engine::job::prepare(&req.scene, req.tmp_dir.as_deref(), &BarStages)?;
     let params = sray_worker::params::to_proto(&req.options, req.store);
     let shard_rays = a.shard_rays.unwrap_or(0);
     let rt = tokio::runtime::Builder::new_multi_thread()

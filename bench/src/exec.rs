@@ -72,9 +72,37 @@ pub fn measure(program: &Path, args: &[String], cwd: &Path) -> anyhow::Result<Me
     Ok(m)
 }
 
-/// This `sray` executable.
+/// The `sray` executable the experiments run, set once by [`set_sray_exe`].
+static SRAY: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+/// Names the `sray` binary to measure: `--sray PATH`, else the running
+/// executable when it is `sray` itself (`sray bench`), else an error.
+pub fn set_sray_exe(explicit: Option<&Path>) -> anyhow::Result<()> {
+    let p = match explicit {
+        Some(p) => p.to_path_buf(),
+        None => {
+            let me = std::env::current_exe().context("cannot find the running executable")?;
+            if me.file_stem().and_then(|s| s.to_str()) != Some("sray") {
+                bail!(
+                    "{} is not the sray binary: give the binary to measure with --sray PATH",
+                    me.display()
+                );
+            }
+            me
+        }
+    };
+    let p = p
+        .canonicalize()
+        .with_context(|| format!("cannot find the sray binary {}", p.display()))?;
+    let _ = SRAY.set(p);
+    Ok(())
+}
+
+/// The `sray` binary under measurement.
 pub fn sray_exe() -> anyhow::Result<PathBuf> {
-    std::env::current_exe().context("cannot find the sray executable")
+    SRAY.get()
+        .cloned()
+        .context("internal: the sray binary to measure was not set")
 }
 
 /// Runs `sray render ARGS --stats FILE` and reads the statistics.

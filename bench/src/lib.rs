@@ -69,6 +69,9 @@ pub struct BenchArgs {
     /// Directory with the SPD's POV-Ray files (default: ../shared/spd if present)
     #[arg(long)]
     pub spd_dir: Option<PathBuf>,
+    /// The sray binary to measure (default: this one)
+    #[arg(long)]
+    pub sray: Option<PathBuf>,
 }
 
 /// What every experiment shares: settings, a scratch directory, progress.
@@ -199,7 +202,7 @@ fn machine() -> String {
         })
         .unwrap_or_else(|| "unknown CPU".into());
     let mem = sray_engine::sys::mem_total_bytes()
-        .map(sray_engine::bf::fmt_bytes)
+        .map(sray_engine::units::fmt_bytes)
         .unwrap_or_default();
     format!(
         "{cpu}, {} logical CPUs, {mem} memory, {} {}",
@@ -210,6 +213,7 @@ fn machine() -> String {
 }
 
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    exec::set_sray_exe(a.sray.as_deref())?;
     let mut exps = if a.experiments.is_empty() {
         Experiment::ALL.to_vec()
     } else {

@@ -9,8 +9,8 @@ use super::chart::{self, Scale, Series};
 use super::exec::{self, Capped, MemoryCap};
 use super::report::{Report, num};
 use super::{Ctx, Plan};
-use sray_engine::bf::fmt_bytes;
 use sray_engine::spd::SpdScene;
+use sray_engine::units::fmt_bytes;
 
 struct Setup {
     cap: u64,

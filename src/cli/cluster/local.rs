@@ -4,9 +4,9 @@
 //! handles drop). A random token keeps other local users out.
 
 use super::client::{self, JobResult};
-use super::server::{Security, serve};
-use super::state::{Config, Shared};
 use anyhow::{Context, bail};
+use sray_coordinator::server::{Security, serve};
+use sray_coordinator::state::{Config, Shared};
 use sray_engine::progress::Progress;
 use sray_proto::auth::Token;
 use sray_proto::net::Target;

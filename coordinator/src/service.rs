@@ -4,9 +4,10 @@
 //! pixel corners of the image, spawned rays in key order within the keys
 //! the shard's rays can spawn.
 
-use super::driver;
-use super::state::{Refusal, Shared, TaskOutput};
-use sray_engine::bf::{Contribution, NO_HIT, RayRec, RecordWriter, ResultRec};
+use crate::driver;
+use crate::state::{Refusal, Shared, TaskOutput};
+use sray_engine::bf::{Contribution, NO_HIT, RayRec, ResultRec};
+use sray_engine::spill::RecordWriter;
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
 use sray_proto::wire::{SCENE_CHUNK_BYTES, pack, records_per_chunk, unpack};
 use std::io::Write;
@@ -273,7 +274,7 @@ impl Coordinator for Service {
         let Some(Up::Header(h)) = stream.message().await?.and_then(|m| m.part) else {
             return Err(Status::invalid_argument("an upload starts with its header"));
         };
-        if !super::scenes::valid_hash(&h.hash) {
+        if !crate::scenes::valid_hash(&h.hash) {
             return Err(Status::invalid_argument("not a scene hash"));
         }
         let mut file = self.shared.scenes.upload_file().map_err(internal)?;
@@ -342,7 +343,7 @@ impl Coordinator for Service {
 /// Streams a reader's records in chunks; false if the receiver went away
 /// or reading failed.
 fn stream_records<T: bytemuck::Pod>(
-    rd: &mut sray_engine::bf::RecordReader<T>,
+    rd: &mut sray_engine::spill::RecordReader<T>,
     kind: v1::RecordKind,
     send: &dyn Fn(v1::RecordKind, Vec<u8>) -> bool,
     fail: &dyn Fn(sray_engine::Error),
@@ -374,7 +375,7 @@ fn stream_records<T: bytemuck::Pod>(
 struct Receiver<'a> {
     shared: &'a Shared,
     task: &'a v1::Task,
-    input: &'a super::state::TaskInput,
+    input: &'a crate::state::TaskInput,
     results: Option<RecordWriter<ResultRec>>,
     contributions: Option<RecordWriter<Contribution>>,
     rays: Option<RecordWriter<RayRec>>,
@@ -384,7 +385,7 @@ struct Receiver<'a> {
 }
 
 impl<'a> Receiver<'a> {
-    fn new(shared: &'a Shared, task: &'a v1::Task, input: &'a super::state::TaskInput) -> Self {
+    fn new(shared: &'a Shared, task: &'a v1::Task, input: &'a crate::state::TaskInput) -> Self {
         Receiver {
             shared,
             task,

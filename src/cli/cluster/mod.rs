@@ -1,0 +1,8 @@
+//! Rendering on a cluster from the command line.
+//!
+//! - [`client`]: submitting a render to a coordinator and watching it;
+//! - [`local`]: a coordinator in this process and N worker processes for
+//!   one render (`--local-workers`).
+
+pub mod client;
+pub mod local;
