@@ -336,10 +336,10 @@ async fn run_stage(
                     tot.counts.reflect_rays += s.reflect_rays;
                     tot.counts.refract_rays += s.refract_rays;
                     tot.counts.shadow_rays += s.shadow_rays;
-                    tot.tests.sphere += s.tests_sphere;
-                    tot.tests.polygon += s.tests_polygon;
-                    tot.tests.patch += s.tests_patch;
-                    tot.tests.cone += s.tests_cone;
+                    // Kind names were checked when the output arrived.
+                    let _ = tot
+                        .tests
+                        .add_named(s.tests_by_kind.iter().map(|(k, &n)| (k.as_str(), n)));
                     tot.hits += output.hits;
                     tot.tasks += 1;
                     tot.worker_seconds += s.seconds;

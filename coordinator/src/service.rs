@@ -6,7 +6,7 @@
 
 use crate::driver;
 use crate::state::{Refusal, Shared, TaskOutput};
-use sray_engine::bf::{Contribution, NO_HIT, RayRec, ResultRec};
+use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::RecordWriter;
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
 use sray_proto::wire::{SCENE_CHUNK_BYTES, pack, records_per_chunk, unpack};
@@ -421,15 +421,13 @@ impl<'a> Receiver<'a> {
                     if r.ray != want {
                         return Err(format!("result for ray {} where ray {want} was due", r.ray));
                     }
-                    if r.object != NO_HIT
-                        && (r.object as u64 >= self.input.objects || !r.t.is_finite())
-                    {
+                    if !r.prim.is_none() && (r.prim.0 >= self.input.objects || !r.t.is_finite()) {
                         return Err(format!(
                             "ray {}: no object {} at distance {}",
-                            r.ray, r.object, r.t
+                            r.ray, r.prim.0, r.t
                         ));
                     }
-                    self.hits += (r.object != NO_HIT) as u64;
+                    self.hits += !r.prim.is_none() as u64;
                     self.n_results += 1;
                 }
                 if self.n_results > self.task.ray_count {
@@ -487,6 +485,8 @@ impl<'a> Receiver<'a> {
                 self.n_results, self.task.ray_count
             ));
         }
+        sray_engine::shapes::KindCounts::default()
+            .add_named(summary.tests_by_kind.iter().map(|(k, &n)| (k.as_str(), n)))?;
         let err = |e: sray_engine::Error| e.to_string();
         Ok(TaskOutput {
             results: self.results.map(|w| w.finish()).transpose().map_err(err)?,

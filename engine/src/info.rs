@@ -1,11 +1,11 @@
 //! `sray info`: what a scene file holds.
 
 use crate::error::{Error, IoContext};
-use crate::nff::read_nff;
 use crate::progress::Progress;
-use crate::scene::{Aabb, Light, Material, SceneSink, Shape, ShapeCounts, View};
+use crate::scene::{Aabb, Light, Material, SceneSink, View};
 use crate::sdb::{Database, MAX_MATERIALS};
-use crate::source::is_database;
+use crate::shapes::{KindCounts, Shape};
+use crate::source::{detect_format, is_database};
 use serde::Serialize;
 use std::collections::HashSet;
 use std::path::Path;
@@ -13,10 +13,10 @@ use std::path::Path;
 /// The facts `sray info` reports. Field names are the JSON keys.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct SceneInfo {
-    /// "nff" or "sdb".
+    /// The scene file's format ("nff", ...), or "sdb".
     pub format: &'static str,
     pub objects: u64,
-    pub counts: ShapeCounts,
+    pub counts: KindCounts,
     pub lights: u64,
     /// Distinct materials.
     pub materials: u64,
@@ -64,8 +64,9 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
             blocks: Some(db.block_count()),
         });
     }
+    let format = detect_format(path)?;
     let mut c = Counter::default();
-    read_nff(path, &mut c, progress)?;
+    format.read(path, &mut c, progress)?;
     if !c.saw_view {
         return Err(Error::Scene(format!(
             "{}: the scene has no view ('v')",
@@ -74,7 +75,7 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
     }
     let (bbox_min, bbox_max) = bbox_fields(c.bbox);
     Ok(SceneInfo {
-        format: "nff",
+        format: format.name(),
         objects: c.counts.total(),
         counts: c.counts,
         lights: c.lights,
@@ -92,7 +93,7 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
 /// Counts what a scene stream holds, as the database writer would store it.
 #[derive(Default)]
 struct Counter {
-    counts: ShapeCounts,
+    counts: KindCounts,
     lights: u64,
     materials: HashSet<[u32; 8]>,
     statements: u64,
@@ -130,7 +131,7 @@ impl SceneSink for Counter {
             self.materials.insert(Material::DEFAULT.key());
             self.any_material = true;
         }
-        self.counts.add(s.kind(), 1);
+        self.counts.add(s.kind());
         self.bbox.union(&s.bounds());
         Ok(())
     }

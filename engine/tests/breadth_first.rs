@@ -21,7 +21,7 @@ fn convert(nff: &Path, dir: &Path, c: Compression) -> PathBuf {
         c.name()
     ));
     let mut w = DbWriter::create(&out, c).unwrap();
-    SceneSource::Nff(nff.to_path_buf())
+    SceneSource::nff(nff.to_path_buf())
         .stream_into(&mut w, &NoProgress)
         .unwrap();
     w.finish().unwrap();

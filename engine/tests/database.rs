@@ -6,7 +6,7 @@ mod common;
 use sray_engine::Error;
 use sray_engine::info::scene_info;
 use sray_engine::progress::NoProgress;
-use sray_engine::scene::record::Recorder;
+use sray_engine::scene::recorder::Recorder;
 use sray_engine::sdb::{Compression, Database, DbWriter};
 use sray_engine::source::{SceneSource, stream_database};
 use sray_engine::spd::SpdScene;
@@ -89,10 +89,10 @@ fn many_blocks_and_compression_read_alike() {
         while let Some(bl) = s.next_block().unwrap() {
             v.extend(bl.objects().map(|o| {
                 (
-                    o.id,
+                    o.index,
                     o.material,
                     o.bbox,
-                    sray_engine::scene::record::OwnedShape::from_shape(&o.shape),
+                    sray_engine::shapes::OwnedShape::from_shape(&o.shape),
                 )
             }));
         }
@@ -210,7 +210,7 @@ fn info_agrees_between_nff_and_database() {
         let nff = common::shared_spd().join(format!("{name}{size}.nff"));
         for c in [Compression::None, Compression::Zstd(5)] {
             let db = dir.path().join(format!("{name}.sdb"));
-            write_db(&SceneSource::Nff(nff.clone()), &db, c);
+            write_db(&SceneSource::nff(nff.clone()), &db, c);
             let a = scene_info(&nff, &NoProgress).unwrap();
             let b = scene_info(&db, &NoProgress).unwrap();
             assert_eq!(

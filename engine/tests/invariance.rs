@@ -14,8 +14,9 @@ use sray_engine::nff::read_nff;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{GridRes, RenderOptions};
 use sray_engine::scene::SceneSink;
-use sray_engine::scene::record::{Event, OwnedShape, Recorder};
+use sray_engine::scene::recorder::{Event, Recorder};
 use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::shapes::GeometryMap;
 use std::path::{Path, PathBuf};
 
 const SIZE: u32 = 24;
@@ -118,30 +119,11 @@ fn scaled(rec: &Recorder, k: f64) -> Recorder {
                 l.position = p64(l.position);
                 Event::Light(l)
             }
-            Event::Object(o) => Event::Object(match o {
-                OwnedShape::Sphere { center, radius } => OwnedShape::Sphere {
-                    center: p32(*center),
-                    radius: (*radius as f64 * k) as f32,
-                },
-                OwnedShape::Polygon { vertices } => OwnedShape::Polygon {
-                    vertices: vertices.iter().map(|&v| p32(v)).collect(),
-                },
-                OwnedShape::Patch { vertices, normals } => OwnedShape::Patch {
-                    vertices: vertices.iter().map(|&v| p32(v)).collect(),
-                    normals: normals.clone(),
-                },
-                OwnedShape::Cone {
-                    base,
-                    base_radius,
-                    apex,
-                    apex_radius,
-                } => OwnedShape::Cone {
-                    base: p32(*base),
-                    base_radius: (*base_radius as f64 * k) as f32,
-                    apex: p32(*apex),
-                    apex_radius: (*apex_radius as f64 * k) as f32,
-                },
-            }),
+            Event::Object(o) => Event::Object(o.mapped(&GeometryMap {
+                point: &p32,
+                length: &|r| (r as f64 * k) as f32,
+                normal: &|n| n,
+            })),
             other => other.clone(),
         })
         .collect();

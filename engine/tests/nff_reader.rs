@@ -6,7 +6,8 @@ mod common;
 use sray_engine::Error;
 use sray_engine::nff::{MAX_LINE_BYTES, read_nff, read_nff_from};
 use sray_engine::progress::NoProgress;
-use sray_engine::scene::record::{Event, OwnedShape, Recorder};
+use sray_engine::scene::recorder::{Event, Recorder};
+use sray_engine::shapes::{Cone, Shape, Sphere};
 use std::path::Path;
 
 const VIEW: &str = "v\nfrom 0 0 5\nat 0 0 0\nup 0 1 0\nangle 45\nhither 1\nresolution 64 64\n";
@@ -54,8 +55,8 @@ fn cone_on_one_line_and_on_three() {
     let three = parse(&format!("{VIEW}c\n0 0 0 1\n0 0 2 0.5\n")).unwrap();
     assert_eq!(one.events, three.events);
     assert!(matches!(
-        one.objects().next().unwrap(),
-        OwnedShape::Cone { apex_radius, .. } if *apex_radius == 0.5
+        one.objects().next().unwrap().shape(),
+        Shape::Cone(Cone { apex_radius, .. }) if apex_radius == 0.5
     ));
 }
 
@@ -68,12 +69,14 @@ fn printf_g_numbers_comments_blank_lines_and_crlf() {
     assert!(r.events.contains(&Event::Background([0.078, 0.361, 0.753])));
     let s = r.objects().next().unwrap();
     assert_eq!(
-        s,
-        &OwnedShape::Sphere {
+        s.shape(),
+        Shape::Sphere(Sphere {
             center: [-0.0, 1e-5, 3.0],
             radius: 0.5
-        }
+        })
     );
+    // -0 keeps its sign.
+    assert_eq!(s.numbers()[0].to_bits(), (-0.0f32).to_bits());
     let light = r.events.iter().find_map(|e| match e {
         Event::Light(l) => Some(*l),
         _ => None,
@@ -94,8 +97,8 @@ fn light_with_colour_and_patches() {
             .any(|e| matches!(e, Event::Light(l) if l.color == Some([0.5, 0.25, 1.0])))
     );
     assert!(matches!(
-        r.objects().next().unwrap(),
-        OwnedShape::Patch { .. }
+        r.objects().next().unwrap().shape(),
+        Shape::Patch(_)
     ));
 }
 

@@ -10,12 +10,13 @@
 
 mod common;
 
-use sray_engine::intersect::{RayQ, intersect, surface_at};
+use sray_engine::intersect::RayQ;
 use sray_engine::math::{Real, Vec3};
 use sray_engine::objects::ObjectTable;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, Precision, ShadeScene, Spawn, epsilon, shade};
 use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::shapes::intersect;
 use sray_engine::source::SceneSource;
 
 const SIDE: u32 = 32;
@@ -85,7 +86,7 @@ fn measure<R: Real>(
                 continue;
             };
             let o = objs.get(id);
-            let surf = surface_at(&o.shape, &eye, t);
+            let surf = o.shape.surface(&eye, t);
             let m = &h.materials[o.material as usize];
             let mut spawned: Vec<(Vec3, f64, bool)> = Vec::new();
             shade(&sc, d, 1, 1.0, &surf, m, &mut |s| match s {
@@ -97,10 +98,11 @@ fn measure<R: Real>(
             for (dir, dist, is_shadow) in spawned {
                 let ray = RayQ::new(surf.p, dir);
                 tally.secondary += 1;
-                if let Some((hit, th)) = nearest::<R>(objs, &ray, eps, dist, None) {
-                    if hit == id && th < 1e-4 * size {
-                        tally.self_hits += 1;
-                    }
+                if let Some((hit, th)) = nearest::<R>(objs, &ray, eps, dist, None)
+                    && hit == id
+                    && th < 1e-4 * size
+                {
+                    tally.self_hits += 1;
                 }
                 if is_shadow {
                     tally.shadow += 1;
@@ -125,7 +127,7 @@ fn secondary_rays_do_not_find_their_own_surface() {
     for (name, size) in common::DEFAULT_SCENES {
         let path = dir.path().join(format!("{name}.sdb"));
         let mut w = DbWriter::create(&path, Compression::None).unwrap();
-        SceneSource::Nff(common::shared_spd().join(format!("{name}{size}.nff")))
+        SceneSource::nff(common::shared_spd().join(format!("{name}{size}.nff")))
             .stream_into(&mut w, &NoProgress)
             .unwrap();
         w.finish().unwrap();

@@ -7,9 +7,10 @@ use common::{DEFAULT_SCENES, shared_spd};
 use sray_engine::Error;
 use sray_engine::nff::read_nff;
 use sray_engine::progress::NoProgress;
-use sray_engine::scene::record::{Event, Recorder};
-use sray_engine::scene::{Light, Material, SceneSink, Shape, View};
+use sray_engine::scene::recorder::{Event, Recorder};
+use sray_engine::scene::{Light, Material, SceneSink, View};
 use sray_engine::sdb::{Compression, DbWriter};
+use sray_engine::shapes::Shape;
 use sray_engine::spd::SpdScene;
 
 fn generated(name: &str, size: u32) -> Recorder {
@@ -45,17 +46,17 @@ fn generators_reproduce_the_seven_shared_scenes() {
         // The scene's extent, from the file's objects.
         let mut bb = sray_engine::scene::Aabb::EMPTY;
         for o in file.objects() {
-            bb.union(&o.as_shape().bounds());
+            bb.union(&o.shape().bounds());
         }
         let tol = 1e-4 * bb.extent().into_iter().fold(0.0, f64::max);
         let mut worst = 0.0f64;
         for (i, (g, f)) in gen_.events.iter().zip(&file.events).enumerate() {
             match (g, f) {
                 (Event::Object(a), Event::Object(b)) => {
-                    assert_eq!(a.kind(), b.kind(), "{name}: statement {i}");
+                    assert_eq!(a.kind, b.kind, "{name}: statement {i}");
                     let (na, nb) = (a.numbers(), b.numbers());
                     assert_eq!(na.len(), nb.len(), "{name}: statement {i} vertex count");
-                    for (x, y) in na.iter().zip(&nb) {
+                    for (x, y) in na.iter().zip(nb) {
                         worst = worst.max((*x as f64 - *y as f64).abs());
                     }
                 }

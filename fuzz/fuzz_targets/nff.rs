@@ -4,11 +4,12 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use sray_engine::intersect::{RayQ, intersect};
+use sray_engine::intersect::RayQ;
 use sray_engine::math::Vec3;
 use sray_engine::nff::read_nff_from;
 use sray_engine::progress::NoProgress;
-use sray_engine::scene::{Light, Material, SceneSink, Shape, View};
+use sray_engine::scene::{Light, Material, SceneSink, View};
+use sray_engine::shapes::{Shape, intersect};
 use std::path::Path;
 
 /// Discards the scene but tests each object against a few rays, as a

@@ -6,7 +6,8 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use sray_engine::intersect::{RayQ, intersect, prepare};
+use sray_engine::intersect::RayQ;
+use sray_engine::shapes::intersect;
 use sray_engine::math::Vec3;
 use sray_engine::sdb::Database;
 use std::io::Write;
@@ -22,9 +23,9 @@ fuzz_target!(|data: &[u8]| {
     let ray = RayQ::new(Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
     while let Ok(Some(block)) = scan.next_block() {
         for o in block.objects() {
-            let _ = prepare(&o.shape);
+            let _ = o.shape.prepare();
             let _ = intersect::<f64>(&o.shape, &o.bbox, &ray, 0.0, f64::INFINITY);
-            let _ = (o.id, o.material);
+            let _ = (o.index, o.material);
         }
     }
 });

@@ -14,4 +14,4 @@ pub mod v1 {
 }
 
 /// Bumped whenever the messages or their meaning change incompatibly.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;

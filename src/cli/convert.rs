@@ -26,7 +26,7 @@ pub struct ConvertArgs {
 pub fn run(a: ConvertArgs) -> anyhow::Result<()> {
     let source = SceneSource::parse(&a.scene)?;
     let bar = match source {
-        SceneSource::Nff(_) => Bar::bytes("convert"),
+        SceneSource::File { format, .. } if format.progress_in_bytes() => Bar::bytes("convert"),
         _ => Bar::new("convert", "objects"),
     };
     write_scene(&source, &a.output, a.compress, &bar)?;

@@ -29,10 +29,12 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
 fn print_human(path: &std::path::Path, i: &SceneInfo) {
     println!("{} ({})", path.display(), i.format);
     println!("  objects      {}", i.objects);
-    println!(
-        "    spheres {}, polygons {}, patches {}, cones {}",
-        i.counts.sphere, i.counts.polygon, i.counts.patch, i.counts.cone
-    );
+    let by_kind: Vec<String> = i
+        .counts
+        .named()
+        .map(|(kind, n)| format!("{kind} {n}"))
+        .collect();
+    println!("    {}", by_kind.join(", "));
     println!("  lights       {}", i.lights);
     println!(
         "  materials    {} distinct ({} statements)",

@@ -262,10 +262,7 @@ fn run_task<R: Real>(
             }
             tracer.recycle(results);
             let t = ist.intersection_tests;
-            summary.tests_sphere = t.sphere;
-            summary.tests_polygon = t.polygon;
-            summary.tests_patch = t.patch;
-            summary.tests_cone = t.cone;
+            summary.tests_by_kind = t.named().map(|(k, n)| (k.to_string(), n)).collect();
             summary.stats_json = serde_json::to_string(&ist).unwrap_or_default();
         }
         Ok(v1::Stage::Shade) => {

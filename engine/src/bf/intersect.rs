@@ -28,16 +28,18 @@
 //! Slots are split into shards, one per thread; every thread scans the same
 //! decoded block for its own rays, so no ray is touched by two threads.
 
-use super::records::{NO_HIT, RayRec, ResultRec};
+use super::records::{RayRec, ResultRec};
 use super::regmap::{END, RegMap};
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
-use crate::intersect::{Prepared, RayQ, intersect_prepared, prepare};
+use crate::hit::{Hit, PrimId};
+use crate::intersect::RayQ;
 use crate::math::{Real, Vec3};
 use crate::progress::Progress;
 use crate::render::KindCounts;
 use crate::sdb::{Block, Database};
+use crate::shapes::Prepared;
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -124,10 +126,9 @@ const NEW_WALK: Walk = Walk {
 /// apart from the rest of the ray so that visits stay in cache.
 #[derive(Clone, Copy, Debug)]
 struct Hot<R> {
-    /// The last object tested (the paper's mailbox).
-    mailbox: u32,
-    best_id: u32,
-    best_t: f64,
+    /// The last primitive tested (the paper's mailbox).
+    mailbox: PrimId,
+    best: Hit,
     /// Tests must find a hit below this: just above the best distance, so
     /// that an exact tie is seen and goes to the smaller id.
     upper: R,
@@ -155,9 +156,8 @@ struct Cold {
 
 fn empty_hot<R: Real>() -> Hot<R> {
     Hot {
-        mailbox: NO_HIT,
-        best_id: NO_HIT,
-        best_t: f64::INFINITY,
+        mailbox: PrimId::NONE,
+        best: Hit::NONE,
         upper: R::INFINITY,
         t_min: R::ZERO,
         prev: [[NONE16; 3]; MAX_GRIDS],
@@ -349,9 +349,8 @@ fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
     };
     let shadow = r.is_shadow();
     sh.hot[i] = Hot {
-        mailbox: NO_HIT,
-        best_id: NO_HIT,
-        best_t: f64::INFINITY,
+        mailbox: PrimId::NONE,
+        best: Hit::NONE,
         upper: if shadow {
             R::from_f64(r.t_max)
         } else {
@@ -600,7 +599,7 @@ fn register<R: Real>(
         let limit = store.store(g, w.k);
         let mut n = 0;
         loop {
-            if h.best_t < dda.t_enter {
+            if h.best.t < dda.t_enter {
                 w.state = DONE; // the best hit lies before this voxel
                 break;
             }
@@ -657,7 +656,8 @@ fn scan_block<R: Real>(
         if !region[g].overlaps(lo, hi) {
             continue;
         }
-        let mut prep: Option<Prepared> = None;
+        let mut prep: Option<Option<Prepared>> = None;
+        let prim = o.prim();
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 let row = grid.spec.index([0, y, z]);
@@ -676,11 +676,11 @@ fn scan_block<R: Real>(
                         if s.blocked {
                             continue;
                         }
-                        if s.mailbox == o.id {
+                        if s.mailbox == prim {
                             sh.counts.skipped_mailbox += 1;
                             continue;
                         }
-                        s.mailbox = o.id;
+                        s.mailbox = prim;
                         let p = s.prev[g];
                         if p[0] != NONE16
                             && (lo[0]..=hi[0]).contains(&(p[0] as u32))
@@ -693,20 +693,18 @@ fn scan_block<R: Real>(
                             sh.counts.skipped_last_voxel += 1;
                             continue;
                         }
-                        let pr = prep.get_or_insert_with(|| prepare(&o.shape));
+                        let pr = prep.get_or_insert_with(|| o.shape.prepare());
                         sh.counts.tests.add(o.shape.kind());
                         let q = &sh.q[slot as usize];
                         if let Some(t) =
-                            intersect_prepared(&o.shape, pr, &o.bbox, q, s.t_min, s.upper)
+                            o.shape.intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
                         {
                             let t = t.to_f64();
                             if s.shadow {
                                 s.blocked = true;
-                                s.best_t = t;
-                                s.best_id = o.id;
-                            } else if t < s.best_t || (t == s.best_t && o.id < s.best_id) {
-                                s.best_t = t;
-                                s.best_id = o.id;
+                                s.best = Hit { t, prim };
+                            } else if s.best.loses_to(t, prim) {
+                                s.best = Hit { t, prim };
                                 s.upper = R::from_f64(t).next_up();
                             }
                         }
@@ -723,7 +721,7 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
         if !h.active {
             continue;
         }
-        let best_t = h.best_t;
+        let best_t = h.best.t;
         let done = h.blocked
             || (0..ngrids).all(|g| {
                 let w = &mut c.walks[g];
@@ -735,9 +733,8 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
         if done {
             sh.done.push(ResultRec {
                 ray: c.id,
-                object: h.best_id,
-                _pad: 0,
-                t: h.best_t,
+                prim: h.best.prim,
+                t: h.best.t,
             });
             h.active = false;
         }

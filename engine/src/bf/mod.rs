@@ -25,7 +25,7 @@ mod tracer;
 mod voxels;
 
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
-pub use records::{Contribution, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+pub use records::{Contribution, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};

@@ -1,6 +1,7 @@
 //! The records the breadth-first tracer keeps on disk: rays, and the
 //! result of intersecting each ray.
 
+use crate::hit::PrimId;
 use bytemuck::{Pod, Zeroable};
 
 /// What a ray is for.
@@ -62,17 +63,14 @@ impl RayRec {
     }
 }
 
-/// No object: a miss, or an unblocked shadow ray.
-pub const NO_HIT: u32 = u32::MAX;
-
-/// The outcome of intersecting ray `ray`: the nearest object and its
-/// distance, or for a shadow ray the first blocker found.
+/// The outcome of intersecting ray `ray`: the nearest primitive and its
+/// distance, or for a shadow ray the first blocker found; `PrimId::NONE`
+/// for a miss or an unblocked shadow ray.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct ResultRec {
     pub ray: u64,
-    pub object: u32,
-    pub _pad: u32,
+    pub prim: PrimId,
     pub t: f64,
 }
 
@@ -83,8 +81,7 @@ pub struct HitRec {
     pub ray: RayRec,
     pub id: u64,
     pub t: f64,
-    pub object: u32,
-    pub _pad: u32,
+    pub prim: PrimId,
 }
 
 /// Colour added to a pixel corner (fixed point), as cluster workers return

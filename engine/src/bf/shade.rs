@@ -5,9 +5,9 @@
 //! the objects, where they are shaded. The rays they spawn go to an
 //! external sort that puts the next round in a fixed order.
 
-use super::records::{HitRec, NO_HIT, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+use super::records::{HitRec, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 use crate::error::Error;
-use crate::intersect::{RayQ, surface_at};
+use crate::intersect::RayQ;
 use crate::math::Vec3;
 use crate::render::{RayCounts, ShadeScene, Spawn, shade, to_fixed};
 use crate::scene::Material;
@@ -72,10 +72,10 @@ pub fn shade_round(
             )));
         }
         if ray.is_shadow() {
-            if res.object == NO_HIT {
+            if res.prim.is_none() {
                 contribute(ray.corner, to_fixed(ray.payload));
             }
-        } else if res.object == NO_HIT {
+        } else if res.prim.is_none() {
             contribute(ray.corner, to_fixed(setup.shade.background(ray.payload[0])));
         } else {
             if ray.kind() == RayKind::Eye {
@@ -86,8 +86,7 @@ pub fn shade_round(
                 ray,
                 id,
                 t: res.t,
-                object: res.object,
-                _pad: 0,
+                prim: res.prim,
             });
             if set.len() >= setup.set_cap.max(1) {
                 shade_set(setup, pool, &mut set, next, counts, &mut st)?;
@@ -115,7 +114,7 @@ fn shade_set(
 ) -> Result<(), Error> {
     // Hits arrive in ray order; a stable sort by object keeps that order
     // within each object.
-    crate::spill::radix_sort_by_key(set, |h| h.object as u64, setup.radix);
+    crate::spill::radix_sort_by_key(set, |h| h.prim.0, setup.radix);
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;
@@ -125,7 +124,7 @@ fn shade_set(
         }
         let first = block.first_object;
         let end = first + block.object_count as u64;
-        let stop = at + set[at..].partition_point(|h| (h.object as u64) < end);
+        let stop = at + set[at..].partition_point(|h| h.prim.0 < end);
         if stop == at {
             continue;
         }
@@ -147,7 +146,7 @@ fn shade_set(
                     out.clear();
                     *c = RayCounts::default();
                     for h in hits {
-                        let obj = &objs[(h.object as u64 - first) as usize];
+                        let obj = &objs[(h.prim.0 - first) as usize];
                         shade_hit(materials, shade_scene, h, obj, out, c);
                     }
                 })
@@ -178,7 +177,7 @@ fn shade_hit(
     let r = &h.ray;
     let o = Vec3::from_f64(r.o);
     let d = Vec3::from_f64(r.d);
-    let surf = surface_at(&obj.shape, &RayQ::new(o, d), h.t);
+    let surf = obj.shape.surface(&RayQ::new(o, d), h.t);
     let mat = &materials[obj.material as usize];
     let lights = shade_scene.lights.len() as u64;
     let base = h.id * SPAWN_SLOTS;

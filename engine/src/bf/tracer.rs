@@ -10,11 +10,12 @@
 //! a ray's spawn keys only on its id in the round.
 
 use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
-use super::records::{NO_HIT, RayKind, RayRec, ResultRec};
+use super::records::{RayKind, RayRec, ResultRec};
 use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
 use super::voxels::VoxelGrids;
 use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, REGS_PER_SLOT};
 use crate::error::Error;
+use crate::hit::PrimId;
 use crate::math::Real;
 use crate::progress::Progress;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
@@ -46,8 +47,7 @@ fn result_key(r: &ResultRec) -> u64 {
 /// A slot of the in-memory results not yet written.
 const UNSET: ResultRec = ResultRec {
     ray: u64::MAX,
-    object: NO_HIT,
-    _pad: 0,
+    prim: PrimId::NONE,
     t: 0.0,
 };
 

@@ -10,12 +10,12 @@ pub use object_grid::ObjectGrid;
 
 use crate::error::Error;
 use crate::grid::{DEFAULT_DENSITY, GridStat, MAX_CELLS, choose_resolution, plan_groups};
-use crate::intersect::{Prepared, prepare};
 use crate::objects::ObjectTable;
 use crate::progress::Progress;
 use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
-use crate::scene::{Aabb, Material, Shape};
+use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
+use crate::shapes::{Prepared, Shape};
 use std::time::Instant;
 
 /// `prep_of` entry of objects without prepared data.
@@ -28,7 +28,7 @@ pub struct DfScene<'t> {
     pub shapes: Vec<Shape<'t>>,
     pub bboxes: Vec<Aabb>,
     /// Index into `preps` of each object's prepared test data, or
-    /// `PLAIN` for objects with none (spheres, triangles).
+    /// `PLAIN` for objects with none worth keeping (spheres, triangles).
     pub prep_of: Vec<u32>,
     pub preps: Vec<Prepared>,
     pub material_of: Vec<u32>,
@@ -71,9 +71,9 @@ impl<'t> DfScene<'t> {
             shapes.push(o.shape);
             bboxes.push(o.bbox);
             material_of.push(o.material);
-            match prepare(&o.shape) {
-                Prepared::Plain => prep_of.push(PLAIN),
-                p => {
+            match o.shape.prepare() {
+                None => prep_of.push(PLAIN),
+                Some(p) => {
                     prep_of.push(preps.len() as u32);
                     preps.push(p);
                 }
@@ -105,12 +105,12 @@ impl<'t> DfScene<'t> {
         })
     }
 
-    /// Prepared test data of object `id`.
+    /// Prepared test data of object `id`, if any was kept.
     #[inline(always)]
-    pub fn prep(&self, id: u32) -> &Prepared {
+    pub fn prep(&self, id: u32) -> Option<&Prepared> {
         match self.prep_of[id as usize] {
-            PLAIN => &Prepared::Plain,
-            i => &self.preps[i as usize],
+            PLAIN => None,
+            i => Some(&self.preps[i as usize]),
         }
     }
 

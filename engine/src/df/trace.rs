@@ -3,7 +3,8 @@
 use super::DfScene;
 use crate::error::Error;
 use crate::grid::Dda;
-use crate::intersect::{RayQ, intersect_prepared, surface_at};
+use crate::hit::{Hit, PrimId};
+use crate::intersect::RayQ;
 use crate::math::{Real, Vec3};
 use crate::progress::Progress;
 use crate::render::{
@@ -176,11 +177,12 @@ fn trace<R: Real>(
         add(s.shade.background(weight));
         return;
     };
+    let id = id as usize;
     if depth == 1 {
         sc.rays.eye_hit_rays += 1;
     }
-    let surf = surface_at(&s.shapes[id as usize], &RayQ::new(o, d), t);
-    let mat = &s.materials[s.material_of[id as usize] as usize];
+    let surf = s.shapes[id].surface(&RayQ::new(o, d), t);
+    let mat = &s.materials[s.material_of[id] as usize];
     let eps = s.shade.eps;
     let max_depth = s.shade.max_depth as usize;
     shade(
@@ -223,8 +225,7 @@ fn trace<R: Real>(
 /// The best hit so far, and the bound a test must beat: just above the
 /// best distance, so that an exact tie is seen and goes to the smaller id.
 struct Best<R> {
-    t: f64,
-    id: u32,
+    hit: Hit,
     upper: R,
 }
 
@@ -244,8 +245,7 @@ fn nearest<R: Real>(
     let stamp = sc.next_stamp();
     let rmin = R::from_f64(t_min);
     let mut best = Best {
-        t: f64::INFINITY,
-        id: NO_OBJECT,
+        hit: Hit::NONE,
         upper: R::INFINITY,
     };
     // The large objects' grid first: one ground polygon found early prunes
@@ -258,19 +258,20 @@ fn nearest<R: Real>(
             }
             continue;
         }
-        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.t.next_up()) else {
+        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.hit.t.next_up()) else {
             continue;
         };
         loop {
             for &id in g.cell(w.index) {
                 test_nearest(s, sc, stamp, &q, rmin, id, &mut best);
             }
-            if (best.id != NO_OBJECT && best.t < w.t_exit()) || !w.advance() {
+            if (best.hit.is_some() && best.hit.t < w.t_exit()) || !w.advance() {
                 break;
             }
         }
     }
-    (best.id != NO_OBJECT).then_some((best.t, best.id))
+    // Objects of the database are the only primitives here.
+    best.hit.prim.object_index().map(|id| (best.hit.t, id))
 }
 
 /// Tests one candidate for the nearest hit, unless this ray tested it
@@ -292,18 +293,11 @@ fn test_nearest<R: Real>(
     *m = stamp;
     let shape = &s.shapes[id as usize];
     sc.tests.add(shape.kind());
-    if let Some(t) = intersect_prepared(
-        shape,
-        s.prep(id),
-        &s.bboxes[id as usize],
-        q,
-        rmin,
-        best.upper,
-    ) {
+    if let Some(t) = shape.intersect(s.prep(id), &s.bboxes[id as usize], q, rmin, best.upper) {
         let t = t.to_f64();
-        if t < best.t || (t == best.t && id < best.id) {
-            best.t = t;
-            best.id = id;
+        let prim = PrimId::object(id);
+        if best.hit.loses_to(t, prim) {
+            best.hit = Hit { t, prim };
             best.upper = R::from_f64(t).next_up();
         }
     }
@@ -377,5 +371,7 @@ fn blocks<R: Real>(
     *m = stamp;
     let shape = &s.shapes[id as usize];
     sc.tests.add(shape.kind());
-    intersect_prepared(shape, s.prep(id), &s.bboxes[id as usize], q, rmin, rmax).is_some()
+    shape
+        .intersect(s.prep(id), &s.bboxes[id as usize], q, rmin, rmax)
+        .is_some()
 }

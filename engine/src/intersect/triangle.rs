@@ -74,17 +74,3 @@ pub fn weights<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>)
     let inv = R::ONE / det;
     [u * inv, v * inv, w * inv]
 }
-
-/// A polygon with vertex normals as a fan of triangles about its first
-/// vertex (the SPD writes only triangles; this also covers larger patches).
-#[inline(always)]
-pub fn intersect_fan<R: Real>(v: &[[f32; 3]], ray: &RayQ<R>, t_min: R, mut t_max: R) -> Option<R> {
-    let mut best = None;
-    for i in 1..v.len() - 1 {
-        if let Some(t) = intersect(v[0], v[i], v[i + 1], ray, t_min, t_max) {
-            t_max = t;
-            best = Some(t);
-        }
-    }
-    best
-}

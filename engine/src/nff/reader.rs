@@ -3,7 +3,8 @@
 
 use crate::error::{Error, IoContext};
 use crate::progress::Progress;
-use crate::scene::{Light, MAX_POLYGON_VERTICES, Material, SceneSink, Shape, View};
+use crate::scene::{Light, Material, SceneSink, View};
+use crate::shapes::{Cone, MAX_POLYGON_VERTICES, Patch, Polygon, Shape, Sphere};
 use std::fs::File;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -272,10 +273,10 @@ impl<R: BufRead> Parser<R> {
             "s" => {
                 self.require_view("sphere 's'")?;
                 let n = numbers::<_, 4>(&self.lines, toks, "sphere 's'")?;
-                let shape = Shape::Sphere {
+                let shape = Shape::Sphere(Sphere {
                     center: single3(&self.lines, &n[..3])?,
                     radius: single(&self.lines, n[3])?,
-                };
+                });
                 self.emit(sink, &shape)
             }
             "c" => {
@@ -298,12 +299,12 @@ impl<R: BufRead> Parser<R> {
                 } else {
                     numbers::<_, 8>(&self.lines, rest.into_iter(), "cone 'c'")?
                 };
-                let shape = Shape::Cone {
+                let shape = Shape::Cone(Cone {
                     base: single3(&self.lines, &n[0..3])?,
                     base_radius: single(&self.lines, n[3])?,
                     apex: single3(&self.lines, &n[4..7])?,
                     apex_radius: single(&self.lines, n[7])?,
-                };
+                });
                 self.emit(sink, &shape)
             }
             "p" | "pp" => {
@@ -355,12 +356,12 @@ impl<R: BufRead> Parser<R> {
                 let verts = std::mem::take(&mut self.verts);
                 let norms = std::mem::take(&mut self.norms);
                 let shape = if patch {
-                    Shape::Patch {
+                    Shape::Patch(Patch {
                         vertices: &verts,
                         normals: &norms,
-                    }
+                    })
                 } else {
-                    Shape::Polygon { vertices: &verts }
+                    Shape::Polygon(Polygon { vertices: &verts })
                 };
                 let r = self.emit(sink, &shape);
                 self.verts = verts;

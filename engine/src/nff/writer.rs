@@ -1,6 +1,7 @@
 use super::gfmt::fmt_g;
 use crate::error::Error;
-use crate::scene::{Light, Material, SceneSink, Shape, View};
+use crate::scene::{Light, Material, SceneSink, View};
+use crate::shapes::{Cone, Patch, Polygon, Shape, Sphere};
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -109,18 +110,18 @@ impl<W: Write> SceneSink for NffWriter<W> {
 
     fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
         match *shape {
-            Shape::Sphere { center, radius } => {
+            Shape::Sphere(Sphere { center, radius }) => {
                 self.word("s");
                 self.nums(&f3(center));
                 self.num(radius as f64);
                 self.end_line();
             }
-            Shape::Cone {
+            Shape::Cone(Cone {
                 base,
                 base_radius,
                 apex,
                 apex_radius,
-            } => {
+            }) => {
                 self.word("c");
                 self.nums(&f3(base));
                 self.num(base_radius as f64);
@@ -128,14 +129,14 @@ impl<W: Write> SceneSink for NffWriter<W> {
                 self.num(apex_radius as f64);
                 self.end_line();
             }
-            Shape::Polygon { vertices } => {
+            Shape::Polygon(Polygon { vertices }) => {
                 self.word(&format!("p {}\n", vertices.len()));
                 for v in vertices {
                     self.nums(&f3(*v));
                     self.end_line();
                 }
             }
-            Shape::Patch { vertices, normals } => {
+            Shape::Patch(Patch { vertices, normals }) => {
                 self.word(&format!("pp {}\n", vertices.len()));
                 for (v, n) in vertices.iter().zip(normals) {
                     self.nums(&f3(*v));

@@ -1,39 +1,6 @@
-use crate::scene::ShapeKind;
+pub use crate::shapes::KindCounts;
 use serde::Serialize;
 use std::ops::AddAssign;
-
-/// Ray/primitive tests by primitive kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
-pub struct KindCounts {
-    pub sphere: u64,
-    pub polygon: u64,
-    pub patch: u64,
-    pub cone: u64,
-}
-
-impl KindCounts {
-    #[inline(always)]
-    pub fn add(&mut self, k: ShapeKind) {
-        match k {
-            ShapeKind::Sphere => self.sphere += 1,
-            ShapeKind::Polygon => self.polygon += 1,
-            ShapeKind::Patch => self.patch += 1,
-            ShapeKind::Cone => self.cone += 1,
-        }
-    }
-    pub fn total(&self) -> u64 {
-        self.sphere + self.polygon + self.patch + self.cone
-    }
-}
-
-impl AddAssign for KindCounts {
-    fn add_assign(&mut self, o: Self) {
-        self.sphere += o.sphere;
-        self.polygon += o.polygon;
-        self.patch += o.patch;
-        self.cone += o.cone;
-    }
-}
 
 /// The SPD's statistics: the same for every tracer on the same scene.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]

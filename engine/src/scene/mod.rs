@@ -1,16 +1,15 @@
 //! The scene model: what a scene holds besides its objects (view, lights,
-//! materials, background), the primitive shapes, and the [`SceneSink`] that
-//! scene sources (the NFF reader, the SPD generators) stream into.
+//! materials, background), and the [`SceneSink`] that scene sources (the
+//! scene readers, the SPD generators) stream into. The objects themselves
+//! are [`crate::shapes`].
 
-mod aabb;
-pub mod record;
-mod shape;
+pub(crate) mod aabb;
+pub mod recorder;
 mod sink;
 mod sizes;
 
 pub use aabb::Aabb;
-pub use shape::{MAX_POLYGON_VERTICES, Shape, ShapeKind};
-pub use sink::{SceneSink, ShapeCounts};
+pub use sink::SceneSink;
 pub use sizes::{SIZE_CLASSES, SizeClass, SizeSummary, size_class};
 
 use serde::Serialize;

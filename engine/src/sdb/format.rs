@@ -1,6 +1,6 @@
 //! On-disk structures of the object database.
 
-use crate::scene::ShapeKind;
+use crate::shapes::KINDS;
 use bytemuck::{Pod, Zeroable};
 
 #[cfg(not(target_endian = "little"))]
@@ -23,8 +23,13 @@ pub const MAX_BLOCK_RAW: usize = 1 << 20;
 pub fn max_stored(raw: usize) -> usize {
     raw + raw / 128 + 4096
 }
-/// Words before a record's geometry: kind/vertex count, material, bbox.
+/// Words before a record's geometry: kind and count field (kind code in
+/// the low byte, the kind's count, e.g. vertices, above it), material,
+/// bounding box.
 pub const RECORD_HEADER_WORDS: usize = 8;
+/// Kinds the header has counts for.
+pub const MAX_KINDS: usize = 8;
+const _: () = assert!(KINDS <= MAX_KINDS);
 /// Limits on the tables, so that a corrupt count cannot ask for memory.
 pub const MAX_LIGHTS: usize = 1 << 16;
 pub const MAX_MATERIALS: usize = 1 << 22;
@@ -78,8 +83,10 @@ pub struct RawHeader {
     pub block_raw_max: u32,
     pub reserved0: u32,
     pub object_count: u64,
-    /// Per [`ShapeKind`]: sphere, polygon, patch, cone.
-    pub counts: [u64; 4],
+    /// Objects per kind, by kind code ([`crate::shapes::ShapeKind`]);
+    /// room for [`MAX_KINDS`] kinds (files written when there were four
+    /// have zeros in the rest, which was reserved space).
+    pub counts: [u64; MAX_KINDS],
     pub block_count: u64,
     /// `f` statements seen (materials are stored deduplicated).
     pub material_statements: u64,
@@ -89,7 +96,7 @@ pub struct RawHeader {
     pub raw_bytes: u64,
     pub bbox: [f32; 6],
     pub tables_crc: u32,
-    pub reserved: [u32; 28],
+    pub reserved: [u32; 20],
     /// CRC-32 of the 252 bytes before it.
     pub header_crc: u32,
 }
@@ -125,16 +132,6 @@ impl RawBlockHeader {
         c.update(bytemuck::bytes_of(&h));
         c.update(payload);
         c.finalize()
-    }
-}
-
-/// Words of geometry after the record header.
-pub fn payload_words(kind: ShapeKind, nverts: usize) -> usize {
-    match kind {
-        ShapeKind::Sphere => 4,
-        ShapeKind::Cone => 8,
-        ShapeKind::Polygon => 3 * nverts,
-        ShapeKind::Patch => 6 * nverts,
     }
 }
 

@@ -3,10 +3,9 @@
 
 use super::format::*;
 use crate::error::{Error, IoContext};
-use crate::scene::{
-    Aabb, Light, Material, SIZE_CLASSES, SceneHeader, Shape, ShapeCounts, ShapeKind, SizeSummary,
-    View,
-};
+use crate::hit::PrimId;
+use crate::scene::{Aabb, Light, Material, SIZE_CLASSES, SceneHeader, SizeSummary, View};
+use crate::shapes::{KINDS, KindCounts, Shape, ShapeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -22,7 +21,7 @@ pub struct Database {
     path: PathBuf,
     scene: SceneHeader,
     sizes: SizeSummary,
-    counts: ShapeCounts,
+    counts: KindCounts,
     object_count: u64,
     bbox: Aabb,
     compression: Compression,
@@ -104,7 +103,16 @@ impl Database {
         if h.tables_len > (64 << 20) + 64 * MAX_MATERIALS as u64 {
             return Err(err("header", "tables are implausibly large".into()));
         }
-        if h.counts.iter().sum::<u64>() != h.object_count || h.object_count > u32::MAX as u64 {
+        if h.counts[KINDS..].iter().any(|&c| c != 0) {
+            return Err(err(
+                "header",
+                "the database holds kinds of primitive this sray does not know; use a newer sray"
+                    .into(),
+            ));
+        }
+        if h.counts.iter().try_fold(0u64, |a, &c| a.checked_add(c)) != Some(h.object_count)
+            || h.object_count > u32::MAX as u64
+        {
             return Err(err("header", "object counts are inconsistent".into()));
         }
         let mut tables = vec![0u8; h.tables_len as usize];
@@ -129,12 +137,7 @@ impl Database {
             path: path.to_path_buf(),
             scene,
             sizes,
-            counts: ShapeCounts {
-                sphere: h.counts[0],
-                polygon: h.counts[1],
-                patch: h.counts[2],
-                cone: h.counts[3],
-            },
+            counts: KindCounts(std::array::from_fn(|i| h.counts[i])),
             object_count: h.object_count,
             bbox,
             compression,
@@ -153,7 +156,7 @@ impl Database {
     pub fn scene(&self) -> &SceneHeader {
         &self.scene
     }
-    pub fn counts(&self) -> ShapeCounts {
+    pub fn counts(&self) -> KindCounts {
         self.counts
     }
     /// Object counts and bounds per size class.
@@ -335,7 +338,8 @@ pub struct Block<'a> {
 /// One object of a block, borrowing its geometry from the block buffer.
 #[derive(Clone, Copy, Debug)]
 pub struct ObjectRef<'a> {
-    pub id: u32,
+    /// Its index in the database.
+    pub index: u32,
     pub material: u32,
     pub bbox: Aabb,
     pub shape: Shape<'a>,
@@ -470,21 +474,20 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
             .ok_or_else(|| format!("record {i} is cut off"))?;
         let kind = ShapeKind::from_u8((head[0] & 0xff) as u8)
             .ok_or_else(|| format!("record {i} has unknown kind {}", head[0] & 0xff))?;
-        let nverts = (head[0] >> 8) as usize;
-        let ok_verts = match kind {
-            ShapeKind::Sphere | ShapeKind::Cone => nverts == 0,
-            _ => (3..=crate::scene::MAX_POLYGON_VERTICES).contains(&nverts),
-        };
-        if !ok_verts {
-            return Err(format!("record {i} has an invalid vertex count {nverts}"));
-        }
+        let count = head[0] >> 8;
+        let payload = kind.payload_words(count).ok_or_else(|| {
+            format!(
+                "record {i} is a {} with an invalid count {count}",
+                kind.name()
+            )
+        })?;
         if head[1] as usize >= materials {
             return Err(format!(
                 "record {i} refers to material {} of {materials}",
                 head[1]
             ));
         }
-        pos += RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        pos += RECORD_HEADER_WORDS + payload;
         if pos > words.len() {
             return Err(format!("record {i} is cut off"));
         }
@@ -496,7 +499,7 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
     // count, material index) are far below the pattern once checked above,
     // so one pass over every word (which vectorizes) covers all the floats.
     const _: () = assert!(MAX_MATERIALS <= 1 << 23);
-    const _: () = assert!(crate::scene::MAX_POLYGON_VERTICES < 1 << 15);
+    const _: () = assert!(crate::shapes::MAX_POLYGON_VERTICES < 1 << 15);
     let bad = words.iter().fold(0u32, |acc, w| {
         acc | ((w & 0x7f80_0000) == 0x7f80_0000) as u32
     });
@@ -555,43 +558,30 @@ impl<'a> Iterator for ObjectIter<'a> {
 /// Decodes the record at the start of `w` (already validated) as object
 /// `id`; returns it and its length in words.
 #[inline(always)]
-pub(crate) fn decode_record(w: &[u32], id: u32) -> Option<(ObjectRef<'_>, usize)> {
+pub(crate) fn decode_record(w: &[u32], index: u32) -> Option<(ObjectRef<'_>, usize)> {
     let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
-    let nverts = (w[0] >> 8) as usize;
-    let len = RECORD_HEADER_WORDS + payload_words(kind, nverts);
+    let count = w[0] >> 8;
+    let len = RECORD_HEADER_WORDS + kind.payload_words(count)?;
     let f: &[f32] = bytemuck::cast_slice(&w[2..len]);
     let bbox = Aabb {
         min: [f[0], f[1], f[2]],
         max: [f[3], f[4], f[5]],
     };
-    let g = &f[6..];
-    let p3 = |i: usize| [g[i], g[i + 1], g[i + 2]];
-    let shape = match kind {
-        ShapeKind::Sphere => Shape::Sphere {
-            center: p3(0),
-            radius: g[3],
-        },
-        ShapeKind::Cone => Shape::Cone {
-            base: p3(0),
-            base_radius: g[3],
-            apex: p3(4),
-            apex_radius: g[7],
-        },
-        ShapeKind::Polygon => Shape::Polygon {
-            vertices: bytemuck::cast_slice(&g[..3 * nverts]),
-        },
-        ShapeKind::Patch => Shape::Patch {
-            vertices: bytemuck::cast_slice(&g[..3 * nverts]),
-            normals: bytemuck::cast_slice(&g[3 * nverts..6 * nverts]),
-        },
-    };
     Some((
         ObjectRef {
-            id,
+            index,
             material: w[1],
             bbox,
-            shape,
+            shape: kind.decode(&f[6..], count),
         },
         len,
     ))
+}
+
+impl ObjectRef<'_> {
+    /// The object's primitive id.
+    #[inline(always)]
+    pub fn prim(&self) -> PrimId {
+        PrimId::object(self.index)
+    }
 }

@@ -3,9 +3,8 @@
 
 use super::format::*;
 use crate::error::{Error, IoContext};
-use crate::scene::{
-    Aabb, Light, Material, SceneHeader, SceneSink, Shape, ShapeCounts, ShapeKind, SizeSummary, View,
-};
+use crate::scene::{Aabb, Light, Material, SceneHeader, SceneSink, SizeSummary, View};
+use crate::shapes::{KindCounts, Shape};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -15,7 +14,7 @@ use std::path::{Path, PathBuf};
 pub struct WriteSummary {
     pub path: PathBuf,
     pub objects: u64,
-    pub counts: ShapeCounts,
+    pub counts: KindCounts,
     pub bbox: Aabb,
     pub file_bytes: u64,
     pub raw_bytes: u64,
@@ -39,7 +38,7 @@ pub struct DbWriter {
     raw_bytes: u64,
     largest_block: usize,
     objects: u64,
-    counts: ShapeCounts,
+    counts: KindCounts,
     bbox: Aabb,
     sizes: SizeSummary,
     view: Option<View>,
@@ -75,7 +74,7 @@ impl DbWriter {
             raw_bytes: 0,
             largest_block: 0,
             objects: 0,
-            counts: ShapeCounts::default(),
+            counts: KindCounts::default(),
             bbox: Aabb::EMPTY,
             sizes: SizeSummary::default(),
             view: None,
@@ -210,7 +209,11 @@ impl DbWriter {
             block_raw_max: self.largest_block as u32,
             reserved0: 0,
             object_count: self.objects,
-            counts: [c.sphere, c.polygon, c.patch, c.cone],
+            counts: {
+                let mut counts = [0; MAX_KINDS];
+                counts[..c.0.len()].copy_from_slice(&c.0);
+                counts
+            },
             block_count: self.blocks,
             material_statements: self.material_statements,
             tables_offset,
@@ -218,7 +221,7 @@ impl DbWriter {
             raw_bytes: self.raw_bytes,
             bbox: self.bbox.to_array(),
             tables_crc: crc32fast::hash(&tables),
-            reserved: [0; 28],
+            reserved: [0; 20],
             header_crc: 0,
         };
         h.header_crc = h.compute_crc();
@@ -303,11 +306,11 @@ impl SceneSink for DbWriter {
             }
         };
         let kind = shape.kind();
-        let nverts = match shape {
-            Shape::Polygon { vertices } | Shape::Patch { vertices, .. } => vertices.len(),
-            _ => 0,
-        };
-        let words = RECORD_HEADER_WORDS + payload_words(kind, nverts);
+        let count = shape.count();
+        let words = RECORD_HEADER_WORDS
+            + kind
+                .payload_words(count)
+                .ok_or_else(|| Error::Scene(format!("a {} with count {count}", kind.name())))?;
         if self.block_objects > 0 && (self.block.len() + words) * 4 > BLOCK_TARGET {
             self.flush_block()?;
         }
@@ -315,36 +318,13 @@ impl SceneSink for DbWriter {
         self.bbox.union(&bbox);
         self.sizes.add(&bbox);
         let b = &mut self.block;
-        b.push(kind as u32 | ((nverts as u32) << 8));
+        b.push(kind as u32 | (count << 8));
         b.push(material);
         b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
-        let push3 = |b: &mut Vec<u32>, p: &[f32; 3]| b.extend(p.iter().map(|f| f.to_bits()));
-        match shape {
-            Shape::Sphere { center, radius } => {
-                push3(b, center);
-                b.push(radius.to_bits());
-            }
-            Shape::Cone {
-                base,
-                base_radius,
-                apex,
-                apex_radius,
-            } => {
-                push3(b, base);
-                b.push(base_radius.to_bits());
-                push3(b, apex);
-                b.push(apex_radius.to_bits());
-            }
-            Shape::Polygon { vertices } => vertices.iter().for_each(|v| push3(b, v)),
-            Shape::Patch { vertices, normals } => {
-                vertices.iter().for_each(|v| push3(b, v));
-                normals.iter().for_each(|n| push3(b, n));
-            }
-        }
-        self.counts.add(kind, 1);
+        shape.encode(b);
+        self.counts.add(kind);
         self.objects += 1;
         self.block_objects += 1;
-        debug_assert!(kind == ShapeKind::from_u8(kind as u8).unwrap());
         Ok(())
     }
 }

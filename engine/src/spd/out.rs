@@ -9,7 +9,8 @@ use super::matrix::PI;
 use crate::error::Error;
 use crate::nff::round_g6;
 use crate::progress::Progress;
-use crate::scene::{Light, Material, SceneSink, Shape, View};
+use crate::scene::{Light, Material, SceneSink, View};
+use crate::shapes::{Cone, Patch, Polygon, Shape, Sphere};
 
 pub struct Out<'a> {
     sink: &'a mut dyn SceneSink,
@@ -121,10 +122,10 @@ impl<'a> Out<'a> {
 
     pub fn sphere(&mut self, c: [f64; 3], r: f64) -> Result<(), Error> {
         self.counted();
-        self.sink.object(&Shape::Sphere {
+        self.sink.object(&Shape::Sphere(Sphere {
             center: r3(c),
             radius: r32(r),
-        })
+        }))
     }
 
     pub fn cylcone(
@@ -135,21 +136,21 @@ impl<'a> Out<'a> {
         ar: f64,
     ) -> Result<(), Error> {
         self.counted();
-        self.sink.object(&Shape::Cone {
+        self.sink.object(&Shape::Cone(Cone {
             base: r3(base),
             base_radius: r32(br),
             apex: r3(apex),
             apex_radius: r32(ar),
-        })
+        }))
     }
 
     pub fn polygon(&mut self, v: &[[f64; 3]]) -> Result<(), Error> {
         self.counted();
         self.verts.clear();
         self.verts.extend(v.iter().map(|p| r3(*p)));
-        self.sink.object(&Shape::Polygon {
+        self.sink.object(&Shape::Polygon(Polygon {
             vertices: &self.verts,
-        })
+        }))
     }
 
     pub fn polypatch(&mut self, v: &[[f64; 3]], n: &[[f64; 3]]) -> Result<(), Error> {
@@ -158,9 +159,9 @@ impl<'a> Out<'a> {
         self.verts.extend(v.iter().map(|p| r3(*p)));
         self.norms.clear();
         self.norms.extend(n.iter().map(|p| r3(*p)));
-        self.sink.object(&Shape::Patch {
+        self.sink.object(&Shape::Patch(Patch {
             vertices: &self.verts,
             normals: &self.norms,
-        })
+        }))
     }
 }

@@ -2,6 +2,7 @@
 //! break naive implementations.
 
 use super::*;
+use crate::intersect::{RayQ, triangle};
 use crate::math::V3;
 
 fn ray(o: [f64; 3], d: [f64; 3]) -> RayQ<f64> {
@@ -16,10 +17,10 @@ fn close(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-9 * b.abs().max(1.0)
 }
 
-const UNIT_SPHERE: Shape<'static> = Shape::Sphere {
+const UNIT_SPHERE: Shape<'static> = Shape::Sphere(Sphere {
     center: [0.0, 0.0, 0.0],
     radius: 1.0,
-};
+});
 
 #[test]
 fn sphere_along_each_axis() {
@@ -73,10 +74,10 @@ fn sphere_grazing_silhouette() {
 
 #[test]
 fn small_sphere_far_away_keeps_precision() {
-    let s = Shape::Sphere {
+    let s = Shape::Sphere(Sphere {
         center: [0.0, 1e4, 0.0],
         radius: 1e-3,
-    };
+    });
     let t = hit(&s, [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]).unwrap();
     assert!((t - (1e4 - 1e-3)).abs() < 1e-7, "{t}");
     // Single precision: the discriminant trick still finds it.
@@ -92,10 +93,10 @@ fn small_sphere_far_away_keeps_precision() {
 
 #[test]
 fn zero_radius_sphere_is_never_hit() {
-    let s = Shape::Sphere {
+    let s = Shape::Sphere(Sphere {
         center: [0.0; 3],
         radius: 0.0,
-    };
+    });
     assert!(hit(&s, [-1.0, 0.0, 0.0], [1.0, 0.0, 0.0]).is_none());
 }
 
@@ -110,7 +111,7 @@ fn triangle_hits_and_barycentrics() {
     // From below and from the side of the back face: both sides count.
     assert!(
         hit(
-            &Shape::Polygon { vertices: &v },
+            &Shape::Polygon(Polygon { vertices: &v }),
             [0.25, 0.25, -2.0],
             [0.0, 0.0, 1.0]
         )
@@ -119,7 +120,7 @@ fn triangle_hits_and_barycentrics() {
     // Outside the triangle.
     assert!(
         hit(
-            &Shape::Polygon { vertices: &v },
+            &Shape::Polygon(Polygon { vertices: &v }),
             [0.75, 0.75, 1.0],
             [0.0, 0.0, -1.0]
         )
@@ -139,7 +140,7 @@ fn triangle_along_each_axis() {
         let mut d = [0.0; 3];
         d[axis] = -1.0;
         assert!(close(
-            hit(&Shape::Polygon { vertices: &v }, o, d).unwrap(),
+            hit(&Shape::Polygon(Polygon { vertices: &v }), o, d).unwrap(),
             3.0
         ));
     }
@@ -155,7 +156,7 @@ fn ray_in_the_plane_misses() {
         [0.0, 1.0, 0.0],
     ];
     for v in [&tri[..], &quad[..]] {
-        let s = Shape::Polygon { vertices: v };
+        let s = Shape::Polygon(Polygon { vertices: v });
         assert!(hit(&s, [-1.0, 0.25, 0.0], [1.0, 0.0, 0.0]).is_none());
         assert!(hit(&s, [-1.0, -1.0, 0.0], [1.0, 1.0, 0.0]).is_none());
     }
@@ -171,8 +172,8 @@ fn shared_edge_is_watertight() {
         let x = i as f64 / 64.0;
         let o = [x, x, 1.0];
         let d = [0.001 * (i as f64 - 32.0), 0.0007, -1.0];
-        let ha = hit(&Shape::Polygon { vertices: &a }, o, d);
-        let hb = hit(&Shape::Polygon { vertices: &b }, o, d);
+        let ha = hit(&Shape::Polygon(Polygon { vertices: &a }), o, d);
+        let hb = hit(&Shape::Polygon(Polygon { vertices: &b }), o, d);
         let inside = (0.0..=1.0).contains(&(x + d[0])) && (0.0..=1.0).contains(&(x + d[1]));
         if inside {
             assert!(ha.is_some() || hb.is_some(), "crack at {i}");
@@ -185,7 +186,7 @@ fn degenerate_polygons_are_never_hit() {
     let line = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
     let point = [[1.0f32, 1.0, 1.0]; 4];
     for v in [&line[..], &point[..]] {
-        let s = Shape::Polygon { vertices: v };
+        let s = Shape::Polygon(Polygon { vertices: v });
         for d in [
             [0.0, 0.0, -1.0],
             [0.0, -1.0, 0.0],
@@ -208,7 +209,7 @@ fn concave_polygon() {
         [1.0, 2.0, 0.0],
         [0.0, 2.0, 0.0],
     ];
-    let s = Shape::Polygon { vertices: &l };
+    let s = Shape::Polygon(Polygon { vertices: &l });
     assert!(hit(&s, [0.5, 1.5, 1.0], [0.0, 0.0, -1.0]).is_some());
     assert!(hit(&s, [1.5, 0.5, 1.0], [0.0, 0.0, -1.0]).is_some());
     assert!(hit(&s, [1.5, 1.5, 1.0], [0.0, 0.0, -1.0]).is_none());
@@ -224,7 +225,7 @@ fn polygon_with_collinear_first_corner_uses_newell_normal() {
         [2.0, 1.0, 0.0],
         [0.0, 1.0, 0.0],
     ];
-    let s = Shape::Polygon { vertices: &q };
+    let s = Shape::Polygon(Polygon { vertices: &q });
     assert!(close(
         hit(&s, [0.5, 0.5, 2.0], [0.0, 0.0, -1.0]).unwrap(),
         2.0
@@ -233,12 +234,12 @@ fn polygon_with_collinear_first_corner_uses_newell_normal() {
 
 #[test]
 fn cylinder_and_cone() {
-    let cyl = Shape::Cone {
+    let cyl = Shape::Cone(Cone {
         base: [0.0, 0.0, 0.0],
         base_radius: 1.0,
         apex: [0.0, 0.0, 2.0],
         apex_radius: 1.0,
-    };
+    });
     assert!(close(
         hit(&cyl, [-5.0, 0.0, 1.0], [1.0, 0.0, 0.0]).unwrap(),
         4.0
@@ -253,12 +254,12 @@ fn cylinder_and_cone() {
     ));
     // A true cone, radius 1 at z = 0 to 0 at z = 1: at z = 0.5 the radius
     // is 0.5.
-    let cone = Shape::Cone {
+    let cone = Shape::Cone(Cone {
         base: [0.0, 0.0, 0.0],
         base_radius: 1.0,
         apex: [0.0, 0.0, 1.0],
         apex_radius: 0.0,
-    };
+    });
     assert!(close(
         hit(&cone, [-3.0, 0.0, 0.5], [1.0, 0.0, 0.0]).unwrap(),
         2.5
@@ -269,12 +270,12 @@ fn cylinder_and_cone() {
     for axis in 0..3 {
         let mut apex = [0.0f32; 3];
         apex[axis] = 2.0;
-        let c = Shape::Cone {
+        let c = Shape::Cone(Cone {
             base: [0.0; 3],
             base_radius: 0.5,
             apex,
             apex_radius: 0.5,
-        };
+        });
         let mut o = [0.0; 3];
         o[axis] = 1.0;
         o[(axis + 1) % 3] = -4.0;
@@ -286,12 +287,12 @@ fn cylinder_and_cone() {
 
 #[test]
 fn zero_length_cone_is_never_hit() {
-    let c = Shape::Cone {
+    let c = Shape::Cone(Cone {
         base: [0.0, 0.0, 0.0],
         base_radius: 1.0,
         apex: [0.0, 0.0, 0.0],
         apex_radius: 0.5,
-    };
+    });
     for d in [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.3, 0.4, -0.5]] {
         assert!(hit(&c, [-2.0, 0.0, 1.0], d).is_none());
     }
@@ -301,13 +302,13 @@ fn zero_length_cone_is_never_hit() {
 fn patch_interpolates_vertex_normals() {
     let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let n = [[0.0f32, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-    let s = Shape::Patch {
+    let s = Shape::Patch(Patch {
         vertices: &v,
         normals: &n,
-    };
+    });
     let r = ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]);
     let t = intersect(&s, &s.bounds(), &r, 0.0, f64::INFINITY).unwrap();
-    let surf = surface_at(&s, &r, t);
+    let surf = s.surface(&r, t);
     let expect = V3::new(0.25, 0.25, 0.5).try_normalize().unwrap();
     assert!((surf.ns - expect).length() < 1e-9);
     assert!((surf.ng - V3::new(0.0, 0.0, 1.0)).length() < 1e-12);
@@ -316,16 +317,16 @@ fn patch_interpolates_vertex_normals() {
 #[test]
 fn surface_normals() {
     let r = ray([0.0, 0.0, 5.0], [0.0, 0.0, -1.0]);
-    let s = surface_at(&UNIT_SPHERE, &r, 4.0);
+    let s = UNIT_SPHERE.surface(&r, 4.0);
     assert!((s.ng - V3::new(0.0, 0.0, 1.0)).length() < 1e-12);
-    let cone = Shape::Cone {
+    let cone = Shape::Cone(Cone {
         base: [0.0, 0.0, 0.0],
         base_radius: 1.0,
         apex: [0.0, 0.0, 1.0],
         apex_radius: 0.0,
-    };
+    });
     let r = ray([-3.0, 0.0, 0.5], [1.0, 0.0, 0.0]);
-    let s = surface_at(&cone, &r, 2.5);
+    let s = cone.surface(&r, 2.5);
     let expect = V3::new(-1.0, 0.0, 1.0).try_normalize().unwrap();
     assert!((s.ng - expect).length() < 1e-9, "{:?}", s.ng);
 }
@@ -340,13 +341,13 @@ fn single_precision_agrees_on_easy_cases() {
     ];
     let shapes = [
         UNIT_SPHERE,
-        Shape::Polygon { vertices: &quad },
-        Shape::Cone {
+        Shape::Polygon(Polygon { vertices: &quad }),
+        Shape::Cone(Cone {
             base: [0.0, 0.0, -1.0],
             base_radius: 0.5,
             apex: [0.0, 0.0, 1.0],
             apex_radius: 0.25,
-        },
+        }),
     ];
     for s in &shapes {
         let r = ray([0.1, 0.2, 4.0], [0.05, -0.02, -1.0]);

@@ -1,0 +1,83 @@
+//! Which primitive a ray hit, and the rule that decides between hits.
+
+use bytemuck::{Pod, Zeroable};
+use serde::Serialize;
+
+/// Identifies a primitive for ties, mailboxes and shading. An object of
+/// the database is its index there (its position in the scene as read);
+/// the high bits are reserved for instances, so that a primitive of a
+/// placed model is (instance, primitive) and ties between instances are
+/// decided the same way everywhere. The order of ids is the tie order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Pod, Zeroable, Serialize)]
+#[repr(transparent)]
+pub struct PrimId(pub u64);
+
+impl PrimId {
+    /// No primitive: a miss, or an unblocked shadow ray.
+    pub const NONE: PrimId = PrimId(u64::MAX);
+
+    /// Object `index` of the database.
+    #[inline(always)]
+    pub const fn object(index: u32) -> PrimId {
+        PrimId(index as u64)
+    }
+
+    #[inline(always)]
+    pub fn is_none(self) -> bool {
+        self == PrimId::NONE
+    }
+
+    /// The database object this primitive is, if it is one.
+    #[inline(always)]
+    pub fn object_index(self) -> Option<u32> {
+        u32::try_from(self.0).ok()
+    }
+}
+
+/// The nearest hit found so far along a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub t: f64,
+    pub prim: PrimId,
+}
+
+impl Hit {
+    pub const NONE: Hit = Hit {
+        t: f64::INFINITY,
+        prim: PrimId::NONE,
+    };
+
+    /// Whether a hit at `t` on `prim` wins over this one: nearer, or as near
+    /// and of a smaller id (the rendering contract's tie rule). The one
+    /// place the rule is written.
+    #[inline(always)]
+    pub fn loses_to(&self, t: f64, prim: PrimId) -> bool {
+        t < self.t || (t == self.t && prim < self.prim)
+    }
+
+    #[inline(always)]
+    pub fn is_some(&self) -> bool {
+        !self.prim.is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearer_wins_and_ties_go_to_the_smaller_id() {
+        let h = Hit {
+            t: 2.0,
+            prim: PrimId::object(5),
+        };
+        assert!(h.loses_to(1.0, PrimId::object(9)));
+        assert!(h.loses_to(2.0, PrimId::object(4)));
+        assert!(!h.loses_to(2.0, PrimId::object(5)));
+        assert!(!h.loses_to(2.0, PrimId::object(6)));
+        assert!(!h.loses_to(3.0, PrimId::object(0)));
+        assert!(Hit::NONE.loses_to(1e300, PrimId::object(u32::MAX)));
+        assert!(PrimId::object(u32::MAX) < PrimId(1 << 32));
+        assert_eq!(PrimId(1 << 32).object_index(), None);
+    }
+}
