@@ -14,6 +14,8 @@ use std::path::Path;
 struct Variant {
     knob: &'static str,
     label: String,
+    /// The setting in a few characters, beside its point on the chart.
+    short: String,
     args: Vec<String>,
 }
 
@@ -23,6 +25,7 @@ fn variants() -> Vec<Variant> {
         v.push(Variant {
             knob: "depth",
             label: format!("depth {d}"),
+            short: format!("depth {d}"),
             args: vec!["--depth".into(), d.to_string()],
         });
     }
@@ -30,6 +33,7 @@ fn variants() -> Vec<Variant> {
         v.push(Variant {
             knob: "precision",
             label: format!("{p} precision"),
+            short: p.into(),
             args: vec!["--precision".into(), p.into()],
         });
     }
@@ -40,6 +44,11 @@ fn variants() -> Vec<Variant> {
                 "pixel corners".into()
             } else {
                 format!("{s} jittered samples")
+            },
+            short: if s == 1 {
+                "corners".into()
+            } else {
+                format!("{s} spp")
             },
             args: vec!["--samples".into(), s.to_string()],
         });
@@ -122,6 +131,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         ref_args.extend(REFERENCE.iter().map(|s| s.to_string()));
         exec::sray_render(&ref_args, ctx.work())?;
         let reference = pixels(&ctx.work().join("ref.png"))?;
+        // Knob, short setting, seconds, error.
         let mut points: Vec<(&'static str, String, f64, f64)> = Vec::new();
         for v in variants() {
             let mut args = base("var.png");
@@ -139,23 +149,21 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             data.push(serde_json::json!({
                 "scene": name, "knob": v.knob, "setting": v.label, "seconds": m.seconds(), "rmse": err,
             }));
-            points.push((v.knob, v.label, m.seconds(), err));
+            points.push((v.knob, v.short, m.seconds(), err));
         }
-        let series: Vec<Series> = ["depth", "precision", "samples"]
-            .iter()
-            .map(|k| Series {
-                name: match *k {
-                    "depth" => "depth 1 to 5".into(),
-                    "precision" => "single, double precision".into(),
-                    _ => "corners, 4, 16 samples".into(),
-                },
-                points: points
-                    .iter()
-                    .filter(|p| p.0 == *k)
-                    .map(|p| (p.2, p.3))
-                    .collect(),
-            })
-            .collect();
+        // One curve per knob, each point labelled with its setting.
+        let series: Vec<Series> = [
+            ("depth", "maximum depth"),
+            ("precision", "precision"),
+            ("samples", "samples per pixel"),
+        ]
+        .iter()
+        .map(|&(k, name)| {
+            let mine: Vec<_> = points.iter().filter(|p| p.0 == k).collect();
+            Series::new(name, mine.iter().map(|p| (p.2, p.3)).collect())
+                .with_labels(mine.iter().map(|p| p.1.clone()).collect())
+        })
+        .collect();
         let file = format!("speed_accuracy_{name}.svg");
         chart::lines(
             &r.path(&file),

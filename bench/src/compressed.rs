@@ -146,14 +146,8 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
 
     // Fig. 9: tetra, plain against compressed.
     let mut series = vec![
-        Series {
-            name: "plain".into(),
-            points: Vec::new(),
-        },
-        Series {
-            name: "zstd".into(),
-            points: Vec::new(),
-        },
+        Series::new("plain", Vec::new()),
+        Series::new("zstd", Vec::new()),
     ];
     let mut rows = Vec::new();
     let mut data = Vec::new();

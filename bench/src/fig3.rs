@@ -71,14 +71,14 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 !remaining.is_empty(),
                 "no remaining_rays_per_pass in the statistics"
             );
-            series.push(Series {
-                name: format!("{res}^3, store {store}"),
-                points: remaining
+            series.push(Series::new(
+                format!("{res}^3, store {store}"),
+                remaining
                     .iter()
                     .enumerate()
                     .map(|(i, &n)| (i as f64 + 1.0, n as f64))
                     .collect(),
-            });
+            ));
             rows.push(vec![
                 res.to_string(),
                 store.to_string(),

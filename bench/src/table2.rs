@@ -128,10 +128,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     for (scene, sizes) in &s.scenes {
         let mut series: Vec<Series> = ["df total", "bf total", "df preprocess", "bf preprocess"]
             .iter()
-            .map(|n| Series {
-                name: n.to_string(),
-                points: Vec::new(),
-            })
+            .map(|n| Series::new(*n, Vec::new()))
             .collect();
         for &size in sizes {
             let name = format!("{}{size}", scene.name());
