@@ -81,7 +81,7 @@ fn measure<R: Real>(
     for row in 0..=SIDE {
         for col in 0..=SIDE {
             let d = cam.direction(col, row);
-            let eye = RayQ::new(cam.eye, d);
+            let eye = RayQ::from_vec3(cam.eye, d);
             let Some((id, t)) = nearest::<R>(objs, &eye, 0.0, f64::INFINITY, None) else {
                 continue;
             };
@@ -96,7 +96,7 @@ fn measure<R: Real>(
                 }
             });
             for (dir, dist, is_shadow) in spawned {
-                let ray = RayQ::new(surf.p, dir);
+                let ray = RayQ::from_vec3(surf.p, dir);
                 tally.secondary += 1;
                 if let Some((hit, th)) = nearest::<R>(objs, &ray, eps, dist, None)
                     && hit == id

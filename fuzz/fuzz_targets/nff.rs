@@ -37,7 +37,7 @@ impl SceneSink for Sink {
             (b.min[2] as f64 + b.max[2] as f64) / 2.0,
         );
         for d in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.3, -0.5, 0.8)] {
-            let ray = RayQ::new(c - d * 10.0, d);
+            let ray = RayQ::from_vec3(c - d * 10.0, d);
             let _ = intersect::<f64>(s, &b, &ray, 0.0, f64::INFINITY);
             let _ = intersect::<f32>(s, &b, &ray.cast(), 0.0, f32::INFINITY);
         }

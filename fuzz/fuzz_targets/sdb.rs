@@ -20,7 +20,7 @@ fuzz_target!(|data: &[u8]| {
     };
     let _ = db.bbox();
     let Ok(mut scan) = db.scan() else { return };
-    let ray = RayQ::new(Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
+    let ray = RayQ::from_vec3(Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
     while let Ok(Some(block)) = scan.next_block() {
         for o in block.objects() {
             let _ = o.shape.prepare();

@@ -35,7 +35,7 @@ use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
-use crate::math::{Real, Vec3};
+use crate::math::{Real, Vec3, Vec3Ext};
 use crate::progress::Progress;
 use crate::render::KindCounts;
 use crate::sdb::{Block, Database};
@@ -339,8 +339,8 @@ impl<R: Real> Slots<R> {
 
 /// Puts a ray into a slot.
 fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
-    let o = Vec3::from_f64(r.o);
-    let d = Vec3::from_f64(r.d);
+    let o = Vec3::from_array(r.o);
+    let d = Vec3::from_array(r.d);
     let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
     let t_min = if r.kind == super::records::RayKind::Eye as u8 {
         0.0

@@ -175,9 +175,9 @@ fn shade_hit(
     c: &mut RayCounts,
 ) {
     let r = &h.ray;
-    let o = Vec3::from_f64(r.o);
-    let d = Vec3::from_f64(r.d);
-    let surf = obj.shape.surface(&RayQ::new(o, d), h.t);
+    let o = Vec3::from_array(r.o);
+    let d = Vec3::from_array(r.d);
+    let surf = obj.shape.surface(&RayQ::from_vec3(o, d), h.t);
     let mat = &materials[obj.material as usize];
     let lights = shade_scene.lights.len() as u64;
     let base = h.id * SPAWN_SLOTS;

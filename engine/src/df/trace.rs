@@ -5,7 +5,7 @@ use crate::error::Error;
 use crate::grid::Dda;
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
-use crate::math::{Real, Vec3};
+use crate::math::{Real, Vec3, Vec3Ext};
 use crate::progress::Progress;
 use crate::render::{
     EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
@@ -181,7 +181,7 @@ fn trace<R: Real>(
     if depth == 1 {
         sc.rays.eye_hit_rays += 1;
     }
-    let surf = s.shapes[id].surface(&RayQ::new(o, d), t);
+    let surf = s.shapes[id].surface(&RayQ::from_vec3(o, d), t);
     let mat = &s.materials[s.material_of[id] as usize];
     let eps = s.shade.eps;
     let max_depth = s.shade.max_depth as usize;

@@ -1,5 +1,5 @@
 use super::*;
-use crate::math::V3;
+use crate::math::Vec3 as V3;
 
 fn unit_box() -> Aabb {
     Aabb {
@@ -10,9 +10,9 @@ fn unit_box() -> Aabb {
 
 fn walk(g: &GridSpec, o: [f64; 3], d: [f64; 3]) -> Vec<[u32; 3]> {
     let mut v = Vec::new();
-    let d = V3::from_f64(d);
+    let d = V3::from_array(d);
     let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-    if let Some(mut w) = Dda::start(g, V3::from_f64(o), d, inv, 0.0, f64::INFINITY) {
+    if let Some(mut w) = Dda::start(g, V3::from_array(o), d, inv, 0.0, f64::INFINITY) {
         loop {
             v.push(w.voxel());
             assert_eq!(w.index, g.index(w.voxel()));

@@ -55,6 +55,13 @@ impl<R: Real> RayQ<R> {
         }
     }
 
+    /// A ray given in the renderer's `f64` vectors.
+    #[inline]
+    pub fn from_vec3(o: crate::math::Vec3, d: crate::math::Vec3) -> Self {
+        use crate::math::Vec3Ext;
+        Self::new(o.cast(), d.cast())
+    }
+
     /// The same ray in another precision.
     pub fn cast<S: Real>(&self) -> RayQ<S> {
         RayQ::new(self.o.cast(), self.d.cast())

@@ -18,7 +18,10 @@ impl Surface {
     /// normal.
     #[inline]
     pub fn unit_or_facing(v: Vec3, ray: &RayQ<f64>) -> Vec3 {
-        v.try_normalize()
-            .unwrap_or_else(|| -ray.d.try_normalize().unwrap_or(Vec3::new(0.0, 0.0, 1.0)))
+        v.try_normalize().unwrap_or_else(|| {
+            -Vec3::from(ray.d)
+                .try_normalize()
+                .unwrap_or(Vec3::new(0.0, 0.0, 1.0))
+        })
     }
 }

@@ -1,7 +1,8 @@
 use super::Real;
 use std::ops::{Add, AddAssign, Index, Mul, Neg, Sub};
 
-/// A 3-vector. Plain data; every operation is written out so that the order
+/// A 3-vector over [`Real`], for the precision-generic intersection tests.
+/// Plain data; every operation is written out so that the order
 /// of floating-point operations, and therefore every result bit, is the same
 /// in every engine that calls it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

@@ -20,12 +20,12 @@ pub struct Camera {
 
 impl Camera {
     pub fn new(view: &View, width: u32, height: u32) -> Result<Camera, Error> {
-        let eye = Vec3::from_f64(view.from);
-        let fwd = (Vec3::from_f64(view.at) - eye)
+        let eye = Vec3::from_array(view.from);
+        let fwd = (Vec3::from_array(view.at) - eye)
             .try_normalize()
             .ok_or_else(|| Error::Scene("the view's 'from' and 'at' are the same point".into()))?;
         let right = fwd
-            .cross(Vec3::from_f64(view.up))
+            .cross(Vec3::from_array(view.up))
             .try_normalize()
             .ok_or_else(|| Error::Scene("the view's 'up' is parallel to its direction".into()))?;
         let up = right.cross(fwd);

@@ -23,7 +23,7 @@ impl ShadeScene {
             lights: h
                 .lights
                 .iter()
-                .map(|l| (Vec3::from_f64(l.position), l.resolved_color(n)))
+                .map(|l| (Vec3::from_array(l.position), l.resolved_color(n)))
                 .collect(),
             background: h.background,
             max_depth,

@@ -132,7 +132,7 @@ impl Kind for ConeKind {
 
     fn surface(s: &Cone, ray: &RayQ<f64>, t: f64) -> Surface {
         let p = ray.at(t);
-        let g = match frame(s) {
+        let g: V3<f64> = match frame(s) {
             Some(f) => {
                 let rel = p - f.base;
                 let s = rel.dot(f.axis);
@@ -142,8 +142,12 @@ impl Kind for ConeKind {
             }
             None => V3::zero(),
         };
-        let ng = Surface::unit_or_facing(g, ray);
-        Surface { p, ng, ns: ng }
+        let ng = Surface::unit_or_facing(g.into(), ray);
+        Surface {
+            p: p.into(),
+            ng,
+            ns: ng,
+        }
     }
 
     fn map(s: &Cone, m: &GeometryMap<'_>, out: &mut Vec<u32>) {

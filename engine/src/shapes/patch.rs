@@ -4,7 +4,7 @@
 
 use super::{GeometryMap, Kind, check_vertex_count, push_points};
 use crate::intersect::{RayQ, Surface, triangle};
-use crate::math::{Real, Vec3};
+use crate::math::{Real, Vec3, Vec3Ext};
 use crate::scene::Aabb;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,7 +92,7 @@ impl Kind for PatchKind {
     /// one whose smallest barycentric weight is largest), and the vertex
     /// normals interpolated there.
     fn surface(s: &Patch<'_>, ray: &RayQ<f64>, t: f64) -> Surface {
-        let p = ray.at(t);
+        let p = ray.at(t).into();
         let (vertices, normals) = (s.vertices, s.normals);
         let mut best = (f64::NEG_INFINITY, 1, [1.0 / 3.0; 3]);
         for i in 1..vertices.len() - 1 {
@@ -104,7 +104,7 @@ impl Kind for PatchKind {
         }
         let (_, i, w) = best;
         let ng = Surface::unit_or_facing(
-            super::polygon::normal::<f64>(&[vertices[0], vertices[i], vertices[i + 1]]),
+            super::polygon::normal::<f64>(&[vertices[0], vertices[i], vertices[i + 1]]).into(),
             ray,
         );
         let ns = Vec3::from_f32(normals[0]) * w[0]

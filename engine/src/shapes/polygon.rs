@@ -96,8 +96,8 @@ impl Kind for PolygonKind {
     }
 
     fn surface(s: &Polygon<'_>, ray: &RayQ<f64>, t: f64) -> Surface {
-        let p = ray.at(t);
-        let ng = Surface::unit_or_facing(normal::<f64>(s.vertices), ray);
+        let p = ray.at(t).into();
+        let ng = Surface::unit_or_facing(normal::<f64>(s.vertices).into(), ray);
         Surface { p, ng, ns: ng }
     }
 

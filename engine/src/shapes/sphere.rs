@@ -2,7 +2,7 @@
 
 use super::{GeometryMap, Kind};
 use crate::intersect::{RayQ, Surface};
-use crate::math::{Real, V3, Vec3};
+use crate::math::{Real, V3, Vec3, Vec3Ext};
 use crate::scene::Aabb;
 use crate::scene::aabb::{f32_down, f32_up};
 
@@ -125,7 +125,7 @@ impl Kind for SphereKind {
 
     /// The outward normal.
     fn surface(s: &Sphere, ray: &RayQ<f64>, t: f64) -> Surface {
-        let p = ray.at(t);
+        let p: Vec3 = ray.at(t).into();
         let ng = Surface::unit_or_facing(p - Vec3::from_f32(s.center), ray);
         Surface { p, ng, ns: ng }
     }

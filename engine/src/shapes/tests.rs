@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::intersect::{RayQ, triangle};
-use crate::math::V3;
+use crate::math::{V3, Vec3};
 
 fn ray(o: [f64; 3], d: [f64; 3]) -> RayQ<f64> {
     RayQ::new(V3::from_f64(o), V3::from_f64(d))
@@ -309,16 +309,16 @@ fn patch_interpolates_vertex_normals() {
     let r = ray([0.25, 0.25, 1.0], [0.0, 0.0, -1.0]);
     let t = intersect(&s, &s.bounds(), &r, 0.0, f64::INFINITY).unwrap();
     let surf = s.surface(&r, t);
-    let expect = V3::new(0.25, 0.25, 0.5).try_normalize().unwrap();
+    let expect = Vec3::new(0.25, 0.25, 0.5).try_normalize().unwrap();
     assert!((surf.ns - expect).length() < 1e-9);
-    assert!((surf.ng - V3::new(0.0, 0.0, 1.0)).length() < 1e-12);
+    assert!((surf.ng - Vec3::new(0.0, 0.0, 1.0)).length() < 1e-12);
 }
 
 #[test]
 fn surface_normals() {
     let r = ray([0.0, 0.0, 5.0], [0.0, 0.0, -1.0]);
     let s = UNIT_SPHERE.surface(&r, 4.0);
-    assert!((s.ng - V3::new(0.0, 0.0, 1.0)).length() < 1e-12);
+    assert!((s.ng - Vec3::new(0.0, 0.0, 1.0)).length() < 1e-12);
     let cone = Shape::Cone(Cone {
         base: [0.0, 0.0, 0.0],
         base_radius: 1.0,
@@ -327,7 +327,7 @@ fn surface_normals() {
     });
     let r = ray([-3.0, 0.0, 0.5], [1.0, 0.0, 0.0]);
     let s = cone.surface(&r, 2.5);
-    let expect = V3::new(-1.0, 0.0, 1.0).try_normalize().unwrap();
+    let expect = Vec3::new(-1.0, 0.0, 1.0).try_normalize().unwrap();
     assert!((s.ng - expect).length() < 1e-9, "{:?}", s.ng);
 }
 
