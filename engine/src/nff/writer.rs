@@ -144,6 +144,15 @@ impl<W: Write> SceneSink for NffWriter<W> {
                     self.end_line();
                 }
             }
+            // NFF has these four entities; a kind it cannot express is
+            // refused rather than approximated.
+            #[allow(unreachable_patterns)]
+            other => {
+                return Err(Error::Scene(format!(
+                    "a {} cannot be written as NFF; convert to an object database (.sdb) instead",
+                    other.kind().name()
+                )));
+            }
         }
         self.flush_line()
     }
