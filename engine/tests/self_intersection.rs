@@ -2,8 +2,8 @@
 //! finds the surface it leaves (surface acne) and how often a shadow ray
 //! misses a blocker closer than the epsilon (lost shadows), with the
 //! epsilon and the spawning code the tracers use, over the first hits of
-//! the seven scenes of ../shared/spd. Brute force: every ray against every
-//! object, so that no grid can hide or cause anything.
+//! the seven SPD scenes (tests/fixtures/spd). Brute force: every ray
+//! against every object, so that no grid can hide or cause anything.
 //!
 //! The figures are printed (`cargo test --release --test self_intersection
 //! -- --nocapture`) and quoted in the README's Stability section.
@@ -97,10 +97,11 @@ fn measure<R: Real>(
             for (dir, dist, is_shadow) in spawned {
                 let ray = RayQ::new(surf.p, dir);
                 tally.secondary += 1;
-                if let Some((hit, th)) = nearest::<R>(objs, &ray, eps, dist, None) {
-                    if hit == id && th < 1e-4 * size {
-                        tally.self_hits += 1;
-                    }
+                if let Some((hit, th)) = nearest::<R>(objs, &ray, eps, dist, None)
+                    && hit == id
+                    && th < 1e-4 * size
+                {
+                    tally.self_hits += 1;
                 }
                 if is_shadow {
                     tally.shadow += 1;
@@ -125,7 +126,7 @@ fn secondary_rays_do_not_find_their_own_surface() {
     for (name, size) in common::DEFAULT_SCENES {
         let path = dir.path().join(format!("{name}.sdb"));
         let mut w = DbWriter::create(&path, Compression::None).unwrap();
-        SceneSource::Nff(common::shared_spd().join(format!("{name}{size}.nff")))
+        SceneSource::Nff(common::spd_fixtures().join(format!("{name}{size}.nff")))
             .stream_into(&mut w, &NoProgress)
             .unwrap();
         w.finish().unwrap();
