@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{fails, json, ok, shared_spd};
+use common::{fails, json, ok, spd_fixtures};
 
 const COUNTS: [&str; 6] = [
     "eye_rays",
@@ -13,8 +13,8 @@ const COUNTS: [&str; 6] = [
     "intersection_tests",
 ];
 
-/// The seven shared NFF files and the same scenes generated on the fly
-/// render to identical images with identical counts.
+/// The seven SPD NFF files (tests/fixtures/spd) and the same scenes
+/// generated on the fly render to identical images with identical counts.
 #[test]
 fn nff_and_spd_routes_render_identically() {
     let dir = tempfile::tempdir().unwrap();
@@ -28,7 +28,7 @@ fn nff_and_spd_routes_render_identically() {
         ("tree", 11),
         ("teapot", 12),
     ] {
-        let nff = shared_spd().join(format!("{name}{size}.nff"));
+        let nff = spd_fixtures().join(format!("{name}{size}.nff"));
         let spd = format!("spd:{name}:{size}");
         let small = ["--width", "96", "--height", "96", "--mode", "df"];
         let mut a = vec![

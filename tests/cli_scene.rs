@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{fails, json, ok, shared_spd};
+use common::{fails, json, ok, spd_fixtures};
 
 #[test]
 fn gen_writes_the_spd_text_exactly() {
@@ -14,7 +14,7 @@ fn gen_writes_the_spd_text_exactly() {
             &["gen", name, "--size", &size.to_string(), "-o", &out],
         );
         let ours = std::fs::read(dir.path().join(&out)).unwrap();
-        let spd = std::fs::read(shared_spd().join(format!("{name}{size}.nff"))).unwrap();
+        let spd = std::fs::read(spd_fixtures().join(format!("{name}{size}.nff"))).unwrap();
         assert!(
             ours == spd,
             "{name}{size}: sray gen output differs from the SPD's"
@@ -65,7 +65,7 @@ fn gen_database_and_info_json() {
 fn info_is_the_same_for_nff_and_converted_database() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in [("rings", 7), ("tree", 11), ("mount", 6)] {
-        let nff = shared_spd().join(format!("{name}{size}.nff"));
+        let nff = spd_fixtures().join(format!("{name}{size}.nff"));
         let nff = nff.to_str().unwrap();
         ok(
             dir.path(),

@@ -432,7 +432,7 @@ fn tls_end_to_end() {
 }
 
 /// Worker count and shard size change nothing: the seven scenes of
-/// ../shared/spd, embedded against one worker with one shard per depth and
+/// tests/fixtures/spd, embedded against one worker with one shard per depth and
 /// against three workers with the smallest shards (256 rays) (so that shards complete in any
 /// order and every merge has many inputs).
 #[test]
@@ -466,7 +466,7 @@ fn seven_scenes_any_worker_count_and_shard_size() {
     .map(|n| {
         let nff = match *n {
             "coincident" => d.join("coincident.nff"),
-            _ => common::shared_spd().join(format!("{n}.nff")),
+            _ => common::spd_fixtures().join(format!("{n}.nff")),
         };
         let nff = nff.to_str().unwrap().to_string();
         let want = embedded(d, &nff, "40");

@@ -120,6 +120,22 @@ fn unregister(ptr: usize) -> Option<(usize, u64)> {
     None
 }
 
+/// Gives the disk space of `off..off + len` of our file back; the range is
+/// never used again.
+fn release(fd: i32, off: u64, len: usize) {
+    // SAFETY: fallocate(2) takes integers only and touches no memory of
+    // ours; `fd` is our own file's descriptor, and punching a hole (size
+    // kept) in a range no live mapping uses changes nothing anyone reads.
+    unsafe {
+        libc::fallocate(
+            fd,
+            libc::FALLOC_FL_PUNCH_HOLE | libc::FALLOC_FL_KEEP_SIZE,
+            off as libc::off_t,
+            len as libc::off_t,
+        );
+    }
+}
+
 impl PagingAlloc {
     /// A file-backed region for `layout`, or None (then the system
     /// allocator serves it).
@@ -129,39 +145,42 @@ impl PagingAlloc {
             return None;
         }
         let len = layout.size().checked_add(PAGE - 1)? & !(PAGE - 1);
+        // A range of the file no region has used: it reads as zeroes.
         let off = NEXT.fetch_add(len as u64, Ordering::Relaxed);
-        // SAFETY (both calls): plain system calls on our own descriptor
-        // with integer arguments; they touch no memory of ours. The
-        // mapping is new (address chosen by the kernel), so it aliases
-        // nothing; the file is unnamed and private to this process, so
-        // no one else can change or truncate what is mapped.
+        // SAFETY: fallocate(2) takes integers only and touches no memory of
+        // ours; `fd` is our own descriptor, open for the rest of the
+        // process (see `enable`), so it names our file and nothing else.
+        if unsafe { libc::fallocate(fd, 0, off as libc::off_t, len as libc::off_t) } != 0 {
+            return None;
+        }
+        // SAFETY: with a null address hint and no MAP_FIXED the kernel
+        // picks addresses that no live mapping or allocation uses, so the
+        // new mapping aliases no memory of this process (Rust's or
+        // anyone's). Its pages are backed by `off..off + len` of our file,
+        // which was just reserved on disk, so touching them cannot raise
+        // SIGBUS for want of space; the file is unnamed and no other
+        // process has it, so no one can truncate or rewrite it under us.
         let p = unsafe {
-            if libc::fallocate(fd, 0, off as libc::off_t, len as libc::off_t) != 0 {
-                return None;
-            }
-            let p = libc::mmap(
+            libc::mmap(
                 std::ptr::null_mut(),
                 len,
                 libc::PROT_READ | libc::PROT_WRITE,
                 libc::MAP_SHARED,
                 fd,
                 off as libc::off_t,
-            );
-            if p == libc::MAP_FAILED {
-                libc::fallocate(
-                    fd,
-                    libc::FALLOC_FL_PUNCH_HOLE | libc::FALLOC_FL_KEEP_SIZE,
-                    off as libc::off_t,
-                    len as libc::off_t,
-                );
-                return None;
-            }
-            if !register(p as usize, len, off) {
-                libc::munmap(p, len);
-                return None;
-            }
-            p
+            )
         };
+        if p == libc::MAP_FAILED {
+            release(fd, off, len);
+            return None;
+        }
+        if !register(p as usize, len, off) {
+            // SAFETY: `p..p + len` is the mapping just made, which no one
+            // else has seen: unmapping it invalidates no reference.
+            unsafe { libc::munmap(p, len) };
+            release(fd, off, len);
+            return None;
+        }
         let now = MAPPED.fetch_add(len as u64, Ordering::Relaxed) + len as u64;
         PEAK_MAPPED.fetch_max(now, Ordering::Relaxed);
         Some(p.cast())
@@ -170,10 +189,16 @@ impl PagingAlloc {
 
 // SAFETY: every block returned is either the system allocator's (for the
 // same layout) or a fresh page-aligned mapping at least `layout.size()`
-// long, used only for layouts aligned to a page or less; `dealloc` tells
-// the two apart by the live-region table (only blocks of at least
-// THRESHOLD bytes can be mappings) and returns each to where it came
-// from. Nothing here allocates, panics or unwinds.
+// long, used only for layouts aligned to a page or less, and zeroed (a
+// never-used range of the file) as `alloc_zeroed` promises. A mapping is
+// in the live-region table, under its start address, from before it is
+// returned until it is deallocated; a system block cannot start at the
+// address of a live mapping (they would overlap). So `dealloc`, given a
+// block and its layout, tells the two apart by that table (only blocks of
+// at least THRESHOLD bytes can be mappings) and returns each to where it
+// came from. The default `realloc` (alloc, copy, dealloc) keeps this.
+// Nothing here allocates, panics or unwinds, so the allocator never
+// re-enters itself.
 unsafe impl GlobalAlloc for PagingAlloc {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         INSTALLED.store(true, Ordering::Relaxed);
@@ -198,22 +223,20 @@ unsafe impl GlobalAlloc for PagingAlloc {
         if layout.size() >= THRESHOLD
             && let Some((len, off)) = unregister(ptr as usize)
         {
-            let fd = FD.load(Ordering::Acquire);
-            // SAFETY: `ptr..ptr + len` is a mapping we made and the caller
-            // gives up; releasing its disk space touches only our file.
-            unsafe {
-                libc::munmap(ptr.cast(), len);
-                libc::fallocate(
-                    fd,
-                    libc::FALLOC_FL_PUNCH_HOLE | libc::FALLOC_FL_KEEP_SIZE,
-                    off as libc::off_t,
-                    len as libc::off_t,
-                );
-            }
+            // SAFETY: `ptr..ptr + len` is a mapping of ours (it was in the
+            // table under this address, and `unregister` took it out, so no
+            // other call can unmap it again), and the caller of `dealloc`
+            // gives the block up: nothing uses these pages any more.
+            unsafe { libc::munmap(ptr.cast(), len) };
+            // The region was mapped, so the descriptor was set; it never
+            // changes after.
+            release(FD.load(Ordering::Acquire), off, len);
             MAPPED.fetch_sub(len as u64, Ordering::Relaxed);
             return;
         }
-        // SAFETY: not a mapping of ours, so the system allocator's block.
+        // SAFETY: not a live mapping of ours (too small to be one, or not
+        // in the table), so the system allocator's block for this layout,
+        // which the caller gives up.
         unsafe { System.dealloc(ptr, layout) }
     }
 }

@@ -61,9 +61,11 @@ pub fn default_memory_budget() -> u64 {
 /// killing the process with SIGXFSZ and leaving partial files behind.
 #[cfg(unix)]
 pub fn report_file_size_limit_as_error() {
-    // SAFETY: `signal` with SIG_IGN installs no handler code, so nothing can
-    // run in signal context; SIGXFSZ is a valid signal number. Called once
-    // at start-up, before any other thread exists.
+    // SAFETY: signal(2) takes two integers and touches no memory of ours.
+    // SIG_IGN installs no handler, so no code of ours ever runs in signal
+    // context (the hazard of signal handlers); SIGXFSZ is a valid signal
+    // number; a disposition is process-wide, and setting it is sound from
+    // any thread at any time.
     unsafe {
         libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }

@@ -56,7 +56,7 @@ fn every_store_number_gives_the_depth_first_image() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in common::DEFAULT_SCENES {
         let path = convert(
-            &common::shared_spd().join(format!("{name}{size}.nff")),
+            &common::spd_fixtures().join(format!("{name}{size}.nff")),
             dir.path(),
             Compression::None,
         );
@@ -79,7 +79,7 @@ fn budgets_from_a_few_hundred_kilobytes_to_plenty() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in [("balls", 4), ("gears", 4), ("rings", 7), ("teapot", 12)] {
         let path = convert(
-            &common::shared_spd().join(format!("{name}{size}.nff")),
+            &common::spd_fixtures().join(format!("{name}{size}.nff")),
             dir.path(),
             Compression::None,
         );
@@ -110,7 +110,7 @@ fn budgets_from_a_few_hundred_kilobytes_to_plenty() {
 fn one_grid_or_several_and_compression() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in [("balls", 4), ("tree", 11), ("gears", 4)] {
-        let nff = common::shared_spd().join(format!("{name}{size}.nff"));
+        let nff = common::spd_fixtures().join(format!("{name}{size}.nff"));
         let plain = Database::open(&convert(&nff, dir.path(), Compression::None)).unwrap();
         let packed = Database::open(&convert(&nff, dir.path(), Compression::Zstd(3))).unwrap();
         let reference = df_render(&plain);
@@ -135,7 +135,7 @@ fn counts_do_not_depend_on_threads_or_budget() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in [("mount", 6), ("rings", 7), ("tetra", 6)] {
         let path = convert(
-            &common::shared_spd().join(format!("{name}{size}.nff")),
+            &common::spd_fixtures().join(format!("{name}{size}.nff")),
             dir.path(),
             Compression::None,
         );
@@ -178,7 +178,7 @@ fn counts_do_not_depend_on_threads_or_budget() {
 fn the_paper_s_rules_do_their_work() {
     let dir = tempfile::tempdir().unwrap();
     let path = convert(
-        &common::shared_spd().join("rings7.nff"),
+        &common::spd_fixtures().join("rings7.nff"),
         dir.path(),
         Compression::None,
     );
@@ -221,7 +221,7 @@ fn the_paper_s_rules_do_their_work() {
 fn too_small_a_budget_says_the_minimum() {
     let dir = tempfile::tempdir().unwrap();
     let path = convert(
-        &common::shared_spd().join("balls4.nff"),
+        &common::spd_fixtures().join("balls4.nff"),
         dir.path(),
         Compression::None,
     );
@@ -248,7 +248,7 @@ fn jittered_samples_agree_between_tracers() {
     let dir = tempfile::tempdir().unwrap();
     for name in ["balls4", "teapot12"] {
         let path = convert(
-            &common::shared_spd().join(format!("{name}.nff")),
+            &common::spd_fixtures().join(format!("{name}.nff")),
             dir.path(),
             Compression::None,
         );

@@ -3,25 +3,37 @@
 
 use std::path::PathBuf;
 
-/// `shared/spd`, the real SPD output that sits beside the repository
-/// (override with SRAY_SHARED_DIR). CI always has it.
-pub fn shared_spd() -> PathBuf {
+/// The seven default SPD scenes as NFF, written by the SPD programs (real
+/// input no one here wrote): the vendored copies in `tests/fixtures/spd`
+/// at the workspace root, or `$SRAY_SHARED_DIR/spd` when that variable is
+/// set.
+pub fn spd_fixtures() -> PathBuf {
     if let Ok(d) = std::env::var("SRAY_SHARED_DIR") {
         return PathBuf::from(d).join("spd");
     }
-    let mut dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    loop {
-        let cand = dir.join("shared").join("spd");
-        if cand.is_dir() {
-            return cand;
-        }
-        if !dir.pop() {
-            panic!(
-                "cannot find shared/spd beside the repository (set SRAY_SHARED_DIR); \
-                 these tests check sray against real SPD output"
-            );
-        }
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/spd")
+}
+
+/// `shared/meshes` beside the repository (`$SRAY_SHARED_DIR/meshes` when
+/// that is set): real meshes, not vendored; CI has them. When it is
+/// absent, says so on stderr and returns None, so that the caller can
+/// skip: `let Some(m) = shared_meshes() else { return };`
+pub fn shared_meshes() -> Option<PathBuf> {
+    let m = match std::env::var("SRAY_SHARED_DIR") {
+        Ok(d) => Some(PathBuf::from(d).join("meshes")).filter(|d| d.is_dir()),
+        Err(_) => std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .ancestors()
+            .map(|d| d.join("shared").join("meshes"))
+            .find(|d| d.is_dir()),
+    };
+    if m.is_none() {
+        eprintln!(
+            "skipping: ../shared/meshes not found (searched upward from {} for \
+             shared/meshes; set SRAY_SHARED_DIR to its parent)",
+            env!("CARGO_MANIFEST_DIR")
+        );
     }
+    m
 }
 
 /// The seven default scenes and their files.

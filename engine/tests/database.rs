@@ -207,7 +207,7 @@ fn wrong_magic_and_wrong_version() {
 fn info_agrees_between_nff_and_database() {
     let dir = tempfile::tempdir().unwrap();
     for (name, size) in common::DEFAULT_SCENES {
-        let nff = common::shared_spd().join(format!("{name}{size}.nff"));
+        let nff = common::spd_fixtures().join(format!("{name}{size}.nff"));
         for c in [Compression::None, Compression::Zstd(5)] {
             let db = dir.path().join(format!("{name}.sdb"));
             write_db(&SceneSource::nff(nff.clone()), &db, c);

@@ -1,8 +1,8 @@
-//! Metamorphic tests over all seven scenes of ../shared/spd: the image and
-//! the SPD counts do not change with the store number, the memory budget,
-//! the grid resolution, one grid or several, compression, the thread
-//! count, the order of the objects in the database, or the scale of the
-//! scene (the last within a measured, documented tolerance).
+//! Metamorphic tests over all seven SPD scenes (tests/fixtures/spd): the
+//! image and the SPD counts do not change with the store number, the
+//! memory budget, the grid resolution, one grid or several, compression,
+//! the thread count, the order of the objects in the database, or the
+//! scale of the scene (the last within a measured, documented tolerance).
 //!
 //! Worker count and shard size are the cluster's knobs; tests/invariance.rs
 //! at the repository root covers them with real processes.
@@ -27,7 +27,7 @@ use common::{Render, bf_render, df_render};
 fn record(name: &str, size: u32) -> Recorder {
     let mut r = Recorder::default();
     read_nff(
-        &common::shared_spd().join(format!("{name}{size}.nff")),
+        &common::spd_fixtures().join(format!("{name}{size}.nff")),
         &mut r,
         &NoProgress,
     )

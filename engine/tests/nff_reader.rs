@@ -40,7 +40,7 @@ fn reads_all_seven_shared_files() {
     for (name, size) in common::DEFAULT_SCENES {
         let mut r = Recorder::default();
         read_nff(
-            &common::shared_spd().join(format!("{name}{size}.nff")),
+            &common::spd_fixtures().join(format!("{name}{size}.nff")),
             &mut r,
             &NoProgress,
         )

@@ -2,8 +2,8 @@
 //! finds the surface it leaves (surface acne) and how often a shadow ray
 //! misses a blocker closer than the epsilon (lost shadows), with the
 //! epsilon and the spawning code the tracers use, over the first hits of
-//! the seven scenes of ../shared/spd. Brute force: every ray against every
-//! object, so that no grid can hide or cause anything.
+//! the seven SPD scenes (tests/fixtures/spd). Brute force: every ray
+//! against every object, so that no grid can hide or cause anything.
 //!
 //! The figures are printed (`cargo test --release --test self_intersection
 //! -- --nocapture`) and quoted in the README's Stability section.
@@ -127,7 +127,7 @@ fn secondary_rays_do_not_find_their_own_surface() {
     for (name, size) in common::DEFAULT_SCENES {
         let path = dir.path().join(format!("{name}.sdb"));
         let mut w = DbWriter::create(&path, Compression::None).unwrap();
-        SceneSource::nff(common::shared_spd().join(format!("{name}{size}.nff")))
+        SceneSource::nff(common::spd_fixtures().join(format!("{name}{size}.nff")))
             .stream_into(&mut w, &NoProgress)
             .unwrap();
         w.finish().unwrap();

@@ -1,9 +1,9 @@
-//! The SPD generators against real SPD output (shared/spd) and against the
-//! object counts of the paper's Tables 2 and 3.
+//! The SPD generators against real SPD output (tests/fixtures/spd) and
+//! against the object counts of the paper's Tables 2 and 3.
 
 mod common;
 
-use common::{DEFAULT_SCENES, shared_spd};
+use common::{DEFAULT_SCENES, spd_fixtures};
 use sray_engine::Error;
 use sray_engine::nff::read_nff;
 use sray_engine::progress::NoProgress;
@@ -23,7 +23,7 @@ fn generated(name: &str, size: u32) -> Recorder {
 fn from_file(name: &str, size: u32) -> Recorder {
     let mut r = Recorder::default();
     read_nff(
-        &shared_spd().join(format!("{name}{size}.nff")),
+        &spd_fixtures().join(format!("{name}{size}.nff")),
         &mut r,
         &NoProgress,
     )

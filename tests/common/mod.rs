@@ -38,22 +38,41 @@ pub fn fails(dir: &Path, args: &[&str]) -> String {
     err
 }
 
-/// `shared/spd` beside the repository (override with SRAY_SHARED_DIR).
-pub fn shared_spd() -> PathBuf {
+/// The seven default SPD scenes as NFF, written by the SPD programs: the
+/// vendored copies in `tests/fixtures/spd`, or `$SRAY_SHARED_DIR/spd` when
+/// that variable is set.
+pub fn spd_fixtures() -> PathBuf {
     if let Ok(d) = std::env::var("SRAY_SHARED_DIR") {
         return PathBuf::from(d).join("spd");
     }
-    let mut dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    loop {
-        let c = dir.join("shared").join("spd");
-        if c.is_dir() {
-            return c;
-        }
-        assert!(
-            dir.pop(),
-            "cannot find shared/spd beside the repository (set SRAY_SHARED_DIR)"
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/spd")
+}
+
+/// `shared/NAME` beside the repository (`$SRAY_SHARED_DIR/NAME` when that
+/// is set), if it exists: found by searching upward from the crate.
+pub fn shared_dir(name: &str) -> Option<PathBuf> {
+    if let Ok(d) = std::env::var("SRAY_SHARED_DIR") {
+        return Some(PathBuf::from(d).join(name)).filter(|d| d.is_dir());
+    }
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .map(|d| d.join("shared").join(name))
+        .find(|d| d.is_dir())
+}
+
+/// `shared/meshes` beside the repository (real meshes, not vendored: CI
+/// has them). When it is absent, says so on stderr and returns None, so
+/// that the caller can skip: `let Some(m) = shared_meshes() else { return };`
+pub fn shared_meshes() -> Option<PathBuf> {
+    let m = shared_dir("meshes");
+    if m.is_none() {
+        eprintln!(
+            "skipping: ../shared/meshes not found (searched upward from {} for \
+             shared/meshes; set SRAY_SHARED_DIR to its parent)",
+            env!("CARGO_MANIFEST_DIR")
         );
     }
+    m
 }
 
 pub fn json(s: &str) -> serde_json::Value {
