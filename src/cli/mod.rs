@@ -28,7 +28,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Render a scene (.nff, .sdb or spd:NAME:SIZE) to a PNG
+    /// Render a scene (.nff, .sdb or spd:NAME:SIZE) to a PNG or OpenEXR image
     Render(render::RenderArgs),
     /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
     Gen(gen_cmd::GenArgs),

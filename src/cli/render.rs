@@ -1,4 +1,4 @@
-//! `sray render`: a scene to a PNG.
+//! `sray render`: a scene to an image file (PNG or OpenEXR).
 
 use super::bar::Bar;
 use super::outputs::Outputs;
@@ -14,7 +14,8 @@ use std::path::PathBuf;
 pub struct RenderArgs {
     /// The scene: an .nff file, an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
     pub scene: String,
-    /// Output image (PNG)
+    /// Output image: .png (8-bit RGB) or .exr (OpenEXR, linear 32-bit float
+    /// RGB, unclamped)
     #[arg(short, long)]
     pub output: PathBuf,
     /// Tracer: df (depth-first, in memory), bf (breadth-first) or auto
@@ -145,7 +146,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         return run_cluster(&a, &req, outputs);
     }
     let result = render(&req, &BarStages)?;
-    outputs.write(&result.frame.png_bytes()?, &result.stats)
+    let image = result.frame.encode(outputs.format())?;
+    outputs.write(&image, &result.stats)
 }
 
 /// Renders on a cluster: a remote coordinator, or local worker processes.
@@ -170,6 +172,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
         .build()?;
     let bar = Bar::new("cluster", "");
     let db = scene.db.path().to_path_buf();
+    let format = outputs.format();
     let result = rt.block_on(async {
         match (&a.coordinator, a.local_workers) {
             (Some(url), _) => {
@@ -183,7 +186,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                         .map_err(anyhow::Error::msg)?,
                     ca: a.tls_ca.clone(),
                 };
-                client::render(&target, &db, params, shard_rays, &bar).await
+                client::render(&target, &db, params, shard_rays, format, &bar).await
             }
             (None, Some(n)) => {
                 let plan = local::LocalPlan {
@@ -194,7 +197,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                     threads: req.options.threads,
                     tmp_dir: req.tmp_dir.clone(),
                 };
-                local::render(&plan, &db, params, shard_rays, &bar).await
+                local::render(&plan, &db, params, shard_rays, format, &bar).await
             }
             (None, None) => unreachable!("checked by the caller"),
         }
@@ -203,5 +206,5 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     let mut result = result?;
     result.stats["convert_seconds"] = scene.convert_seconds.into();
     result.stats["client_seconds"] = t0.elapsed().as_secs_f64().into();
-    outputs.write(&result.png, &result.stats)
+    outputs.write(&result.image, &result.stats)
 }
