@@ -8,6 +8,7 @@ mod gen_cmd;
 mod info_cmd;
 mod outputs;
 mod render;
+mod summary;
 mod verify;
 
 use clap::{Parser, Subcommand};

@@ -2,6 +2,7 @@
 
 use super::bar::Bar;
 use super::outputs::Outputs;
+use super::summary;
 use clap::Args;
 use sray_engine::bf::StoreNumber;
 use sray_engine::job::{RenderRequest, Stages, render};
@@ -63,6 +64,10 @@ pub struct RenderArgs {
     /// Write statistics as JSON to this file
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// No progress bars, and no summary line at the end (errors are still
+    /// printed)
+    #[arg(short, long)]
+    pub quiet: bool,
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
@@ -119,6 +124,7 @@ impl Stages for BarStages {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
     }
@@ -147,7 +153,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     let result = render(&req, &BarStages)?;
     let image = result.frame.encode(outputs.format())?;
-    outputs.write(&image, &result.stats)
+    outputs.write(&image, &result.stats)?;
+    summary::print(&serde_json::to_value(&result.stats)?, &a.output, a.quiet);
+    Ok(())
 }
 
 /// Renders on a cluster: a remote coordinator, or local worker processes.
@@ -206,5 +214,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     let mut result = result?;
     result.stats["convert_seconds"] = scene.convert_seconds.into();
     result.stats["client_seconds"] = t0.elapsed().as_secs_f64().into();
-    outputs.write(&result.image, &result.stats)
+    outputs.write(&result.image, &result.stats)?;
+    summary::print(&result.stats, &a.output, a.quiet);
+    Ok(())
 }

@@ -128,6 +128,9 @@ async fn watch(
         .map_err(status)?
         .into_inner();
     let mut image = Vec::new();
+    // Each stage of each round counts its shards: (round, stage), done.
+    let mut counting: Option<(u32, i32)> = None;
+    let mut done = 0;
     while let Some(ev) = events.message().await.map_err(status)? {
         match ev.event {
             Some(v1::job_event::Event::Progress(p)) => {
@@ -136,9 +139,20 @@ async fn watch(
                 } else {
                     "intersecting"
                 };
+                if counting != Some((p.round, p.stage)) {
+                    counting = Some((p.round, p.stage));
+                    done = 0;
+                    progress.set_unit("shards");
+                    progress.set_total(p.shards_total);
+                }
+                // Progress events may be skipped when the stream is busy.
+                if p.shards_done > done {
+                    progress.inc(p.shards_done - done);
+                    done = p.shards_done;
+                }
                 progress.set_message(&format!(
-                    "round {}: {stage} {} rays, {}/{} shards done, {} worker(s)",
-                    p.round, p.rays, p.shards_done, p.shards_total, p.workers
+                    "round {}: {stage} {} rays, {} worker(s)",
+                    p.round, p.rays, p.workers
                 ));
             }
             Some(v1::job_event::Event::ImageChunk(c)) => image.extend_from_slice(&c),
