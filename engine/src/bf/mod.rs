@@ -33,7 +33,7 @@ pub use voxels::{VoxelGrid, VoxelGrids};
 use crate::error::Error;
 use crate::grid::{GridSpec, MAX_CELLS, choose_resolution, plan_groups};
 use crate::math::Real;
-use crate::progress::Progress;
+use crate::progress::{Prefixed, Progress};
 use crate::render::{
     Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
 };
@@ -308,6 +308,8 @@ fn render_in<R: Real>(
         camera: Camera::new(&db.scene().view, opts.width, opts.height)?,
         sampling: opts.sampling(),
     };
+    // Marking the voxels counts objects.
+    progress.set_unit("objects");
     let mut tr = Tracer::<R>::new(db, opts, bf, opts.frame_slots(), progress)?;
     let mut frame = Frame::with_sampling(opts.width, opts.height, eye.sampling);
     let mut counts = RayCounts {
@@ -324,10 +326,16 @@ fn render_in<R: Real>(
             break;
         }
         tr.stats.rays_per_round.push(n);
+        // Each round counts its own rays against its own total (a new
+        // count: the done count starts again at zero), and names itself in
+        // the passes' messages. The whole render's rays are not known in
+        // advance: each round holds the rays the previous one spawned.
+        progress.set_unit("rays");
         progress.set_total(n);
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
+        let in_round = Prefixed::new(progress, format!("round {round}: "));
         let resident = matches!(rays, RoundRays::Held(HeldRays::Memory(_)));
-        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, progress)?;
+        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, &in_round)?;
 
         progress.set_message(&format!("round {round}: shading"));
         let (next, count, _) = tr.shade(
