@@ -12,16 +12,37 @@
 //! are merged by key into the next round's rays. The image and every count
 //! are therefore those of the embedded render, whatever the workers, the
 //! shard size or the order of completion.
+//!
+//! **Verification.** A ray's intersection result, and what shading it
+//! contributes and spawns, depend only on the ray, never on the worker,
+//! its grid or its memory. So every shard's output is checked, before the
+//! stage may end, by re-tracing a random contiguous sample of its rays
+//! (`verify_fraction` of them, at least `verify_min_rays`) on a *different*
+//! worker and comparing bit for bit: results exactly; spawned rays in the
+//! sample's key range exactly; the sample's contributions must all be
+//! among the shard's (contributions carry no ray id). When no other worker
+//! may take the sample, the coordinator traces it itself. On a mismatch the
+//! coordinator re-traces the sample itself (it is the one party trusted),
+//! quarantines whichever worker disagrees with it, redoes elsewhere every
+//! output of this stage from a worker found lying, and says so in the
+//! job's log.
+//!
+//! **Checkpoints.** At the end of every round the next round's rays, the
+//! frame and the totals are journaled (see [`crate::jobs`]); a restarted
+//! coordinator resumes the job from there.
 
-use crate::state::{Shared, TaskEvent, TaskInput, TaskOutput};
+use crate::jobs::{self, JobEntry, JobState, Record, Resume};
+use crate::service::Receiver;
+use crate::state::{Shared, TaskEvent, TaskInput, TaskOutput, WorkerTag};
 use anyhow::{Context, bail};
-use sray_engine::bf::{RayRec, plan_grids};
+use sray_engine::bf::{BfOptions, Contribution, RayRec, ResultRec, SPAWN_SLOTS, StoreNumber};
 use sray_engine::render::{
     Camera, Frame, GridRes, ImageFormat, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
 };
 use sray_engine::sdb::Database;
 use sray_engine::spill::{ExternalSorter, RecordFile, RecordWriter};
 use sray_proto::v1;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::mpsc;
@@ -32,6 +53,7 @@ pub struct Job {
     pub hash: String,
     pub params: v1::RenderParams,
     pub opts: RenderOptions,
+    pub store: StoreNumber,
     pub shard_rays: u64,
     /// The format of the image sent back.
     pub format: ImageFormat,
@@ -43,19 +65,66 @@ pub struct Job {
 /// Fewest and most rays per shard a job may ask for.
 const SHARD_RAYS: std::ops::RangeInclusive<u64> = 256..=(1 << 24);
 
+/// The memory the grid statistics of a job are planned for: each worker
+/// plans its own grid from its own `--memory` (results do not depend on
+/// the grid), so the statistics name a nominal one.
+const NOMINAL_MEMORY: u64 = 1 << 30;
+
 impl Job {
-    /// Checks a job request: the scene is here, the settings are sane.
-    /// Fixes the main grid's resolution so that every worker builds the
-    /// same grid (planned for the smallest worker's memory).
-    pub async fn check(shared: &Arc<Shared>, spec: v1::JobSpec) -> anyhow::Result<Job> {
-        let hash = spec.scene.map(|s| s.hash).unwrap_or_default();
+    /// Checks a job request against the coordinator's limits (before
+    /// anything is allocated for it): the scene is here, the settings are
+    /// sane and within bounds.
+    pub async fn check(shared: &Arc<Shared>, spec: &v1::JobSpec) -> anyhow::Result<Job> {
+        let l = &shared.cfg.limits;
+        let params = spec.params.context("a job needs render settings")?;
+        let pixels = params.width as u64 * params.height as u64;
+        if pixels > l.max_pixels {
+            bail!(
+                "{}x{} is {pixels} pixels: this coordinator renders at most {} (--max-pixels)",
+                params.width,
+                params.height,
+                l.max_pixels
+            );
+        }
+        if params.samples > l.max_samples {
+            bail!(
+                "{} samples per pixel: this coordinator takes at most {} (--max-samples)",
+                params.samples,
+                l.max_samples
+            );
+        }
+        if params.max_depth > l.max_depth {
+            bail!(
+                "depth {}: this coordinator takes at most {} (--max-depth)",
+                params.max_depth,
+                l.max_depth
+            );
+        }
+        let voxels = params.grid_res_x as u64 * params.grid_res_y as u64 * params.grid_res_z as u64;
+        if voxels > l.max_grid_voxels {
+            bail!(
+                "a {}x{}x{} grid: at most {} voxels here",
+                params.grid_res_x,
+                params.grid_res_y,
+                params.grid_res_z,
+                l.max_grid_voxels
+            );
+        }
+        let hash = spec.scene.as_ref().map(|s| s.hash.clone()).unwrap_or_default();
         let sh = shared.clone();
         let h = hash.clone();
         let scene = tokio::task::spawn_blocking(move || sh.scenes.get(&h))
             .await??
             .with_context(|| format!("no scene {hash} here: upload it first"))?;
-        let mut params = spec.params.context("a job needs render settings")?;
-        let (opts, _) = sray_worker::params::from_proto(&params, 0).map_err(anyhow::Error::msg)?;
+        if scene.size > l.max_scene_bytes {
+            bail!(
+                "the scene has {} bytes: at most {} here (--max-scene-bytes)",
+                scene.size,
+                l.max_scene_bytes
+            );
+        }
+        let (opts, store) =
+            sray_worker::params::from_proto(&params, 0).map_err(anyhow::Error::msg)?;
         let shard_rays = match spec.shard_rays {
             0 => shared.cfg.shard_rays,
             n if SHARD_RAYS.contains(&n) => n,
@@ -69,32 +138,35 @@ impl Job {
                 spec.image_format
             ),
         };
-        let db = Database::open(&scene.path)?;
-        Camera::new(&db.scene().view, opts.width, opts.height)?;
-        let memory = shared.min_worker_memory().unwrap_or(1 << 30);
-        let (specs, _) = plan_grids(&db, &opts, memory);
-        let groups = sray_engine::grid::plan_groups(db.sizes(), opts.multiple_grids);
-        if opts.grid_res == GridRes::Auto {
-            let [x, y, z] = specs[0].res;
-            (params.grid_res_x, params.grid_res_y, params.grid_res_z) = (x, y, z);
-        }
-        let grids = specs
-            .iter()
-            .zip(&groups.counts)
-            .map(|(s, &n)| sray_engine::grid::GridStat {
-                objects: n,
-                resolution: s.res,
-                lo: s.lo,
-                hi: s.hi,
-            })
-            .collect();
+        let path = scene.path.clone();
+        let o = opts.clone();
+        let (objects, eps, grids) = tokio::task::spawn_blocking(move || -> anyhow::Result<_> {
+            let db = Database::open(&path)?;
+            Camera::new(&db.scene().view, o.width, o.height)?;
+            let (specs, _) = sray_engine::bf::plan_grids(&db, &o, NOMINAL_MEMORY);
+            let groups = sray_engine::grid::plan_groups(db.sizes(), o.multiple_grids);
+            let grids: Vec<_> = specs
+                .iter()
+                .zip(&groups.counts)
+                .map(|(s, &n)| sray_engine::grid::GridStat {
+                    objects: n,
+                    resolution: s.res,
+                    lo: s.lo,
+                    hi: s.hi,
+                })
+                .collect();
+            Ok((db.object_count(), epsilon(&db.bbox(), o.precision), grids))
+        })
+        .await??;
+        let _ = GridRes::Auto;
         Ok(Job {
-            objects: db.object_count(),
-            eps: epsilon(&db.bbox(), opts.precision),
+            objects,
+            eps,
             scene,
             hash,
             params,
             opts,
+            store,
             shard_rays,
             format,
             grids,
@@ -102,26 +174,118 @@ impl Job {
     }
 }
 
-/// Starts a job; its events go to whoever takes its watcher.
-pub fn start(shared: Arc<Shared>, job: Job) -> u64 {
-    let (id, events) = shared.new_job();
-    tokio::spawn(async move {
+/// Takes a checked request: journals it and starts it. Returns the job's
+/// id and secret.
+pub async fn submit(shared: &Arc<Shared>, spec: v1::JobSpec) -> anyhow::Result<(String, String)> {
+    let job = Job::check(shared, &spec).await?;
+    let (entry, secret) = shared.jobs.create(&job.hash)?;
+    let mut rec = Record::new(&entry, &spec);
+    let dir = entry.dir.clone();
+    let r = rec_save(&mut rec, &dir).await;
+    if let Err(e) = r {
+        let _ = std::fs::remove_dir_all(&dir);
+        return Err(e);
+    }
+    entry.log(format!(
+        "job submitted: {}x{}, {} samples, depth {}, scene {}",
+        job.opts.width,
+        job.opts.height,
+        job.opts.samples,
+        job.opts.max_depth,
+        &job.hash[..16]
+    ));
+    start(shared.clone(), entry.clone(), job, rec, None);
+    Ok((entry.id.clone(), secret))
+}
+
+async fn rec_save(rec: &mut Record, dir: &std::path::Path) -> anyhow::Result<()> {
+    let json = serde_json::to_vec_pretty(&*rec)?;
+    let dir = dir.to_path_buf();
+    tokio::task::spawn_blocking(move || {
+        jobs::write_atomic(&dir, "job.json", |w| {
+            use std::io::Write;
+            Ok(w.write_all(&json)?)
+        })
+    })
+    .await?
+}
+
+/// Resumes the unfinished jobs of the journal (at start).
+pub async fn resume_all(shared: &Arc<Shared>) {
+    let sh = shared.clone();
+    let found = tokio::task::spawn_blocking(move || jobs::load_all(&sh.jobs, sh.cfg.job_retention))
+        .await
+        .unwrap_or_default();
+    for (entry, rec) in found {
+        let r: anyhow::Result<()> = async {
+            let spec = rec.spec()?;
+            let job = Job::check(shared, &spec).await?;
+            let slots = job.opts.frame_slots();
+            let dir = entry.dir.clone();
+            let spill = shared.spill.clone();
+            let rec2 = serde_json::to_value(&rec)?;
+            let resume = tokio::task::spawn_blocking(move || {
+                let rec: Record = serde_json::from_value(rec2)?;
+                jobs::load_checkpoint(&dir, &rec, slots, &spill)
+            })
+            .await??;
+            entry.log(match &resume {
+                Some(r) => format!("coordinator restarted: resuming at round {}", r.round),
+                None => "coordinator restarted: starting again (no round had finished)".into(),
+            });
+            start(shared.clone(), entry.clone(), job, rec.clone(), resume);
+            Ok(())
+        }
+        .await;
+        if let Err(e) = r {
+            let msg = format!("cannot resume the job: {e:#}");
+            tracing::warn!(job = %entry.id, error = %msg, "job not resumed");
+            let mut rec = rec;
+            let _ = jobs::fail(&entry, &mut rec, &msg);
+            entry.set_state(JobState::Failed(msg));
+        }
+    }
+}
+
+/// Runs a job to its end; the outcome is journaled and told to watchers.
+fn start(shared: Arc<Shared>, entry: Arc<JobEntry>, job: Job, rec: Record, resume: Option<Resume>) {
+    let e2 = entry.clone();
+    let h = tokio::spawn(async move {
         let t0 = Instant::now();
-        let r = drive(&shared, id, &job, &events).await;
+        let mut rec = rec;
+        let r = drive(&shared, &entry, &job, &mut rec, resume).await;
+        if shared.is_stopping() {
+            // Resumed from its last checkpoint by the next run.
+            return;
+        }
         match r {
-            Ok(()) => tracing::info!(job = id, seconds = t0.elapsed().as_secs_f64(), "job done"),
+            Ok((image, stats)) => {
+                let e = entry.clone();
+                let saved = tokio::task::spawn_blocking(move || {
+                    jobs::finish(&e, &mut rec, &image, &stats)
+                })
+                .await;
+                match saved {
+                    Ok(Ok(())) => {
+                        tracing::info!(job = %entry.id, seconds = t0.elapsed().as_secs_f64(), "job done");
+                        entry.set_state(JobState::Done);
+                    }
+                    Ok(Err(e)) => entry.set_state(JobState::Failed(format!(
+                        "cannot keep the image: {e:#}"
+                    ))),
+                    Err(e) => entry.set_state(JobState::Failed(format!("internal: {e}"))),
+                }
+            }
             Err(e) => {
-                tracing::warn!(job = id, error = %format!("{e:#}"), "job failed");
-                let _ = events
-                    .send(v1::JobEvent {
-                        event: Some(v1::job_event::Event::Error(format!("{e:#}"))),
-                    })
-                    .await;
+                let msg = format!("{e:#}");
+                tracing::warn!(job = %entry.id, error = %msg, "job failed");
+                let _ = jobs::fail(&entry, &mut rec, &msg);
+                entry.set_state(JobState::Failed(msg));
             }
         }
-        shared.end_job(id);
+        shared.end_job(&entry.id);
     });
-    id
+    *e2.driver.lock().unwrap_or_else(|p| p.into_inner()) = Some(h.abort_handle());
 }
 
 /// Drops a stage's tasks however the stage ends.
@@ -136,11 +300,14 @@ impl Drop for TaskGuard<'_> {
     }
 }
 
-/// Totals over a job.
-#[derive(Default)]
+/// Totals over a job (journaled with every checkpoint).
+#[derive(Default, serde::Serialize, serde::Deserialize)]
 struct Totals {
-    counts: RayCounts,
-    tests: KindCounts,
+    eye_hit_rays: u64,
+    reflect_rays: u64,
+    refract_rays: u64,
+    shadow_rays: u64,
+    tests: BTreeMap<String, u64>,
     hits: u64,
     tasks: u64,
     worker_seconds: f64,
@@ -150,30 +317,61 @@ struct Totals {
     rays_per_round: Vec<u64>,
     shards_per_round: Vec<u64>,
     passes: Vec<Vec<u64>>,
+    /// Verification: samples checked, their rays, samples traced by the
+    /// coordinator itself, mismatches, workers quarantined for lying,
+    /// outputs redone.
+    samples: u64,
+    sample_rays: u64,
+    shard_rays: u64,
+    local_samples: u64,
+    mismatches: u64,
+    quarantined: Vec<String>,
+    redone: u64,
+    backups: u64,
 }
+
+impl Totals {
+    fn add(&mut self, o: &TaskOutput) {
+        let s = &o.summary;
+        self.eye_hit_rays += s.eye_hit_rays;
+        self.reflect_rays += s.reflect_rays;
+        self.refract_rays += s.refract_rays;
+        self.shadow_rays += s.shadow_rays;
+        for (k, n) in &s.tests_by_kind {
+            *self.tests.entry(k.clone()).or_default() += n;
+        }
+        self.hits += o.hits;
+        self.tasks += 1;
+        self.worker_seconds += s.seconds;
+    }
+}
+
+type Outcome = anyhow::Result<(Vec<u8>, String)>;
 
 async fn drive(
     shared: &Arc<Shared>,
-    id: u64,
+    entry: &Arc<JobEntry>,
     job: &Job,
-    events: &mpsc::Sender<v1::JobEvent>,
-) -> anyhow::Result<()> {
+    rec: &mut Record,
+    resume: Option<Resume>,
+) -> Outcome {
     let t0 = Instant::now();
     let traffic0 = shared.traffic.snapshot();
     let opts = &job.opts;
     let corners = opts.frame_slots();
     let mut frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
-    let mut tot = Totals {
-        counts: RayCounts {
-            eye_rays: opts.eye_rays(),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
+    let mut tot = Totals::default();
     let mut rays: Option<Arc<RecordFile<RayRec>>> = None;
     let mut n = opts.eye_rays();
     let mut round = 1u32;
+    if let Some(r) = resume {
+        frame.slots = r.frame;
+        tot = serde_json::from_value(r.totals).unwrap_or_default();
+        round = r.round;
+        n = r.rays.as_ref().map_or(0, |f| f.len());
+        rays = r.rays.map(Arc::new);
+    }
+    let mut arbiter = Arbiter::new(shared, job);
     while n > 0 {
         tot.rays_per_round.push(n);
         let shards: Vec<(u64, u64)> = (0..n.div_ceil(job.shard_rays))
@@ -183,48 +381,34 @@ async fn drive(
             })
             .collect();
         tot.shards_per_round.push(shards.len() as u64);
-        let task = |stage: v1::Stage, first: u64, count: u64| v1::Task {
-            task_id: 0,
-            job_id: id,
-            attempt: 0,
-            stage: stage as i32,
-            round,
-            first_ray: first,
-            ray_count: count,
-            eye_rays: rays.is_none(),
-            params: Some(job.params),
-            scene: Some(v1::SceneRef {
-                hash: job.hash.clone(),
-            }),
-        };
+        let eye = rays.is_none();
 
         // Intersect every shard.
         let ts = Instant::now();
-        let tasks = shards
+        let inputs: Vec<Arc<TaskInput>> = shards
             .iter()
-            .enumerate()
-            .map(|(i, &(first, count))| {
-                let input = TaskInput {
+            .map(|_| {
+                Arc::new(TaskInput {
                     rays: rays.clone(),
                     results: None,
+                    results_offset: 0,
                     objects: job.objects,
                     corners,
-                };
-                (task(v1::Stage::Intersect, first, count), i, Arc::new(input))
+                })
             })
             .collect();
-        let outs = run_stage(
+        let mut stage = Stage {
             shared,
-            id,
+            entry,
+            job,
             round,
-            v1::Stage::Intersect,
-            tasks,
-            &ev_tx,
-            &mut ev_rx,
-            events,
-            &mut tot,
-        )
-        .await?;
+            stage: v1::Stage::Intersect,
+            eye,
+            shards: &shards,
+            inputs,
+            main_ids: Vec::new(),
+        };
+        let outs = stage.run(&mut tot, &mut arbiter).await?;
         let mut round_passes = Vec::new();
         let results: Vec<_> = outs
             .into_iter()
@@ -235,37 +419,27 @@ async fn drive(
                     .context("an intersection task returned no results")
             })
             .collect::<anyhow::Result<_>>()?;
-        tot.passes
-            .push(round_passes.into_iter().flatten().collect());
+        tot.passes.push(round_passes.into_iter().flatten().collect());
         tot.intersect_seconds += ts.elapsed().as_secs_f64();
 
         // Shade every shard.
         let ts = Instant::now();
-        let tasks = shards
+        stage.stage = v1::Stage::Shade;
+        stage.inputs = shards
             .iter()
             .enumerate()
-            .map(|(i, &(first, count))| {
-                let input = TaskInput {
+            .map(|(i, _)| {
+                Arc::new(TaskInput {
                     rays: rays.clone(),
                     results: Some(results[i].clone()),
+                    results_offset: 0,
                     objects: job.objects,
                     corners,
-                };
-                (task(v1::Stage::Shade, first, count), i, Arc::new(input))
+                })
             })
             .collect();
-        let outs = run_stage(
-            shared,
-            id,
-            round,
-            v1::Stage::Shade,
-            tasks,
-            &ev_tx,
-            &mut ev_rx,
-            events,
-            &mut tot,
-        )
-        .await?;
+        let outs = stage.run(&mut tot, &mut arbiter).await?;
+        drop(stage);
         drop(results);
         // Colour into the frame; spawned rays merged by key.
         let spill = shared.spill.clone();
@@ -276,120 +450,590 @@ async fn drive(
         rays = next.map(Arc::new);
         tot.shade_seconds += ts.elapsed().as_secs_f64();
         round += 1;
+
+        // Checkpoint: a restart resumes here.
+        let e = entry.clone();
+        let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
+        let slots = std::mem::take(&mut frame.slots);
+        let rays2 = rays.clone();
+        let totals = serde_json::to_value(&tot)?;
+        let (slots, r2) = tokio::task::spawn_blocking(move || {
+            let r = jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals);
+            r.map(|()| (slots, r2))
+        })
+        .await??;
+        frame.slots = slots;
+        *rec = r2;
+        tracing::info!(job = %entry.id, round, rays = n, "checkpoint written");
     }
+    drop(arbiter);
 
     // The image, then the statistics.
     let format = job.format;
     let image = tokio::task::spawn_blocking(move || frame.encode(format)).await??;
-    for c in image.chunks(sray_proto::wire::RECORD_CHUNK_BYTES) {
-        send(events, v1::job_event::Event::ImageChunk(c.to_vec())).await?;
-    }
-    let stats = job_stats(shared, id, job, &tot, traffic0, t0.elapsed().as_secs_f64());
-    send(
-        events,
-        v1::job_event::Event::StatsJson(serde_json::to_string(&stats)?),
-    )
-    .await?;
-    Ok(())
+    let stats = job_stats(shared, entry, job, &tot, traffic0, t0.elapsed().as_secs_f64());
+    Ok((image, serde_json::to_string(&stats)?))
 }
 
-async fn send(events: &mpsc::Sender<v1::JobEvent>, e: v1::job_event::Event) -> anyhow::Result<()> {
-    events
-        .send(v1::JobEvent { event: Some(e) })
-        .await
-        .map_err(|_| anyhow::anyhow!("the client went away"))
+/// What a shard of a stage has come to.
+#[derive(Default)]
+struct ShardState {
+    out: Option<(Arc<TaskOutput>, WorkerTag)>,
+    verified: bool,
+    /// The verification task out for it, and its sample.
+    verify: Option<(u64, u64, u64)>,
 }
 
-/// Queues a stage's tasks and waits until every one is done, reporting
-/// progress; fails on a task that failed too often, on cancellation, or
-/// when no worker has been there for too long.
-#[allow(clippy::too_many_arguments)]
-async fn run_stage(
-    shared: &Arc<Shared>,
-    job: u64,
+enum Kind {
+    Main(usize),
+    Verify(usize),
+}
+
+/// What the coordinator's own trace of a sample is for.
+enum Purpose {
+    /// No other worker could check the shard.
+    Verify,
+    /// A worker's check disagreed with the shard's output.
+    Arbitrate(WorkerTag, Arc<TaskOutput>),
+}
+
+struct Local {
+    shard: usize,
+    sample: (u64, u64),
+    purpose: Purpose,
+    result: anyhow::Result<TaskOutput>,
+}
+
+struct Stage<'a> {
+    shared: &'a Arc<Shared>,
+    entry: &'a Arc<JobEntry>,
+    job: &'a Job,
     round: u32,
     stage: v1::Stage,
-    tasks: Vec<(v1::Task, usize, Arc<TaskInput>)>,
-    ev_tx: &mpsc::UnboundedSender<TaskEvent>,
-    ev_rx: &mut mpsc::UnboundedReceiver<TaskEvent>,
-    events: &mpsc::Sender<v1::JobEvent>,
-    tot: &mut Totals,
-) -> anyhow::Result<Vec<TaskOutput>> {
-    let total = tasks.len();
-    let rays: u64 = tasks.iter().map(|t| t.0.ray_count).sum();
-    let guard = TaskGuard {
-        shared,
-        ids: shared.enqueue(tasks, ev_tx),
-    };
-    let mut outs: Vec<Option<TaskOutput>> = (0..total).map(|_| None).collect();
-    let mut done = 0;
-    let mut alone_since: Option<Instant> = None;
-    let progress = |done: usize| v1::JobEvent {
-        event: Some(v1::job_event::Event::Progress(v1::JobProgress {
-            round,
-            stage: stage as i32,
-            shards_done: done as u64,
+    eye: bool,
+    shards: &'a [(u64, u64)],
+    inputs: Vec<Arc<TaskInput>>,
+    /// The shards' tasks in this stage.
+    main_ids: Vec<u64>,
+}
+
+impl Stage<'_> {
+    fn task(&self, first: u64, count: u64, verification: bool) -> v1::Task {
+        v1::Task {
+            task_id: 0,
+            job_id: self.entry.id.clone(),
+            attempt: 0,
+            stage: self.stage as i32,
+            round: self.round,
+            first_ray: first,
+            ray_count: count,
+            eye_rays: self.eye,
+            params: Some(self.job.params),
+            scene: Some(v1::SceneRef {
+                hash: self.job.hash.clone(),
+            }),
+            verification,
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        stage_name(self.stage)
+    }
+
+    /// The input of a sample of shard `i`'s rays.
+    fn sample_input(&self, i: usize, s: u64) -> Arc<TaskInput> {
+        let inp = &self.inputs[i];
+        Arc::new(TaskInput {
+            rays: inp.rays.clone(),
+            results: inp.results.clone(),
+            results_offset: s - self.shards[i].0,
+            objects: inp.objects,
+            corners: inp.corners,
+        })
+    }
+
+    /// A random sample of shard `i`: its first ray and count.
+    fn sample(&self, i: usize) -> (u64, u64) {
+        let (first, count) = self.shards[i];
+        let cfg = &self.shared.cfg;
+        let k = ((count as f64 * cfg.verify_fraction).ceil() as u64)
+            .max(cfg.verify_min_rays)
+            .clamp(1, count);
+        let off = sray_proto::ids::random_u64() % (count - k + 1);
+        (first + off, k)
+    }
+
+    /// Queues the stage's tasks and waits until every shard is done and
+    /// verified; fails on a task that failed too often, on cancellation,
+    /// or when no worker may do the work for too long.
+    async fn run(
+        &mut self,
+        tot: &mut Totals,
+        arbiter: &mut Arbiter,
+    ) -> anyhow::Result<Vec<TaskOutput>> {
+        let shared = self.shared;
+        let cfg = &shared.cfg;
+        let total = self.shards.len();
+        let rays: u64 = self.shards.iter().map(|s| s.1).sum();
+        let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
+        let (local_tx, mut local_rx) = mpsc::unbounded_channel::<Local>();
+        let tasks: Vec<_> = self
+            .shards
+            .iter()
+            .enumerate()
+            .map(|(i, &(first, count))| (self.task(first, count, false), i, self.inputs[i].clone()))
+            .collect();
+        let main_ids = shared.enqueue(tasks, &ev_tx, &[]);
+        self.main_ids = main_ids.clone();
+        let mut guard = TaskGuard {
+            shared,
+            ids: main_ids.clone(),
+        };
+        let mut kinds: HashMap<u64, Kind> = main_ids
+            .iter()
+            .enumerate()
+            .map(|(i, &id)| (id, Kind::Main(i)))
+            .collect();
+        let mut st: Vec<ShardState> = (0..total).map(|_| ShardState::default()).collect();
+        let verify = cfg.verify_fraction > 0.0;
+        let mut stuck_since: Option<Instant> = None;
+        let progress = |st: &[ShardState]| v1::JobProgress {
+            round: self.round,
+            stage: self.stage as i32,
+            shards_done: st.iter().filter(|s| s.out.is_some() && s.verified).count() as u64,
             shards_total: total as u64,
             rays,
             workers: shared.worker_count() as u32,
-        })),
-    };
-    let _ = events.try_send(progress(0));
-    let mut tick = tokio::time::interval(Duration::from_millis(500));
-    while done < total {
-        tokio::select! {
-            ev = ev_rx.recv() => match ev {
-                Some(TaskEvent::Done { task, shard, output }) => {
-                    if !guard.ids.contains(&task) || outs[shard].is_some() {
+        };
+        self.entry.set_progress(progress(&st));
+        let mut tick = tokio::time::interval(Duration::from_millis(250));
+        while !st.iter().all(|s| s.out.is_some() && s.verified) {
+            tokio::select! {
+                ev = ev_rx.recv() => match ev {
+                    Some(TaskEvent::Done { task, output, worker, .. }) => match kinds.get(&task) {
+                        Some(&Kind::Main(i)) => {
+                            if st[i].out.is_some() {
+                                continue;
+                            }
+                            let out = Arc::new(output);
+                            st[i].out = Some((out, worker.clone()));
+                            st[i].verified = !verify;
+                            if verify {
+                                let (s, k) = self.sample(i);
+                                if shared.eligible_workers(std::slice::from_ref(&worker)) > 0 {
+                                    let t = self.task(s, k, true);
+                                    let id = shared.enqueue(vec![(t, i, self.sample_input(i, s))], &ev_tx, &[worker])[0];
+                                    guard.ids.push(id);
+                                    kinds.insert(id, Kind::Verify(i));
+                                    st[i].verify = Some((id, s, k));
+                                } else {
+                                    st[i].verify = Some((0, s, k));
+                                    arbiter.trace(self, i, (s, k), Purpose::Verify, &local_tx);
+                                }
+                            }
+                            self.entry.set_progress(progress(&st));
+                        }
+                        Some(&Kind::Verify(i)) => {
+                            let Some((vid, s, k)) = st[i].verify else { continue };
+                            if vid != task {
+                                continue;
+                            }
+                            let Some((main, main_worker)) = st[i].out.clone() else { continue };
+                            let sample = Arc::new(output);
+                            let first = self.shards[i].0;
+                            let stage = self.stage;
+                            let sm = sample.clone();
+                            let same = tokio::task::spawn_blocking(move || same_sample(stage, &main, first, &sm, s, k)).await??;
+                            tot.samples += 1;
+                            tot.sample_rays += k;
+                            if same {
+                                st[i].verified = true;
+                                self.entry.set_progress(progress(&st));
+                            } else {
+                                tot.mismatches += 1;
+                                self.entry.log(format!(
+                                    "verification mismatch: round {} {} shard {i} (rays {s}..{}): worker {} and worker {} disagree; the coordinator traces the sample itself to decide",
+                                    self.round, self.name(), s + k, main_worker.name, worker.name
+                                ));
+                                arbiter.trace(self, i, (s, k), Purpose::Arbitrate(worker, sample), &local_tx);
+                            }
+                        }
+                        None => {}
+                    },
+                    Some(TaskEvent::Failed { task, error }) => match kinds.get(&task) {
+                        Some(Kind::Main(_)) => bail!(
+                            "a {} task of round {} failed on {} workers: {error}",
+                            self.name(), self.round, cfg.max_attempts
+                        ),
+                        Some(&Kind::Verify(i)) => {
+                            // A sample that cannot be traced elsewhere is
+                            // traced here.
+                            if let Some((vid, s, k)) = st[i].verify && vid == task {
+                                st[i].verify = Some((0, s, k));
+                                arbiter.trace(self, i, (s, k), Purpose::Verify, &local_tx);
+                            }
+                        }
+                        None => {}
+                    },
+                    None => bail!("internal: task events closed"),
+                },
+                Some(l) = local_rx.recv() => {
+                    let i = l.shard;
+                    let Some((main, main_worker)) = st[i].out.clone() else { continue };
+                    let (s, k) = l.sample;
+                    if st[i].verify.map(|v| (v.1, v.2)) != Some((s, k)) {
                         continue;
                     }
-                    let s = &output.summary;
-                    tot.counts.eye_hit_rays += s.eye_hit_rays;
-                    tot.counts.reflect_rays += s.reflect_rays;
-                    tot.counts.refract_rays += s.refract_rays;
-                    tot.counts.shadow_rays += s.shadow_rays;
-                    // Kind names were checked when the output arrived.
-                    let _ = tot
-                        .tests
-                        .add_named(s.tests_by_kind.iter().map(|(k, &n)| (k.as_str(), n)));
-                    tot.hits += output.hits;
-                    tot.tasks += 1;
-                    tot.worker_seconds += s.seconds;
-                    outs[shard] = Some(output);
-                    done += 1;
-                    let _ = events.try_send(progress(done));
-                }
-                Some(TaskEvent::Failed { task, error }) => {
-                    if guard.ids.contains(&task) {
-                        bail!("a {} task of round {round} failed on every try: {error}", stage_name(stage));
+                    tot.local_samples += 1;
+                    let local = match l.result {
+                        Ok(o) => Arc::new(o),
+                        Err(e) => {
+                            self.entry.log(format!(
+                                "the coordinator could not trace a sample of round {} {} shard {i}: {e:#}; the shard is redone on another worker",
+                                self.round, self.name()
+                            ));
+                            self.redo(i, &main_worker, &mut st, tot);
+                            continue;
+                        }
+                    };
+                    let stage = self.stage;
+                    let first = self.shards[i].0;
+                    let (m, lo) = (main.clone(), local.clone());
+                    let main_ok = tokio::task::spawn_blocking(move || same_sample(stage, &m, first, &lo, s, k)).await??;
+                    if let Purpose::Arbitrate(verifier, vout) = &l.purpose {
+                        let (v, lo) = (vout.clone(), local.clone());
+                        let verifier_ok = tokio::task::spawn_blocking(move || {
+                            anyhow::Ok(same_sample(stage, &v, s, &lo, s, k)? && same_sample(stage, &lo, s, &v, s, k)?)
+                        }).await??;
+                        if !verifier_ok {
+                            self.distrust(verifier, &format!("its check of round {} {} shard {i} was wrong", self.round, self.name()), tot);
+                        }
+                    } else if main_ok {
+                        tot.samples += 1;
+                        tot.sample_rays += k;
+                    }
+                    if main_ok {
+                        st[i].verified = true;
+                        self.entry.set_progress(progress(&st));
+                    } else {
+                        tot.mismatches += u64::from(matches!(l.purpose, Purpose::Verify));
+                        self.distrust(&main_worker, &format!("it returned wrong output for round {} {} shard {i} (rays {s}..{})", self.round, self.name(), s + k), tot);
+                        // Every output of the stage from that worker is redone.
+                        for j in 0..total {
+                            if st[j].out.as_ref().is_some_and(|(_, w)| *w == main_worker) {
+                                self.redo(j, &main_worker, &mut st, tot);
+                            }
+                        }
                     }
                 }
-                None => bail!("internal: task events closed"),
-            },
-            _ = tick.tick() => {
-                if events.is_closed() || shared.is_cancelled(job) {
-                    bail!("cancelled by the client");
+                _ = tick.tick() => {
+                    if self.entry.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+                        bail!("cancelled by the client");
+                    }
+                    let workers = shared.worker_count();
+                    tot.max_workers = tot.max_workers.max(workers);
+                    // Backup attempts for stragglers.
+                    for (id, ran) in shared.issue_backups(&guard.ids) {
+                        tot.backups += 1;
+                        if let Some(k) = kinds.get(&id) {
+                            let (Kind::Main(i) | Kind::Verify(i)) = *k;
+                            self.entry.log(format!(
+                                "a {} task of round {} shard {i} has run {:.1} s, far longer than its siblings: a backup attempt goes to another worker (the first result wins)",
+                                self.name(), self.round, ran.as_secs_f64()
+                            ));
+                        }
+                    }
+                    // Work that no worker may take.
+                    let stranded = shared.stranded(&guard.ids);
+                    let mut main_stranded = None;
+                    for (id, errors) in stranded {
+                        match kinds.get(&id) {
+                            Some(&Kind::Verify(i)) => {
+                                if let Some((vid, s, k)) = st[i].verify && vid == id {
+                                    shared.forget_tasks(&[id]);
+                                    st[i].verify = Some((0, s, k));
+                                    arbiter.trace(self, i, (s, k), Purpose::Verify, &local_tx);
+                                }
+                            }
+                            Some(Kind::Main(_)) => main_stranded = Some(errors),
+                            None => {}
+                        }
+                    }
+                    match main_stranded {
+                        None => stuck_since = None,
+                        Some(errors) => {
+                            let since = *stuck_since.get_or_insert_with(Instant::now);
+                            if since.elapsed() > cfg.worker_wait {
+                                if workers == 0 {
+                                    bail!(
+                                        "no worker has been connected for {} s: start workers with `sray worker --coordinator URL`",
+                                        cfg.worker_wait.as_secs()
+                                    );
+                                }
+                                bail!(
+                                    "no connected worker may run a {} task of round {} for {} s (it failed on, or was quarantined from, all of them): {errors}",
+                                    self.name(), self.round, cfg.worker_wait.as_secs()
+                                );
+                            }
+                        }
+                    }
                 }
-                let workers = shared.worker_count();
-                tot.max_workers = tot.max_workers.max(workers);
-                if workers > 0 {
-                    alone_since = None;
-                } else {
-                    let since = *alone_since.get_or_insert_with(Instant::now);
-                    if since.elapsed() > shared.cfg.worker_wait {
-                        bail!(
-                            "no worker has been connected for {} s: start workers with `sray worker --coordinator URL`",
-                            shared.cfg.worker_wait.as_secs()
-                        );
+            }
+        }
+        drop(guard);
+        let outs: Vec<TaskOutput> = st
+            .into_iter()
+            .map(|s| {
+                let (o, _) = s.out.expect("every shard is done");
+                Arc::try_unwrap(o).map_err(|_| anyhow::anyhow!("internal: an output is still shared"))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        for o in &outs {
+            tot.add(o);
+        }
+        tot.shard_rays += rays;
+        Ok(outs)
+    }
+
+    /// Quarantines a worker that returned wrong output.
+    fn distrust(&self, w: &WorkerTag, why: &str, tot: &mut Totals) {
+        if !self.shared.is_quarantined(w) {
+            self.shared.quarantine(w, why);
+        }
+        if !tot.quarantined.contains(&w.name) {
+            tot.quarantined.push(w.name.clone());
+        }
+        self.entry.log(format!(
+            "worker {} quarantined for {} s: {why}; its outputs of this stage are redone on other workers",
+            w.name,
+            self.shared.cfg.quarantine.as_secs()
+        ));
+    }
+
+    /// Throws shard `i`'s output away and runs it again elsewhere.
+    fn redo(&self, i: usize, avoid: &WorkerTag, st: &mut [ShardState], tot: &mut Totals) {
+        st[i] = ShardState::default();
+        tot.redone += 1;
+        self.shared.redo(self.main_ids[i], avoid);
+    }
+}
+
+/// The coordinator's own tracer for a job, started the first time a
+/// sample must be traced here (no other worker, or a mismatch to decide).
+struct Arbiter {
+    shared: Arc<Shared>,
+    exec: Option<Arc<sray_worker::exec::Executor>>,
+    db: std::path::PathBuf,
+    opts: RenderOptions,
+    store: StoreNumber,
+    hash: String,
+}
+
+impl Arbiter {
+    fn new(shared: &Arc<Shared>, job: &Job) -> Arbiter {
+        let mut opts = job.opts.clone();
+        opts.threads = 1;
+        Arbiter {
+            shared: shared.clone(),
+            exec: None,
+            db: job.scene.path.clone(),
+            opts,
+            store: job.store,
+            hash: job.hash.clone(),
+        }
+    }
+
+    /// Traces shard `i`'s sample here; the outcome goes to `tx`.
+    fn trace(
+        &mut self,
+        stage: &Stage<'_>,
+        i: usize,
+        sample: (u64, u64),
+        purpose: Purpose,
+        tx: &mpsc::UnboundedSender<Local>,
+    ) {
+        let exec = self
+            .exec
+            .get_or_insert_with(|| {
+                Arc::new(sray_worker::exec::Executor::start(
+                    sray_worker::exec::JobSetup {
+                        key: format!("arbiter-{}", &self.hash[..16]),
+                        db_path: self.db.clone(),
+                        opts: self.opts.clone(),
+                        bf: BfOptions {
+                            memory: self.shared.cfg.arbiter_memory,
+                            store: self.store,
+                            spill_dir: Some(self.shared.spill.path().to_path_buf()),
+                        },
+                    },
+                    tokio::runtime::Handle::current(),
+                ))
+            })
+            .clone();
+        let (s, k) = sample;
+        let task = stage.task(s, k, true);
+        let input = stage.sample_input(i, s);
+        let shared = self.shared.clone();
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            let result = trace_here(&shared, &exec, task, input).await;
+            let _ = tx.send(Local {
+                shard: i,
+                sample,
+                purpose,
+                result,
+            });
+        });
+    }
+}
+
+/// Runs one task on the coordinator's own executor, checking its output
+/// as a worker's is checked.
+async fn trace_here(
+    shared: &Arc<Shared>,
+    exec: &sray_worker::exec::Executor,
+    task: v1::Task,
+    input: Arc<TaskInput>,
+) -> anyhow::Result<TaskOutput> {
+    use sray_worker::exec::{Input, Inputs, Work};
+    // The sample's input records, copied out of the round's files.
+    let (t2, i2, spill) = (task.clone(), input.clone(), shared.spill.clone());
+    let files = tokio::task::spawn_blocking(move || -> anyhow::Result<Inputs> {
+        let mut inputs = Inputs::default();
+        if let (Some(r), false) = (&i2.rays, t2.eye_rays) {
+            let mut rd = r.reader_range(t2.first_ray, t2.ray_count)?;
+            let mut w = RecordWriter::<RayRec>::create(&spill, "sample-rays")?;
+            while let Some(x) = rd.next()? {
+                w.push(&x)?;
+            }
+            inputs.rays = Some(w.finish()?);
+        }
+        if let Some(r) = &i2.results {
+            let mut rd = r.reader_range(i2.results_offset, t2.ray_count)?;
+            let mut w = RecordWriter::<ResultRec>::create(&spill, "sample-results")?;
+            while let Some(x) = rd.next()? {
+                w.push(&x)?;
+            }
+            inputs.results = Some(w.finish()?);
+        }
+        Ok(inputs)
+    })
+    .await??;
+    let (out_tx, mut out_rx) = mpsc::channel::<v1::TaskOutput>(4);
+    let (done_tx, done_rx) = tokio::sync::oneshot::channel();
+    let work = Work {
+        task: task.clone(),
+        input: Input::Files(files),
+        out: out_tx,
+        done: done_tx,
+    };
+    if !exec.submit(work) {
+        bail!("the coordinator's tracer has stopped");
+    }
+    let mut rx = Receiver::new(shared, &task, &input);
+    let mut summary = None;
+    while let Some(m) = out_rx.recv().await {
+        match m.part {
+            Some(v1::task_output::Part::Records(c)) => rx.take(c).map_err(anyhow::Error::msg)?,
+            Some(v1::task_output::Part::Summary(s)) => summary = Some(s),
+            _ => {}
+        }
+    }
+    done_rx
+        .await
+        .map_err(|_| anyhow::anyhow!("the coordinator's tracer stopped"))?
+        .map_err(anyhow::Error::msg)?;
+    rx.finish(summary.context("no summary")?)
+        .map_err(anyhow::Error::msg)
+}
+
+/// Whether `sample` (rays `s .. s + k`) agrees bit for bit with what
+/// `main` (a shard from ray `first`) says of those rays.
+fn same_sample(
+    stage: v1::Stage,
+    main: &TaskOutput,
+    first: u64,
+    sample: &TaskOutput,
+    s: u64,
+    k: u64,
+) -> anyhow::Result<bool> {
+    if stage == v1::Stage::Intersect {
+        let (Some(m), Some(x)) = (&main.results, &sample.results) else {
+            return Ok(false);
+        };
+        if x.len() != k || m.len() < (s - first) + k {
+            return Ok(false);
+        }
+        let mut a = m.reader_range(s - first, k)?;
+        let mut b = x.reader()?;
+        for _ in 0..k {
+            let (p, q) = (a.next()?, b.next()?);
+            match (p, q) {
+                (Some(p), Some(q)) if bytemuck::bytes_of(&p) == bytemuck::bytes_of(&q) => {}
+                _ => return Ok(false),
+            }
+        }
+        return Ok(true);
+    }
+    // Spawned rays in the sample's key range: exactly the sample's.
+    let (lo, hi) = (s * SPAWN_SLOTS, (s + k) * SPAWN_SLOTS);
+    let mut want: Vec<RayRec> = Vec::new();
+    if let Some(m) = &main.rays {
+        let mut rd = m.reader()?;
+        while let Some(r) = rd.next()? {
+            if r.key >= hi {
+                break;
+            }
+            if r.key >= lo {
+                want.push(r);
+            }
+        }
+    }
+    let mut got: Vec<RayRec> = Vec::new();
+    if let Some(x) = &sample.rays {
+        let mut rd = x.reader()?;
+        while let Some(r) = rd.next()? {
+            got.push(r);
+        }
+    }
+    if bytemuck::cast_slice::<RayRec, u8>(&want) != bytemuck::cast_slice::<RayRec, u8>(&got) {
+        return Ok(false);
+    }
+    // The sample's contributions, each among the shard's.
+    let mut need: HashMap<[u8; 32], u64> = HashMap::new();
+    if let Some(x) = &sample.contributions {
+        let mut rd = x.reader()?;
+        while let Some(c) = rd.next()? {
+            *need.entry(contribution_key(&c)).or_default() += 1;
+        }
+    }
+    if need.is_empty() {
+        return Ok(true);
+    }
+    if let Some(m) = &main.contributions {
+        let mut rd = m.reader()?;
+        while let Some(c) = rd.next()? {
+            if let Some(n) = need.get_mut(&contribution_key(&c)) {
+                *n -= 1;
+                if *n == 0 {
+                    need.remove(&contribution_key(&c));
+                    if need.is_empty() {
+                        return Ok(true);
                     }
                 }
             }
         }
     }
-    Ok(outs
-        .into_iter()
-        .map(|o| o.expect("every shard is done"))
-        .collect())
+    Ok(need.is_empty())
+}
+
+fn contribution_key(c: &Contribution) -> [u8; 32] {
+    let mut k = [0u8; 32];
+    k[..4].copy_from_slice(&c.corner.to_le_bytes());
+    for (j, v) in c.rgb.iter().enumerate() {
+        k[8 + 8 * j..16 + 8 * j].copy_from_slice(&v.to_le_bytes());
+    }
+    k
 }
 
 fn stage_name(s: v1::Stage) -> &'static str {
@@ -439,27 +1083,37 @@ fn passes_of(stats_json: &str) -> Option<u64> {
 
 fn job_stats(
     shared: &Shared,
-    id: u64,
+    entry: &JobEntry,
     job: &Job,
     tot: &Totals,
     traffic0: [u64; 4],
     seconds: f64,
 ) -> RenderStats {
     let t = shared.traffic.snapshot();
-    let d: Vec<u64> = t.iter().zip(traffic0).map(|(a, b)| a - b).collect();
-    let rays = tot.counts.eye_rays
-        + tot.counts.reflect_rays
-        + tot.counts.refract_rays
-        + tot.counts.shadow_rays;
+    let d: Vec<u64> = t.iter().zip(traffic0).map(|(a, b)| a.saturating_sub(b)).collect();
+    let counts = RayCounts {
+        eye_rays: job.opts.eye_rays(),
+        eye_hit_rays: tot.eye_hit_rays,
+        reflect_rays: tot.reflect_rays,
+        refract_rays: tot.refract_rays,
+        shadow_rays: tot.shadow_rays,
+    };
+    let mut tests = KindCounts::default();
+    // Kind names were checked when the outputs arrived.
+    let _ = tests.add_named(tot.tests.iter().map(|(k, &n)| (k.as_str(), n)));
+    let rays = counts.eye_rays + counts.reflect_rays + counts.refract_rays + counts.shadow_rays;
     let wire = d[0] + d[1];
+    let (requeued, backups) = shared.requeued(&entry.id);
     let cluster = serde_json::json!({
+        "job_id": entry.id,
         "workers": tot.max_workers,
         "shard_rays": job.shard_rays,
         "shards_per_round": tot.shards_per_round,
         "rays_per_round": tot.rays_per_round,
         "passes": tot.passes,
         "tasks": tot.tasks,
-        "tasks_requeued": shared.requeued(id),
+        "tasks_requeued": requeued,
+        "backup_tasks": backups.max(tot.backups),
         "worker_seconds": tot.worker_seconds,
         "bytes_to_workers": d[0],
         "bytes_from_workers": d[1],
@@ -468,6 +1122,17 @@ fn job_stats(
         "hits": tot.hits,
         "bytes_per_ray": wire as f64 / rays.max(1) as f64,
         "bytes_per_hit": wire as f64 / tot.hits.max(1) as f64,
+        "verification": {
+            "fraction": shared.cfg.verify_fraction,
+            "samples": tot.samples,
+            "sample_rays": tot.sample_rays,
+            "shard_rays": tot.shard_rays,
+            "traced_by_coordinator": tot.local_samples,
+            "mismatches": tot.mismatches,
+            "quarantined": tot.quarantined,
+            "outputs_redone": tot.redone,
+        },
+        "log": entry.view().log.clone(),
     });
     RenderStats {
         mode: "cluster".into(),
@@ -479,9 +1144,9 @@ fn job_stats(
         threads: 0,
         precision: format!("{:?}", job.opts.precision).to_lowercase(),
         epsilon: job.eps,
-        rays: tot.counts,
-        intersection_tests: tot.tests.total(),
-        intersection_tests_by_kind: tot.tests,
+        rays: counts,
+        intersection_tests: tests.total(),
+        intersection_tests_by_kind: tests,
         grid_res: job.grids[0].resolution,
         grids: job.grids.clone(),
         trace_seconds: tot.intersect_seconds + tot.shade_seconds,

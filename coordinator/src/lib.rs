@@ -4,10 +4,12 @@
 //! - [`state`]: workers, the task queue, jobs;
 //! - [`service`]: the gRPC calls of `sray.proto`;
 //! - [`driver`]: a job's round loop, sharded over the workers;
+//! - [`jobs`]: who may see a job, its watchers, its journal on disk;
 //! - [`scenes`]: object databases served by content hash;
 //! - [`server`]: listening, TLS, the token.
 
 pub mod driver;
+pub mod jobs;
 pub mod scenes;
 pub mod server;
 pub mod service;

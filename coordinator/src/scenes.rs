@@ -42,6 +42,9 @@ impl Scene {
 pub struct SceneStore {
     dir: PathBuf,
     scenes: Mutex<HashMap<String, Arc<Scene>>>,
+    /// When each scene was last asked for (uploaded ones are evicted least
+    /// recently used first when the store is over its cap).
+    used: Mutex<HashMap<String, std::time::SystemTime>>,
 }
 
 pub fn valid_hash(hash: &str) -> bool {
@@ -86,9 +89,19 @@ impl SceneStore {
     pub fn new(dir: &Path) -> anyhow::Result<SceneStore> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the data directory {}", dir.display()))?;
+        // Uploads cut short by a killed coordinator.
+        if let Ok(rd) = std::fs::read_dir(dir) {
+            for f in rd.flatten() {
+                let n = f.file_name().to_string_lossy().to_string();
+                if n.starts_with("upload-") && n.ends_with(".part") {
+                    let _ = std::fs::remove_file(f.path());
+                }
+            }
+        }
         Ok(SceneStore {
             dir: dir.to_path_buf(),
             scenes: Mutex::new(HashMap::new()),
+            used: Mutex::new(HashMap::new()),
         })
     }
 
@@ -102,6 +115,10 @@ impl SceneStore {
         if !valid_hash(hash) {
             bail!("'{hash}' is not a scene hash");
         }
+        self.used
+            .lock()
+            .unwrap()
+            .insert(hash.to_string(), std::time::SystemTime::now());
         if let Some(s) = self.scenes.lock().unwrap().get(hash) {
             return Ok(Some(s.clone()));
         }
@@ -162,6 +179,51 @@ impl SceneStore {
             .with_context(|| path.display().to_string())?;
         self.insert(&hash, path, size, chunks);
         Ok(hash)
+    }
+
+    /// Removes uploaded scenes, least recently used first, until those in
+    /// the data directory take at most `cap` bytes; never one in `keep`.
+    pub fn evict(&self, cap: u64, keep: &[String]) {
+        let Ok(rd) = std::fs::read_dir(&self.dir) else {
+            return;
+        };
+        let used = self.used.lock().unwrap().clone();
+        let mut files: Vec<(std::time::SystemTime, String, u64, PathBuf)> = rd
+            .flatten()
+            .filter_map(|f| {
+                let name = f.file_name().to_string_lossy().to_string();
+                let hash = name.strip_suffix(".sdb")?.to_string();
+                if !valid_hash(&hash) {
+                    return None;
+                }
+                let md = f.metadata().ok()?;
+                let t = used
+                    .get(&hash)
+                    .copied()
+                    .or_else(|| md.modified().ok())
+                    .unwrap_or(std::time::UNIX_EPOCH);
+                Some((t, hash, md.len(), f.path()))
+            })
+            .collect();
+        let mut total: u64 = files.iter().map(|f| f.2).sum();
+        if total <= cap {
+            return;
+        }
+        files.sort();
+        for (_, hash, size, path) in files {
+            if total <= cap {
+                break;
+            }
+            if keep.contains(&hash) {
+                continue;
+            }
+            if std::fs::remove_file(&path).is_ok() {
+                tracing::info!(scene = %hash, bytes = size, "scene evicted (the store is over --scene-store-max)");
+                total -= size;
+                self.scenes.lock().unwrap().remove(&hash);
+                self.used.lock().unwrap().remove(&hash);
+            }
+        }
     }
 
     /// A temporary file in the data directory for an upload.

@@ -1,5 +1,13 @@
 //! Serving the coordinator: the gRPC service on a listener, with the token
-//! check, TLS when given a certificate, and the heartbeat monitor.
+//! and role check, TLS when given a certificate (and client certificates
+//! when given a CA for them), the heartbeat monitor, and the journal's
+//! unfinished jobs resumed at start.
+//!
+//! Stopping (SIGTERM, Ctrl-C): new work is refused, watchers and long
+//! polls end at once with "coordinator restarting", running jobs stop
+//! where they are (each resumes from its last finished round at the next
+//! start), and the server is given [`STOP_GRACE`] to close its
+//! connections before the process exits regardless.
 
 use crate::service::Service;
 use crate::state::{Shared, monitor};
@@ -11,15 +19,24 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tokio::net::TcpListener;
 use tonic::service::interceptor::InterceptedService;
-use tonic::transport::{Identity, Server, ServerTlsConfig};
+use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 
 /// Security settings of a coordinator.
 #[derive(Clone, Debug, Default)]
 pub struct Security {
-    pub token: Option<Token>,
+    /// The token workers present.
+    pub worker_token: Option<Token>,
+    /// The token clients present.
+    pub client_token: Option<Token>,
     /// PEM certificate chain and private key: serve TLS.
     pub tls: Option<(PathBuf, PathBuf)>,
+    /// PEM CA certificate(s): with TLS, every caller must present a
+    /// certificate signed by one of them.
+    pub client_ca: Option<PathBuf>,
 }
+
+/// How long the server may take to close its connections once stopping.
+pub const STOP_GRACE: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// HTTP/2 flow-control window, bytes.
 pub const WINDOW: u32 = 8 << 20;
@@ -59,21 +76,57 @@ pub async fn serve(
             .with_context(|| format!("cannot read the certificate {}", cert.display()))?;
         let k = std::fs::read(key)
             .with_context(|| format!("cannot read the private key {}", key.display()))?;
-        builder = builder
-            .tls_config(ServerTlsConfig::new().identity(Identity::from_pem(c, k)))
-            .context("TLS settings")?;
+        let mut tls = ServerTlsConfig::new().identity(Identity::from_pem(c, k));
+        if let Some(ca) = &sec.client_ca {
+            let pem = std::fs::read(ca)
+                .with_context(|| format!("cannot read the client CA {}", ca.display()))?;
+            tls = tls.client_ca_root(Certificate::from_pem(pem));
+        }
+        builder = builder.tls_config(tls).context("TLS settings")?;
+    } else if sec.client_ca.is_some() {
+        anyhow::bail!("--tls-client-ca needs --tls-cert and --tls-key (client certificates need TLS)");
     }
     let svc = CoordinatorServer::new(Service {
         shared: shared.clone(),
     })
     .max_decoding_message_size(MAX_MESSAGE_BYTES)
     .max_encoding_message_size(MAX_MESSAGE_BYTES);
-    let svc = InterceptedService::new(svc, Check(sec.token));
-    let mon = tokio::spawn(monitor(shared));
-    let r = builder
+    let svc = InterceptedService::new(
+        svc,
+        Check {
+            worker: sec.worker_token,
+            client: sec.client_token,
+        },
+    );
+    let mon = tokio::spawn(monitor(shared.clone()));
+    crate::driver::resume_all(&shared).await;
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = builder
         .add_service(svc)
-        .serve_with_incoming_shutdown(incoming(listener), shutdown)
-        .await;
+        .serve_with_incoming_shutdown(incoming(listener), async {
+            let _ = stop_rx.await;
+        });
+    tokio::pin!(server);
+    let r = tokio::select! {
+        r = &mut server => r,
+        _ = shutdown => {
+            let t0 = std::time::Instant::now();
+            tracing::info!("stopping: refusing new work; running jobs resume at the next start");
+            shared.begin_stop();
+            for e in shared.jobs.running() {
+                if let Some(h) = e.driver.lock().unwrap_or_else(|p| p.into_inner()).take() {
+                    h.abort();
+                }
+            }
+            let _ = stop_tx.send(());
+            let r = match tokio::time::timeout(STOP_GRACE, &mut server).await {
+                Ok(r) => r,
+                Err(_) => Ok(()),
+            };
+            tracing::info!(seconds = t0.elapsed().as_secs_f64(), "coordinator stopped");
+            r
+        }
+    };
     mon.abort();
     r.context("the coordinator's server failed")
 }

@@ -1,13 +1,17 @@
 //! The coordinator's gRPC service: the calls of `sray.proto`, on top of
-//! [`Shared`]. Every record a worker sends is checked before it is kept:
+//! [`Shared`]. Every call is checked for its role (worker or client);
+//! workers act under their session secret, clients under their job's
+//! secret. Every record a worker sends is checked before it is kept:
 //! results in ray order for exactly the shard's rays, contributions to
 //! pixel corners of the image, spawned rays in key order within the keys
 //! the shard's rays can spawn.
 
 use crate::driver;
+use crate::jobs::{JobEntry, JobRefusal, JobState};
 use crate::state::{Refusal, Shared, TaskOutput};
 use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::RecordWriter;
+use sray_proto::auth::{Role, require};
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
 use sray_proto::wire::{SCENE_CHUNK_BYTES, pack, records_per_chunk, unpack};
 use std::io::Write;
@@ -23,6 +27,9 @@ use tonic::{Request, Response, Status, Streaming};
 /// How long a worker's `NextTask` waits for work before answering "none".
 const POLL: Duration = Duration::from_secs(10);
 
+/// What clients are told while the coordinator stops.
+pub const RESTARTING: &str = "coordinator restarting";
+
 pub struct Service {
     pub shared: Arc<Shared>,
 }
@@ -31,13 +38,33 @@ type Stream_<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
 fn refused(r: Refusal) -> Status {
     match r {
-        Refusal::UnknownWorker => Status::not_found("unknown worker: register again"),
+        Refusal::UnknownWorker => Status::not_found("unknown worker session: register again"),
         Refusal::NotYours => Status::aborted("the task is not (or no longer) this worker's"),
+        Refusal::Stopping => Status::unavailable(RESTARTING),
     }
 }
 
 fn internal(e: impl std::fmt::Display) -> Status {
     Status::internal(e.to_string())
+}
+
+impl Service {
+    fn job(&self, r: &v1::JobRef, method: &str) -> Result<Arc<JobEntry>, Status> {
+        match self.shared.jobs.get(&r.job_id, &r.job_secret) {
+            Ok(e) => Ok(e),
+            Err(JobRefusal::NoSuchJob) => Err(Status::not_found(format!(
+                "no job {} here (finished jobs are kept {} s)",
+                r.job_id.chars().take(64).collect::<String>(),
+                self.shared.cfg.job_retention.as_secs()
+            ))),
+            Err(JobRefusal::WrongSecret) => {
+                tracing::warn!(job = %r.job_id, method, "refused a call: wrong job secret");
+                Err(Status::permission_denied(
+                    "wrong job secret: only the job's submitter may do this",
+                ))
+            }
+        }
+    }
 }
 
 #[tonic::async_trait]
@@ -46,6 +73,10 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::RegisterRequest>,
     ) -> Result<Response<v1::RegisterReply>, Status> {
+        require(&req, Role::Worker, "Register")?;
+        if self.shared.is_stopping() {
+            return Err(Status::unavailable(RESTARTING));
+        }
         let r = req.into_inner();
         if r.protocol_version != sray_proto::PROTOCOL_VERSION {
             return Err(Status::failed_precondition(format!(
@@ -55,12 +86,23 @@ impl Coordinator for Service {
             )));
         }
         let name: String = r.name.chars().take(128).collect();
-        let id = self
+        let floor = self.shared.cfg.min_worker_memory;
+        if r.memory_bytes < floor {
+            tracing::warn!(name = %name, memory = r.memory_bytes, "worker refused: too little memory");
+            return Err(Status::failed_precondition(format!(
+                "--memory {} is below this coordinator's floor of {} bytes ({} MiB): give the worker more memory",
+                r.memory_bytes,
+                floor,
+                floor >> 20
+            )));
+        }
+        let session = self
             .shared
             .register(name.clone(), r.threads, r.memory_bytes);
-        tracing::info!(worker = id, name = %name, threads = r.threads, memory = r.memory_bytes, "worker registered");
+        tracing::info!(worker = %name, threads = r.threads, memory = r.memory_bytes, "worker registered");
         Ok(Response::new(v1::RegisterReply {
-            worker_id: id,
+            session,
+            run_id: self.shared.run_id.clone(),
             heartbeat_ms: self.shared.cfg.heartbeat.as_millis() as u32,
         }))
     }
@@ -69,7 +111,8 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::HeartbeatRequest>,
     ) -> Result<Response<v1::HeartbeatReply>, Status> {
-        let known = self.shared.beat(req.into_inner().worker_id);
+        require(&req, Role::Worker, "Heartbeat")?;
+        let known = self.shared.beat(&req.into_inner().session);
         Ok(Response::new(v1::HeartbeatReply { known }))
     }
 
@@ -77,15 +120,21 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::NextTaskRequest>,
     ) -> Result<Response<v1::NextTaskReply>, Status> {
-        let worker = req.into_inner().worker_id;
-        let task = self.shared.next_task(worker, POLL).await.map_err(refused)?;
+        require(&req, Role::Worker, "NextTask")?;
+        let session = req.into_inner().session;
+        let task = self
+            .shared
+            .next_task(&session, POLL)
+            .await
+            .map_err(refused)?;
         if let Some(t) = &task {
             tracing::debug!(
-                worker,
+                worker = %self.shared.worker_name(&session),
                 task = t.task_id,
                 attempt = t.attempt,
                 stage = t.stage,
                 round = t.round,
+                verification = t.verification,
                 "task assigned"
             );
         }
@@ -98,6 +147,7 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::TaskRef>,
     ) -> Result<Response<Self::TaskInputStream>, Status> {
+        require(&req, Role::Worker, "TaskInput")?;
         let (task, input) = self.shared.task_input(req.get_ref()).map_err(refused)?;
         let (tx, rx) = mpsc::channel(4);
         let shared = self.shared.clone();
@@ -126,7 +176,7 @@ impl Coordinator for Service {
                 }
             }
             if let Some(results) = &input.results {
-                let mut rd = match results.reader() {
+                let mut rd = match results.reader_range(input.results_offset, task.ray_count) {
                     Ok(r) => r,
                     Err(e) => return fail(e),
                 };
@@ -140,6 +190,7 @@ impl Coordinator for Service {
         &self,
         req: Request<Streaming<v1::TaskOutput>>,
     ) -> Result<Response<v1::CompleteTaskReply>, Status> {
+        require(&req, Role::Worker, "CompleteTask")?;
         let mut stream = req.into_inner();
         let Some(Part::Header(tref)) = stream.message().await?.and_then(|m| m.part) else {
             return Err(Status::invalid_argument(
@@ -201,6 +252,7 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::FailTaskRequest>,
     ) -> Result<Response<v1::Empty>, Status> {
+        require(&req, Role::Worker, "FailTask")?;
         let r = req.into_inner();
         if let Some(t) = r.task {
             let error: String = r.error.chars().take(2000).collect();
@@ -213,6 +265,7 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::SceneRef>,
     ) -> Result<Response<v1::SceneManifestReply>, Status> {
+        require(&req, Role::Worker, "SceneManifest")?;
         let hash = req.into_inner().hash;
         let shared = self.shared.clone();
         let s = tokio::task::spawn_blocking(move || shared.scenes.get(&hash))
@@ -231,6 +284,7 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::SceneChunkRequest>,
     ) -> Result<Response<v1::SceneChunkReply>, Status> {
+        require(&req, Role::Worker, "SceneChunk")?;
         let r = req.into_inner();
         let shared = self.shared.clone();
         let data = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, Status> {
@@ -255,6 +309,7 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::SceneRef>,
     ) -> Result<Response<v1::HasSceneReply>, Status> {
+        require(&req, Role::Client, "HasScene")?;
         let hash = req.into_inner().hash;
         let shared = self.shared.clone();
         let present = tokio::task::spawn_blocking(move || shared.scenes.get(&hash))
@@ -270,12 +325,23 @@ impl Coordinator for Service {
         req: Request<Streaming<v1::SceneUpload>>,
     ) -> Result<Response<v1::SceneRef>, Status> {
         use v1::scene_upload::Part as Up;
+        require(&req, Role::Client, "UploadScene")?;
+        if self.shared.is_stopping() {
+            return Err(Status::unavailable(RESTARTING));
+        }
         let mut stream = req.into_inner();
         let Some(Up::Header(h)) = stream.message().await?.and_then(|m| m.part) else {
             return Err(Status::invalid_argument("an upload starts with its header"));
         };
         if !crate::scenes::valid_hash(&h.hash) {
             return Err(Status::invalid_argument("not a scene hash"));
+        }
+        let max = self.shared.cfg.limits.max_scene_bytes;
+        if h.size > max {
+            return Err(Status::invalid_argument(format!(
+                "a scene of {} bytes: this coordinator takes at most {max} (--max-scene-bytes)",
+                h.size
+            )));
         }
         let mut file = self.shared.scenes.upload_file().map_err(internal)?;
         let mut got = 0u64;
@@ -309,12 +375,28 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::JobSpec>,
     ) -> Result<Response<v1::JobAccepted>, Status> {
+        require(&req, Role::Client, "SubmitJob")?;
+        if self.shared.is_stopping() {
+            return Err(Status::unavailable(RESTARTING));
+        }
         let spec = req.into_inner();
-        let job = driver::Job::check(&self.shared, spec)
+        if spec.protocol_version != sray_proto::PROTOCOL_VERSION {
+            return Err(Status::failed_precondition(format!(
+                "protocol version {} (this coordinator speaks {}): use the same sray version as the cluster",
+                spec.protocol_version,
+                sray_proto::PROTOCOL_VERSION
+            )));
+        }
+        let running = self.shared.jobs.running().len();
+        if running >= self.shared.cfg.limits.max_jobs {
+            return Err(Status::resource_exhausted(format!(
+                "{running} jobs are running, the most this coordinator takes (--max-jobs): try again later"
+            )));
+        }
+        let (job_id, job_secret) = driver::submit(&self.shared, spec)
             .await
             .map_err(|e| Status::invalid_argument(format!("{e:#}")))?;
-        let id = driver::start(self.shared.clone(), job);
-        Ok(Response::new(v1::JobAccepted { job_id: id }))
+        Ok(Response::new(v1::JobAccepted { job_id, job_secret }))
     }
 
     type WatchJobStream = Stream_<v1::JobEvent>;
@@ -323,20 +405,104 @@ impl Coordinator for Service {
         &self,
         req: Request<v1::JobRef>,
     ) -> Result<Response<Self::WatchJobStream>, Status> {
-        let id = req.into_inner().job_id;
-        let rx = self
-            .shared
-            .take_watcher(id)
-            .ok_or_else(|| Status::not_found("no such job, or it is watched already"))?;
-        Ok(Response::new(Box::pin(tokio_stream::StreamExt::map(
-            ReceiverStream::new(rx),
-            Ok,
-        ))))
+        require(&req, Role::Client, "WatchJob")?;
+        if self.shared.is_stopping() {
+            return Err(Status::unavailable(RESTARTING));
+        }
+        let entry = self.job(req.get_ref(), "WatchJob")?;
+        let (tx, rx) = mpsc::channel(16);
+        let shared = self.shared.clone();
+        tokio::spawn(async move {
+            watch(shared, entry, tx).await;
+        });
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 
     async fn cancel_job(&self, req: Request<v1::JobRef>) -> Result<Response<v1::Empty>, Status> {
-        self.shared.cancel(req.into_inner().job_id);
+        require(&req, Role::Client, "CancelJob")?;
+        let entry = self.job(req.get_ref(), "CancelJob")?;
+        entry.cancelled.store(true, Ordering::Relaxed);
+        tracing::info!(job = %entry.id, "cancelled by its client");
         Ok(Response::new(v1::Empty {}))
+    }
+}
+
+/// Follows a job for one watcher: its log and progress while it runs,
+/// then the image and statistics (from the journal) or the error. Ends
+/// with `unavailable("coordinator restarting")` when the coordinator stops,
+/// so that the client reconnects.
+async fn watch(shared: Arc<Shared>, entry: Arc<JobEntry>, tx: mpsc::Sender<Result<v1::JobEvent, Status>>) {
+    let ev = |e: v1::job_event::Event| Ok(v1::JobEvent { event: Some(e) });
+    let mut changed = entry.subscribe();
+    let mut sent_log = 0;
+    let mut last_progress: Option<v1::JobProgress> = None;
+    loop {
+        if shared.is_stopping() {
+            let _ = tx.send(Err(Status::unavailable(RESTARTING))).await;
+            return;
+        }
+        let (lines, progress, state) = {
+            let v = entry.view();
+            (
+                v.log[sent_log.min(v.log.len())..].to_vec(),
+                v.progress,
+                v.state.clone(),
+            )
+        };
+        sent_log += lines.len();
+        for l in lines {
+            if tx.send(ev(v1::job_event::Event::Notice(l))).await.is_err() {
+                return;
+            }
+        }
+        if progress.is_some() && progress != last_progress {
+            last_progress = progress;
+            if tx
+                .send(ev(v1::job_event::Event::Progress(progress.expect("some"))))
+                .await
+                .is_err()
+            {
+                return;
+            }
+        }
+        match state {
+            JobState::Running => {}
+            JobState::Failed(e) => {
+                let _ = tx.send(ev(v1::job_event::Event::Error(e))).await;
+                return;
+            }
+            JobState::Done => {
+                let e = entry.clone();
+                match tokio::task::spawn_blocking(move || crate::jobs::result(&e)).await {
+                    Ok(Ok((image, stats))) => {
+                        for c in image.chunks(sray_proto::wire::RECORD_CHUNK_BYTES) {
+                            if tx
+                                .send(ev(v1::job_event::Event::ImageChunk(c.to_vec())))
+                                .await
+                                .is_err()
+                            {
+                                return;
+                            }
+                        }
+                        let _ = tx.send(ev(v1::job_event::Event::StatsJson(stats))).await;
+                    }
+                    Ok(Err(e)) => {
+                        let _ = tx
+                            .send(ev(v1::job_event::Event::Error(format!("{e:#}"))))
+                            .await;
+                    }
+                    Err(e) => {
+                        let _ = tx.send(Err(internal(e))).await;
+                    }
+                }
+                return;
+            }
+        }
+        tokio::select! {
+            r = changed.changed() => if r.is_err() { return },
+            _ = shared.stop.notified() => {}
+            _ = tx.closed() => return,
+        }
     }
 }
 
@@ -372,7 +538,7 @@ fn stream_records<T: bytemuck::Pod>(
 }
 
 /// Takes a task's output records, checking them as they come.
-struct Receiver<'a> {
+pub(crate) struct Receiver<'a> {
     shared: &'a Shared,
     task: &'a v1::Task,
     input: &'a crate::state::TaskInput,
@@ -385,7 +551,11 @@ struct Receiver<'a> {
 }
 
 impl<'a> Receiver<'a> {
-    fn new(shared: &'a Shared, task: &'a v1::Task, input: &'a crate::state::TaskInput) -> Self {
+    pub(crate) fn new(
+        shared: &'a Shared,
+        task: &'a v1::Task,
+        input: &'a crate::state::TaskInput,
+    ) -> Self {
         Receiver {
             shared,
             task,
@@ -410,7 +580,7 @@ impl<'a> Receiver<'a> {
         Ok(())
     }
 
-    fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
+    pub(crate) fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
         let io = |e: sray_engine::Error| e.to_string();
         match (v1::RecordKind::try_from(c.kind), intersect) {
@@ -477,7 +647,7 @@ impl<'a> Receiver<'a> {
         }
     }
 
-    fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
+    pub(crate) fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
         if intersect && self.n_results != self.task.ray_count {
             return Err(format!(

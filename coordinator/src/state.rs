@@ -1,23 +1,66 @@
 //! What the coordinator knows: its workers, the task queue and the jobs.
 //!
 //! A task is one stage (intersect or shade) of one shard of one round of a
-//! job. It is queued, given to one worker at a time (`Running`, with an
-//! attempt number), and done once: an output that arrives for an attempt
-//! that is no longer current (the worker was declared dead, the task went
-//! elsewhere) is dropped. A worker that misses its heartbeats, or whose
-//! output stream breaks, has its task queued again; a task that fails
-//! `max_attempts` times fails its job.
+//! job, or a verification: a re-trace of a sample of a shard on another
+//! worker. It is queued and given to workers as *attempts*; usually one at
+//! a time, but a task that runs far longer than its finished siblings gets
+//! a backup attempt on another worker (MapReduce's backup tasks): the
+//! first complete output wins, later ones are dropped. An output that
+//! arrives for an attempt that is no longer live (its worker was declared
+//! dead or quarantined, the task was done elsewhere) is dropped.
+//!
+//! Failures: a task that failed on a worker is never given to that worker
+//! again (`excluded`), and fails its job after `max_attempts` failures; a
+//! worker with `quarantine_after` failures within `quarantine` is
+//! quarantined for `quarantine` (it gets no task, by session and by name,
+//! so registering again does not lift it). A worker caught returning wrong
+//! output by verification is quarantined the same way and *distrusted*:
+//! every output of it the job has not yet built on is redone elsewhere.
+//!
+//! Workers are named by a random session secret issued at registration
+//! (not a counter), so a caller cannot act for another worker by guessing.
 
 use crate::scenes::SceneStore;
 use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::{RecordFile, SpillDir};
 use sray_proto::v1;
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::{Notify, mpsc};
+
+/// What a client may ask of this coordinator: every request is checked
+/// against these before anything is allocated for it.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    /// Width x height.
+    pub max_pixels: u64,
+    /// Eye rays per pixel.
+    pub max_samples: u32,
+    /// Depth of the ray tree.
+    pub max_depth: u32,
+    /// Size of an uploaded object database.
+    pub max_scene_bytes: u64,
+    /// Jobs running at once (finished ones kept for fetching not counted).
+    pub max_jobs: usize,
+    /// Voxels of a fixed main grid (each worker allocates it).
+    pub max_grid_voxels: u64,
+}
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            max_pixels: 16 << 20,
+            max_samples: 64,
+            max_depth: 16,
+            max_scene_bytes: 64 << 30,
+            max_jobs: 16,
+            max_grid_voxels: 1 << 27,
+        }
+    }
+}
 
 /// The coordinator's settings.
 #[derive(Clone, Debug)]
@@ -26,17 +69,45 @@ pub struct Config {
     pub heartbeat: Duration,
     /// A worker silent this long is dead; its task goes to another.
     pub worker_timeout: Duration,
-    /// A job with work to do and no worker for this long fails.
+    /// A job with work to do and no worker that may do it for this long
+    /// fails.
     pub worker_wait: Duration,
     /// Rays per shard, unless a job asks otherwise.
     pub shard_rays: u64,
-    /// Failures of one task that fail its job.
+    /// Failures of one task (on distinct workers) that fail its job.
     pub max_attempts: u32,
-    /// Uploaded scenes.
+    /// Uploaded scenes and the jobs' journals.
     pub data_dir: PathBuf,
-    /// Rays, results and outputs in flight (default: the system's temp dir).
+    /// Rays, results and outputs in flight (default: the data directory).
     pub tmp_dir: Option<PathBuf>,
+    /// Share of every shard's rays re-traced on another worker (0: none).
+    pub verify_fraction: f64,
+    /// Fewest rays a verification sample has (when the shard has them).
+    pub verify_min_rays: u64,
+    /// A task running longer than this many times the median of its
+    /// finished siblings gets a backup attempt on another worker ...
+    pub deadline_factor: f64,
+    /// ... but never before this long ...
+    pub deadline_min: Duration,
+    /// ... and, while no sibling has finished, after this long.
+    pub task_timeout: Duration,
+    /// Failures within this time that quarantine a worker, and how long.
+    pub quarantine_after: u32,
+    pub quarantine: Duration,
+    /// How long a finished (or failed) job stays fetchable.
+    pub job_retention: Duration,
+    /// Bytes of uploaded scenes kept; least recently used go first.
+    pub scene_store_max: u64,
+    /// Workers with a smaller `--memory` are refused at registration.
+    pub min_worker_memory: u64,
+    /// Memory of the coordinator's own tracer (arbitration of mismatches).
+    pub arbiter_memory: u64,
+    pub limits: Limits,
 }
+
+/// The smallest worker memory accepted by default: below it the tracer
+/// runs tens of passes for a handful of rays.
+pub const MIN_WORKER_MEMORY: u64 = 16 << 20;
 
 impl Default for Config {
     fn default() -> Config {
@@ -48,6 +119,18 @@ impl Default for Config {
             max_attempts: 3,
             data_dir: PathBuf::from("sray-data"),
             tmp_dir: None,
+            verify_fraction: 0.02,
+            verify_min_rays: 8,
+            deadline_factor: 4.0,
+            deadline_min: Duration::from_secs(30),
+            task_timeout: Duration::from_secs(900),
+            quarantine_after: 3,
+            quarantine: Duration::from_secs(600),
+            job_retention: Duration::from_secs(3600),
+            scene_store_max: 50 << 30,
+            min_worker_memory: MIN_WORKER_MEMORY,
+            arbiter_memory: 256 << 20,
+            limits: Limits::default(),
         }
     }
 }
@@ -78,8 +161,9 @@ impl Traffic {
 pub struct TaskInput {
     /// The round's rays (absent for eye rays, which workers make).
     pub rays: Option<Arc<RecordFile<RayRec>>>,
-    /// The shard's results (shading).
+    /// The shard's results (shading), from record `results_offset` on.
     pub results: Option<Arc<RecordFile<ResultRec>>>,
+    pub results_offset: u64,
     pub objects: u64,
     /// Frame slots (pixel corners, or pixels): the bound of contributions.
     pub corners: u64,
@@ -96,12 +180,20 @@ pub struct TaskOutput {
     pub summary: v1::TaskSummary,
 }
 
+/// Who did a piece of work.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct WorkerTag {
+    pub session: String,
+    pub name: String,
+}
+
 /// What a job's driver hears about its tasks.
 pub enum TaskEvent {
     Done {
         task: u64,
         shard: usize,
         output: TaskOutput,
+        worker: WorkerTag,
     },
     Failed {
         task: u64,
@@ -112,8 +204,13 @@ pub enum TaskEvent {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TaskState {
     Queued,
-    Running { worker: u64 },
+    Running,
     Done,
+}
+
+struct Attempt {
+    worker: WorkerTag,
+    since: Instant,
 }
 
 pub struct TaskEntry {
@@ -123,6 +220,19 @@ pub struct TaskEntry {
     pub failures: Vec<String>,
     pub input: Arc<TaskInput>,
     events: mpsc::UnboundedSender<TaskEvent>,
+    live: HashMap<u32, Attempt>,
+    next_attempt: u32,
+    /// Sessions and names of workers this task must not go to.
+    excluded: HashSet<String>,
+    /// How long the winning attempt took.
+    took: Option<Duration>,
+    backup: bool,
+}
+
+impl TaskEntry {
+    fn excludes(&self, w: &WorkerTag) -> bool {
+        self.excluded.contains(&w.session) || self.excluded.contains(&w.name)
+    }
 }
 
 pub struct Worker {
@@ -130,57 +240,74 @@ pub struct Worker {
     pub threads: u32,
     pub memory: u64,
     last_beat: Instant,
-    task: Option<u64>,
+    running: HashSet<(u64, u32)>,
+}
+
+struct Quarantine {
+    until: Instant,
 }
 
 #[derive(Default)]
 struct Inner {
-    workers: BTreeMap<u64, Worker>,
-    next_worker: u64,
-    next_task: u64,
-    next_job: u64,
+    workers: HashMap<String, Worker>,
+    /// By session and by name.
+    quarantined: HashMap<String, Quarantine>,
+    /// Recent failures by worker name.
+    failures: HashMap<String, Vec<Instant>>,
     queue: VecDeque<u64>,
     tasks: HashMap<u64, TaskEntry>,
-    /// Per job, the events its client has not yet taken.
-    watchers: HashMap<u64, mpsc::Receiver<v1::JobEvent>>,
-    requeued: HashMap<u64, u64>,
-    cancelled: std::collections::HashSet<u64>,
+    requeued: HashMap<String, u64>,
+    backups: HashMap<String, u64>,
 }
 
 /// Everything the service, the drivers and the monitor share.
 pub struct Shared {
     pub cfg: Config,
+    pub run_id: String,
     pub scenes: SceneStore,
     pub spill: SpillDir,
     pub traffic: Traffic,
+    pub jobs: crate::jobs::Jobs,
     inner: Mutex<Inner>,
     task_ready: Notify,
     started: Instant,
+    stopping: AtomicBool,
+    pub stop: Notify,
+    /// The spill directory's parent (removed when the coordinator ends).
+    spill_parent: PathBuf,
+}
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.spill_parent);
+    }
 }
 
 /// Why a worker's call was refused.
 pub enum Refusal {
     UnknownWorker,
     NotYours,
+    Stopping,
 }
 
 impl Shared {
     pub fn new(cfg: Config) -> anyhow::Result<Arc<Shared>> {
         let scenes = SceneStore::new(&cfg.data_dir)?;
-        let spill = SpillDir::new(cfg.tmp_dir.as_deref())?;
+        let (spill, spill_parent) = crate::jobs::spill_dir(&cfg)?;
+        let jobs = crate::jobs::Jobs::new(&cfg.data_dir)?;
         Ok(Arc::new(Shared {
             cfg,
+            run_id: sray_proto::ids::new_session(),
             scenes,
             spill,
             traffic: Traffic::default(),
-            inner: Mutex::new(Inner {
-                next_worker: 1,
-                next_task: 1,
-                next_job: 1,
-                ..Default::default()
-            }),
+            jobs,
+            inner: Mutex::new(Inner::default()),
             task_ready: Notify::new(),
             started: Instant::now(),
+            stopping: AtomicBool::new(false),
+            stop: Notify::new(),
+            spill_parent,
         }))
     }
 
@@ -189,27 +316,47 @@ impl Shared {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    pub fn register(&self, name: String, threads: u32, memory: u64) -> u64 {
+    /// Stop accepting work: long polls and watchers end now.
+    pub fn begin_stop(&self) {
+        self.stopping.store(true, Ordering::SeqCst);
+        self.stop.notify_waiters();
+        self.task_ready.notify_waiters();
+        self.jobs.wake_all();
+    }
+
+    pub fn is_stopping(&self) -> bool {
+        self.stopping.load(Ordering::SeqCst)
+    }
+
+    /// A new worker session.
+    pub fn register(&self, name: String, threads: u32, memory: u64) -> String {
+        let session = sray_proto::ids::new_session();
         let mut g = self.lock();
-        let id = g.next_worker;
-        g.next_worker += 1;
         g.workers.insert(
-            id,
+            session.clone(),
             Worker {
                 name,
                 threads,
                 memory,
                 last_beat: Instant::now(),
-                task: None,
+                running: HashSet::new(),
             },
         );
-        id
+        session
+    }
+
+    /// The worker's name, for logs ("?" if unknown).
+    pub fn worker_name(&self, session: &str) -> String {
+        self.lock()
+            .workers
+            .get(session)
+            .map_or_else(|| "?".into(), |w| w.name.clone())
     }
 
     /// Records a beat; false if the worker is not known (any more).
-    pub fn beat(&self, worker: u64) -> bool {
+    pub fn beat(&self, session: &str) -> bool {
         let mut g = self.lock();
-        match g.workers.get_mut(&worker) {
+        match g.workers.get_mut(session) {
             Some(w) => {
                 w.last_beat = Instant::now();
                 true
@@ -222,40 +369,49 @@ impl Shared {
         self.lock().workers.len()
     }
 
-    /// The smallest memory budget among the workers (to plan grids every
-    /// worker can hold), if any worker is there.
-    pub fn min_worker_memory(&self) -> Option<u64> {
-        self.lock().workers.values().map(|w| w.memory).min()
+    fn quarantined_now(g: &Inner, tag: &WorkerTag, now: Instant) -> bool {
+        [&tag.session, &tag.name]
+            .iter()
+            .any(|k| g.quarantined.get(*k).is_some_and(|q| q.until > now))
     }
 
-    /// A new job number and the channel its client watches.
-    pub fn new_job(&self) -> (u64, mpsc::Sender<v1::JobEvent>) {
-        let mut g = self.lock();
-        let id = g.next_job;
-        g.next_job += 1;
-        let (tx, rx) = mpsc::channel(64);
-        g.watchers.insert(id, rx);
-        (id, tx)
-    }
-
-    /// The job's events, for its one watcher.
-    pub fn take_watcher(&self, job: u64) -> Option<mpsc::Receiver<v1::JobEvent>> {
-        self.lock().watchers.remove(&job)
+    /// Workers that may take a task that excludes `excluded` (sessions
+    /// or names), not counting quarantined ones.
+    pub fn eligible_workers(&self, excluded: &[WorkerTag]) -> usize {
+        let g = self.lock();
+        let now = Instant::now();
+        g.workers
+            .iter()
+            .filter(|(s, w)| {
+                let tag = WorkerTag {
+                    session: (*s).clone(),
+                    name: w.name.clone(),
+                };
+                !Self::quarantined_now(&g, &tag, now)
+                    && !excluded
+                        .iter()
+                        .any(|e| e.session == tag.session || e.name == tag.name)
+            })
+            .count()
     }
 
     /// Queues tasks; their outcomes go to `events`. Returns their ids.
+    /// `avoid`: workers the tasks must not go to (verification).
     pub fn enqueue(
         &self,
         tasks: Vec<(v1::Task, usize, Arc<TaskInput>)>,
         events: &mpsc::UnboundedSender<TaskEvent>,
+        avoid: &[WorkerTag],
     ) -> Vec<u64> {
         let mut g = self.lock();
         let mut ids = Vec::with_capacity(tasks.len());
         for (mut task, shard, input) in tasks {
-            let id = g.next_task;
-            g.next_task += 1;
+            let mut id = sray_proto::ids::random_u64();
+            while id == 0 || g.tasks.contains_key(&id) {
+                id = sray_proto::ids::random_u64();
+            }
             task.task_id = id;
-            task.attempt = 1;
+            task.attempt = 0;
             g.tasks.insert(
                 id,
                 TaskEntry {
@@ -265,6 +421,14 @@ impl Shared {
                     failures: Vec::new(),
                     input,
                     events: events.clone(),
+                    live: HashMap::new(),
+                    next_attempt: 1,
+                    excluded: avoid
+                        .iter()
+                        .flat_map(|w| [w.session.clone(), w.name.clone()])
+                        .collect(),
+                    took: None,
+                    backup: false,
                 },
             );
             g.queue.push_back(id);
@@ -275,48 +439,44 @@ impl Shared {
         ids
     }
 
-    /// Drops a job's remaining tasks (it ended or was cancelled).
+    /// Drops tasks (their stage ended, or the job did).
     pub fn forget_tasks(&self, ids: &[u64]) {
         let mut g = self.lock();
         for id in ids {
-            g.tasks.remove(id);
+            if let Some(t) = g.tasks.remove(id) {
+                for (a, at) in t.live {
+                    if let Some(w) = g.workers.get_mut(&at.worker.session) {
+                        w.running.remove(&(*id, a));
+                    }
+                }
+            }
         }
         let tasks = std::mem::take(&mut g.tasks);
         g.queue.retain(|t| tasks.contains_key(t));
         g.tasks = tasks;
-        for w in g.workers.values_mut() {
-            if w.task.is_some_and(|t| ids.contains(&t)) {
-                w.task = None;
-            }
-        }
     }
 
-    /// A client asked to stop job `job`.
-    pub fn cancel(&self, job: u64) {
-        self.lock().cancelled.insert(job);
-    }
-
-    pub fn is_cancelled(&self, job: u64) -> bool {
-        self.lock().cancelled.contains(&job)
-    }
-
-    /// Forgets a finished job's bookkeeping.
-    pub fn end_job(&self, job: u64) {
+    /// Forgets a finished job's counters.
+    pub fn end_job(&self, job: &str) {
         let mut g = self.lock();
-        g.cancelled.remove(&job);
-        g.requeued.remove(&job);
-        g.watchers.remove(&job);
+        g.requeued.remove(job);
+        g.backups.remove(job);
     }
 
-    /// Tasks queued again so far for job `job`'s driver to report.
-    pub fn requeued(&self, job: u64) -> u64 {
-        self.lock().requeued.get(&job).copied().unwrap_or(0)
+    /// Tasks queued again (after a worker loss or failure), and backup
+    /// attempts issued, so far for job `job`.
+    pub fn requeued(&self, job: &str) -> (u64, u64) {
+        let g = self.lock();
+        (
+            g.requeued.get(job).copied().unwrap_or(0),
+            g.backups.get(job).copied().unwrap_or(0),
+        )
     }
 
-    /// The next task for `worker`, waiting up to `wait` for one.
+    /// The next task for the worker `session`, waiting up to `wait`.
     pub async fn next_task(
         &self,
-        worker: u64,
+        session: &str,
         wait: Duration,
     ) -> Result<Option<v1::Task>, Refusal> {
         let deadline = tokio::time::Instant::now() + wait;
@@ -324,123 +484,153 @@ impl Shared {
             let notified = self.task_ready.notified();
             tokio::pin!(notified);
             notified.as_mut().enable();
+            if self.is_stopping() {
+                return Err(Refusal::Stopping);
+            }
             {
                 let mut g = self.lock();
-                let Some(w) = g.workers.get_mut(&worker) else {
+                let now = Instant::now();
+                let Some(w) = g.workers.get_mut(session) else {
                     return Err(Refusal::UnknownWorker);
                 };
-                w.last_beat = Instant::now();
-                while let Some(id) = g.queue.pop_front() {
-                    let Some(t) = g.tasks.get_mut(&id) else {
-                        continue;
-                    };
-                    if t.state != TaskState::Queued {
-                        continue;
+                w.last_beat = now;
+                let tag = WorkerTag {
+                    session: session.to_string(),
+                    name: w.name.clone(),
+                };
+                if !Self::quarantined_now(&g, &tag, now) {
+                    let g = &mut *g;
+                    let mut pick = None;
+                    g.queue.retain(|id| {
+                        let Some(t) = g.tasks.get(id) else {
+                            return false;
+                        };
+                        if t.state == TaskState::Done {
+                            return false;
+                        }
+                        if pick.is_none()
+                            && !t.excludes(&tag)
+                            && !t.live.values().any(|a| a.worker.session == tag.session)
+                        {
+                            pick = Some(*id);
+                            return false;
+                        }
+                        true
+                    });
+                    if let Some(id) = pick {
+                        let t = g.tasks.get_mut(&id).expect("picked");
+                        let attempt = t.next_attempt;
+                        t.next_attempt += 1;
+                        t.state = TaskState::Running;
+                        t.live.insert(
+                            attempt,
+                            Attempt {
+                                worker: tag.clone(),
+                                since: now,
+                            },
+                        );
+                        let mut task = t.task.clone();
+                        task.attempt = attempt;
+                        if let Some(w) = g.workers.get_mut(session) {
+                            w.running.insert((id, attempt));
+                        }
+                        return Ok(Some(task));
                     }
-                    t.state = TaskState::Running { worker };
-                    let task = t.task.clone();
-                    if let Some(w) = g.workers.get_mut(&worker) {
-                        w.task = Some(id);
-                    }
-                    return Ok(Some(task));
                 }
             }
-            if tokio::time::timeout_at(deadline, notified).await.is_err() {
-                return Ok(None);
+            tokio::select! {
+                r = tokio::time::timeout_at(deadline, notified) => {
+                    if r.is_err() {
+                        return Ok(None);
+                    }
+                }
+                _ = self.stop.notified() => return Err(Refusal::Stopping),
             }
         }
+    }
+
+    fn live_attempt<'a>(g: &'a Inner, r: &v1::TaskRef) -> Option<&'a TaskEntry> {
+        let t = g.tasks.get(&r.task_id)?;
+        let a = t.live.get(&r.attempt)?;
+        (t.state != TaskState::Done
+            && sray_proto::ids::same(a.worker.session.as_bytes(), r.session.as_bytes()))
+        .then_some(t)
     }
 
     /// The input of a task the worker is running.
     pub fn task_input(&self, r: &v1::TaskRef) -> Result<(v1::Task, Arc<TaskInput>), Refusal> {
         let g = self.lock();
-        let t = g.tasks.get(&r.task_id).ok_or(Refusal::NotYours)?;
-        if t.state
-            != (TaskState::Running {
-                worker: r.worker_id,
-            })
-            || t.task.attempt != r.attempt
-        {
-            return Err(Refusal::NotYours);
+        let t = Self::live_attempt(&g, r).ok_or(Refusal::NotYours)?;
+        let mut task = t.task.clone();
+        task.attempt = r.attempt;
+        Ok((task, t.input.clone()))
+    }
+
+    /// Removes a live attempt; returns its worker.
+    fn drop_attempt(g: &mut Inner, id: u64, attempt: u32) -> Option<WorkerTag> {
+        let t = g.tasks.get_mut(&id)?;
+        let a = t.live.remove(&attempt)?;
+        if let Some(w) = g.workers.get_mut(&a.worker.session) {
+            w.running.remove(&(id, attempt));
         }
-        Ok((t.task.clone(), t.input.clone()))
+        Some(a.worker)
     }
 
-    /// Whether `r` is the current attempt of a running task.
-    pub fn is_current(&self, r: &v1::TaskRef) -> bool {
-        self.task_input(r).is_ok()
-    }
-
-    /// A complete output arrived: the task is done, if `r` is still its
-    /// current attempt (else the output is dropped and false returned).
+    /// A complete output arrived: the task is done, if `r` is a live
+    /// attempt of it (else the output is dropped and false returned). The
+    /// first output wins; other live attempts are dropped.
     pub fn complete(&self, r: &v1::TaskRef, output: TaskOutput) -> bool {
         let mut g = self.lock();
-        let Some(t) = g.tasks.get_mut(&r.task_id) else {
-            return false;
-        };
-        if t.state
-            != (TaskState::Running {
-                worker: r.worker_id,
-            })
-            || t.task.attempt != r.attempt
-        {
+        if Self::live_attempt(&g, r).is_none() {
             return false;
         }
+        let t = g.tasks.get_mut(&r.task_id).expect("checked");
+        let a = &t.live[&r.attempt];
+        t.took = Some(a.since.elapsed());
+        let worker = a.worker.clone();
         t.state = TaskState::Done;
         let ev = TaskEvent::Done {
             task: r.task_id,
             shard: t.shard,
             output,
+            worker,
         };
         let _ = t.events.send(ev);
-        if let Some(w) = g.workers.get_mut(&r.worker_id) {
-            w.task = None;
+        let attempts: Vec<u32> = t.live.keys().copied().collect();
+        for a in attempts {
+            Self::drop_attempt(&mut g, r.task_id, a);
         }
         true
     }
 
-    /// The output stream of `r` broke: the task goes back in the queue.
+    /// The output stream of `r` broke: the attempt is dropped, and the
+    /// task queued again if no other attempt is live.
     pub fn abandon(&self, r: &v1::TaskRef, why: &str) {
         let mut g = self.lock();
-        if g.tasks.get(&r.task_id).is_some_and(|t| {
-            t.state
-                == (TaskState::Running {
-                    worker: r.worker_id,
-                })
-                && t.task.attempt == r.attempt
-        }) {
-            tracing::warn!(
-                task = r.task_id,
-                worker = r.worker_id,
-                why,
-                "task queued again"
-            );
-            requeue(&mut g, r.task_id);
-            if let Some(w) = g.workers.get_mut(&r.worker_id) {
-                w.task = None;
-            }
-            drop(g);
-            self.task_ready.notify_waiters();
+        if Self::live_attempt(&g, r).is_none() {
+            return;
         }
+        tracing::warn!(task = r.task_id, why, "attempt abandoned");
+        Self::drop_attempt(&mut g, r.task_id, r.attempt);
+        requeue_if_idle(&mut g, r.task_id);
+        drop(g);
+        self.task_ready.notify_waiters();
     }
 
-    /// The worker says the task failed.
+    /// The worker says the task failed (or its output was refused): never
+    /// again on that worker; the job fails after `max_attempts` failures.
     pub fn fail(&self, r: &v1::TaskRef, error: String) {
         let mut g = self.lock();
-        let max = self.cfg.max_attempts as usize;
-        let Some(t) = g.tasks.get_mut(&r.task_id) else {
-            return;
-        };
-        if t.state
-            != (TaskState::Running {
-                worker: r.worker_id,
-            })
-            || t.task.attempt != r.attempt
-        {
+        if Self::live_attempt(&g, r).is_none() {
             return;
         }
-        tracing::warn!(task = r.task_id, worker = r.worker_id, error = %error, "task failed");
-        t.failures.push(error);
+        let max = self.cfg.max_attempts as usize;
+        let worker = Self::drop_attempt(&mut g, r.task_id, r.attempt).expect("live");
+        tracing::warn!(task = r.task_id, worker = %worker.name, error = %error, "task failed");
+        let t = g.tasks.get_mut(&r.task_id).expect("live");
+        t.failures.push(format!("{}: {error}", worker.name));
+        t.excluded.insert(worker.session.clone());
+        t.excluded.insert(worker.name.clone());
         if t.failures.len() >= max {
             t.state = TaskState::Done;
             let msg = t.failures.join("; ");
@@ -449,37 +639,175 @@ impl Shared {
                 error: msg,
             });
         } else {
-            requeue(&mut g, r.task_id);
+            requeue_if_idle(&mut g, r.task_id);
         }
-        if let Some(w) = g.workers.get_mut(&r.worker_id) {
-            w.task = None;
+        // Repeated failures quarantine the worker.
+        let now = Instant::now();
+        let window = self.cfg.quarantine;
+        let recent = g.failures.entry(worker.name.clone()).or_default();
+        recent.retain(|t| now.duration_since(*t) < window);
+        recent.push(now);
+        if recent.len() >= self.cfg.quarantine_after as usize {
+            recent.clear();
+            drop(g);
+            self.quarantine(
+                &worker,
+                &format!(
+                    "{} task failures within {} s",
+                    self.cfg.quarantine_after,
+                    window.as_secs()
+                ),
+            );
+            return;
         }
         drop(g);
         self.task_ready.notify_waiters();
+    }
+
+    /// Gives `worker` no task for `cfg.quarantine`; its live attempts are
+    /// dropped and their tasks queued again elsewhere.
+    pub fn quarantine(&self, worker: &WorkerTag, why: &str) {
+        let mut g = self.lock();
+        let until = Instant::now() + self.cfg.quarantine;
+        tracing::warn!(worker = %worker.name, why, seconds = self.cfg.quarantine.as_secs(), "worker quarantined");
+        g.quarantined
+            .insert(worker.session.clone(), Quarantine { until });
+        g.quarantined.insert(worker.name.clone(), Quarantine { until });
+        let mine: Vec<(u64, u32)> = g
+            .tasks
+            .iter()
+            .flat_map(|(id, t)| {
+                t.live
+                    .iter()
+                    .filter(|(_, a)| a.worker.session == worker.session)
+                    .map(move |(a, _)| (*id, *a))
+            })
+            .collect();
+        for (id, a) in mine {
+            Self::drop_attempt(&mut g, id, a);
+            if let Some(t) = g.tasks.get_mut(&id) {
+                t.excluded.insert(worker.session.clone());
+                t.excluded.insert(worker.name.clone());
+            }
+            requeue_if_idle(&mut g, id);
+        }
+        drop(g);
+        self.task_ready.notify_waiters();
+    }
+
+    /// Whether the worker is quarantined now.
+    pub fn is_quarantined(&self, worker: &WorkerTag) -> bool {
+        Self::quarantined_now(&self.lock(), worker, Instant::now())
+    }
+
+    /// Queues a done task again (its output was thrown away), never on
+    /// the workers in `avoid`.
+    pub fn redo(&self, id: u64, avoid: &WorkerTag) -> bool {
+        let mut g = self.lock();
+        let Some(t) = g.tasks.get_mut(&id) else {
+            return false;
+        };
+        t.excluded.insert(avoid.session.clone());
+        t.excluded.insert(avoid.name.clone());
+        t.state = TaskState::Queued;
+        t.took = None;
+        t.backup = false;
+        let job = t.task.job_id.clone();
+        *g.requeued.entry(job).or_default() += 1;
+        g.queue.push_front(id);
+        drop(g);
+        self.task_ready.notify_waiters();
+        true
+    }
+
+    /// Backup attempts for the tasks among `ids` that run far longer than
+    /// their finished siblings (or than `task_timeout` while none has
+    /// finished). Returns the ids given a backup, with how long they ran.
+    pub fn issue_backups(&self, ids: &[u64]) -> Vec<(u64, Duration)> {
+        let mut g = self.lock();
+        let mut took: Vec<Duration> = ids
+            .iter()
+            .filter_map(|id| g.tasks.get(id).and_then(|t| t.took))
+            .collect();
+        took.sort();
+        let deadline = match took.get(took.len() / 2) {
+            Some(median) => median
+                .mul_f64(self.cfg.deadline_factor)
+                .max(self.cfg.deadline_min),
+            None => self.cfg.task_timeout,
+        };
+        let now = Instant::now();
+        let mut backed = Vec::new();
+        for id in ids {
+            let Some(t) = g.tasks.get_mut(id) else {
+                continue;
+            };
+            if t.state != TaskState::Running || t.backup {
+                continue;
+            }
+            let Some(oldest) = t.live.values().map(|a| a.since).min() else {
+                continue;
+            };
+            let ran = now.duration_since(oldest);
+            if ran > deadline {
+                t.backup = true;
+                let job = t.task.job_id.clone();
+                *g.backups.entry(job).or_default() += 1;
+                g.queue.push_front(*id);
+                backed.push((*id, ran));
+            }
+        }
+        drop(g);
+        if !backed.is_empty() {
+            self.task_ready.notify_waiters();
+        }
+        backed
+    }
+
+    /// Queued tasks among `ids` that no registered worker may take.
+    pub fn stranded(&self, ids: &[u64]) -> Vec<(u64, String)> {
+        let g = self.lock();
+        let now = Instant::now();
+        ids.iter()
+            .filter_map(|id| {
+                let t = g.tasks.get(id)?;
+                if t.state != TaskState::Queued {
+                    return None;
+                }
+                let any = g.workers.iter().any(|(s, w)| {
+                    let tag = WorkerTag {
+                        session: s.clone(),
+                        name: w.name.clone(),
+                    };
+                    !t.excludes(&tag) && !Self::quarantined_now(&g, &tag, now)
+                });
+                (!any).then(|| (*id, t.failures.join("; ")))
+            })
+            .collect()
     }
 
     /// Declares silent workers dead and queues their tasks again.
     pub fn reap(&self) {
         let mut g = self.lock();
         let now = Instant::now();
-        let dead: Vec<u64> = g
+        let dead: Vec<String> = g
             .workers
             .iter()
             .filter(|(_, w)| now.duration_since(w.last_beat) > self.cfg.worker_timeout)
-            .map(|(&id, _)| id)
+            .map(|(s, _)| s.clone())
             .collect();
+        g.quarantined.retain(|_, q| q.until > now);
         if dead.is_empty() {
             return;
         }
-        for id in dead {
-            let w = g.workers.remove(&id).expect("listed above");
-            tracing::warn!(worker = id, name = %w.name, "worker missed its heartbeats: declared dead");
-            if let Some(t) = w.task
-                && g.tasks
-                    .get(&t)
-                    .is_some_and(|e| e.state == (TaskState::Running { worker: id }))
-            {
-                requeue(&mut g, t);
+        for s in dead {
+            let w = g.workers.remove(&s).expect("listed above");
+            tracing::warn!(name = %w.name, "worker missed its heartbeats: declared dead");
+            for (id, a) in w.running {
+                if let Some(t) = g.tasks.get_mut(&id) {
+                    t.live.remove(&a);
+                }
+                requeue_if_idle(&mut g, id);
             }
         }
         drop(g);
@@ -491,22 +819,33 @@ impl Shared {
     }
 }
 
-fn requeue(g: &mut Inner, id: u64) {
-    if let Some(t) = g.tasks.get_mut(&id) {
+/// Queues a task again if it is not done and no attempt of it is live.
+fn requeue_if_idle(g: &mut Inner, id: u64) {
+    if let Some(t) = g.tasks.get_mut(&id)
+        && t.state != TaskState::Done
+        && t.live.is_empty()
+    {
         t.state = TaskState::Queued;
-        t.task.attempt += 1;
-        let job = t.task.job_id;
+        t.backup = false;
+        let job = t.task.job_id.clone();
         *g.requeued.entry(job).or_default() += 1;
         // To the front: a re-queued task holds up its whole stage.
         g.queue.push_front(id);
     }
 }
 
-/// Runs until the process ends: declares silent workers dead.
+/// Runs until the process ends: declares silent workers dead, expires
+/// finished jobs and evicts scenes over the store's cap.
 pub async fn monitor(shared: Arc<Shared>) {
     let mut tick = tokio::time::interval(shared.cfg.heartbeat);
+    let mut last_expiry = Instant::now();
     loop {
         tick.tick().await;
         shared.reap();
+        if last_expiry.elapsed() >= Duration::from_secs(1) {
+            last_expiry = Instant::now();
+            let sh = shared.clone();
+            let _ = tokio::task::spawn_blocking(move || crate::jobs::housekeeping(&sh)).await;
+        }
     }
 }

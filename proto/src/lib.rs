@@ -1,9 +1,10 @@
 //! The gRPC contract between sray's coordinator, its workers and its
 //! clients (`sray.proto`, compiled at build time without a system
 //! `protoc`), and the small pieces every side shares: record packing,
-//! message limits, the shared-token check and TLS settings.
+//! message limits, the token checks and roles, random ids, TLS settings.
 
 pub mod auth;
+pub mod ids;
 pub mod net;
 pub mod wire;
 
@@ -14,4 +15,5 @@ pub mod v1 {
 }
 
 /// Bumped whenever the messages or their meaning change incompatibly.
-pub const PROTOCOL_VERSION: u32 = 2;
+/// 3: random job ids with secrets, worker sessions, separate roles.
+pub const PROTOCOL_VERSION: u32 = 3;

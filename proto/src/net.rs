@@ -7,7 +7,7 @@ use crate::wire::MAX_MESSAGE_BYTES;
 use std::path::PathBuf;
 use std::time::Duration;
 use tonic::service::interceptor::InterceptedService;
-use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint};
+use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint, Identity};
 
 /// A coordinator client that attaches the token to every call.
 pub type Client = CoordinatorClient<InterceptedService<Channel, Attach>>;
@@ -20,6 +20,9 @@ pub struct Target {
     pub token: Option<Token>,
     /// PEM certificate(s) to trust for an `https` URL.
     pub ca: Option<PathBuf>,
+    /// A client certificate and its key (PEM), for a coordinator that
+    /// requires them (`--tls-client-ca`).
+    pub identity: Option<(PathBuf, PathBuf)>,
 }
 
 impl Target {
@@ -42,8 +45,16 @@ impl Target {
             };
             let pem = std::fs::read(ca)
                 .map_err(|e| format!("cannot read the CA certificate {}: {e}", ca.display()))?;
+            let mut tls = ClientTlsConfig::new().ca_certificate(Certificate::from_pem(pem));
+            if let Some((cert, key)) = &self.identity {
+                let c = std::fs::read(cert)
+                    .map_err(|e| format!("cannot read the certificate {}: {e}", cert.display()))?;
+                let k = std::fs::read(key)
+                    .map_err(|e| format!("cannot read the private key {}: {e}", key.display()))?;
+                tls = tls.identity(Identity::from_pem(c, k));
+            }
             ep = ep
-                .tls_config(ClientTlsConfig::new().ca_certificate(Certificate::from_pem(pem)))
+                .tls_config(tls)
                 .map_err(|e| format!("TLS settings for {}: {e}", self.url))?;
         } else if !self.url.starts_with("http://") {
             return Err(format!(

@@ -5,7 +5,7 @@
 use anyhow::Context;
 use clap::Args;
 use sray_coordinator::server::{Security, serve};
-use sray_coordinator::state::{Config, Shared};
+use sray_coordinator::state::{Config, Limits, MIN_WORKER_MEMORY, Shared};
 use sray_proto::auth::Token;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -15,15 +15,24 @@ pub struct CoordinatorArgs {
     /// Address to listen on
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub listen: String,
-    /// Where uploaded scenes are kept
+    /// Where uploaded scenes and the jobs' journals are kept (one coordinator per directory)
     #[arg(long, default_value = "sray-data")]
     pub data_dir: PathBuf,
-    /// Where rays and results in flight are kept (default: the system's temp dir)
+    /// Where rays and results in flight are kept (default: the data directory)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
-    /// Require this shared token (a file holding it) of workers and clients
+    /// Require this token (a file holding it) of workers and clients alike; prefer the next two
     #[arg(long)]
     pub token_file: Option<PathBuf>,
+    /// Require this token (a file holding it) of workers; it grants nothing a client may do
+    #[arg(long)]
+    pub worker_token_file: Option<PathBuf>,
+    /// Require this token (a file holding it) of clients; it grants nothing a worker may do
+    #[arg(long)]
+    pub client_token_file: Option<PathBuf>,
+    /// With TLS, require every caller to present a certificate signed by this CA (PEM)
+    #[arg(long)]
+    pub tls_client_ca: Option<PathBuf>,
     /// Serve TLS with this certificate chain (PEM); needs --tls-key
     #[arg(long, requires = "tls_key")]
     pub tls_cert: Option<PathBuf>,
@@ -39,9 +48,48 @@ pub struct CoordinatorArgs {
     /// A worker silent this long (seconds) is declared dead and its task requeued
     #[arg(long, default_value_t = 5.0)]
     pub worker_timeout: f64,
-    /// A job with no worker for this long (seconds) fails
+    /// A job with no worker that may do its work for this long (seconds) fails
     #[arg(long, default_value_t = 60.0)]
     pub worker_wait: f64,
+    /// Share of every shard's rays re-traced on another worker to verify it (0 turns verification off)
+    #[arg(long, default_value_t = 0.02)]
+    pub verify_fraction: f64,
+    /// A task running this many times longer than the median of its finished siblings gets a backup attempt
+    #[arg(long, default_value_t = 4.0)]
+    pub deadline_factor: f64,
+    /// ... but not before this many seconds
+    #[arg(long, default_value_t = 30.0)]
+    pub deadline_min: f64,
+    /// ... and after this many seconds while no sibling has finished
+    #[arg(long, default_value_t = 900.0)]
+    pub task_timeout: f64,
+    /// Seconds a worker is quarantined (no tasks) after 3 failures, or a wrong output
+    #[arg(long, default_value_t = 600.0)]
+    pub quarantine: f64,
+    /// Seconds a finished job's image stays fetchable (`sray fetch`)
+    #[arg(long, default_value_t = 3600.0)]
+    pub job_retention: f64,
+    /// Bytes of uploaded scenes kept; least recently used are removed past it
+    #[arg(long, default_value = "50GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
+    pub scene_store_max: u64,
+    /// Workers with less --memory are refused at registration
+    #[arg(long, default_value_t = MIN_WORKER_MEMORY, value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
+    pub min_worker_memory: u64,
+    /// Largest image a job may ask for, width x height
+    #[arg(long, default_value_t = Limits::default().max_pixels)]
+    pub max_pixels: u64,
+    /// Most eye rays per pixel a job may ask for
+    #[arg(long, default_value_t = Limits::default().max_samples)]
+    pub max_samples: u32,
+    /// Deepest ray tree a job may ask for
+    #[arg(long, default_value_t = Limits::default().max_depth)]
+    pub max_depth: u32,
+    /// Largest object database a client may upload
+    #[arg(long, default_value = "64GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
+    pub max_scene_bytes: u64,
+    /// Jobs running at once; more are refused until one ends
+    #[arg(long, default_value_t = Limits::default().max_jobs)]
+    pub max_jobs: usize,
 }
 
 #[derive(Args, Debug)]
@@ -58,15 +106,24 @@ pub struct WorkerArgs {
     /// Where scenes are cached, by content hash
     #[arg(long, default_value = "sray-cache")]
     pub cache_dir: PathBuf,
+    /// Bytes of scenes kept in the cache; least recently used are removed past it
+    #[arg(long, default_value = "20GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
+    pub cache_max: u64,
     /// Where spilled rays go (default: the system's temp dir)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
-    /// The cluster's shared token (a file holding it)
+    /// The workers' token (a file holding it)
     #[arg(long)]
     pub token_file: Option<PathBuf>,
     /// Certificate (PEM) to trust for an https coordinator
     #[arg(long)]
     pub tls_ca: Option<PathBuf>,
+    /// This worker's client certificate (PEM), for a coordinator with --tls-client-ca; needs --tls-key
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The client certificate's private key (PEM)
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
     /// Name shown in the coordinator's log (default: host name and process id)
     #[arg(long)]
     pub name: Option<String>,
@@ -113,7 +170,7 @@ async fn stop_signal() {
     }
 }
 
-fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
+pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -125,6 +182,12 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
     if a.heartbeat_ms == 0 || a.heartbeat_ms > 60_000 {
         anyhow::bail!("--heartbeat-ms must be 1 to 60000");
     }
+    if !(0.0..=1.0).contains(&a.verify_fraction) {
+        anyhow::bail!("--verify-fraction must be 0 to 1");
+    }
+    if !(a.deadline_factor >= 1.0 && a.deadline_factor < 1e6) {
+        anyhow::bail!("--deadline-factor must be at least 1");
+    }
     let cfg = Config {
         heartbeat: Duration::from_millis(a.heartbeat_ms),
         worker_timeout: seconds(a.worker_timeout, "--worker-timeout")?,
@@ -132,16 +195,43 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         shard_rays: a.shard_rays.clamp(256, 1 << 24),
         data_dir: a.data_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
+        verify_fraction: a.verify_fraction,
+        deadline_factor: a.deadline_factor,
+        deadline_min: seconds(a.deadline_min, "--deadline-min")?,
+        task_timeout: seconds(a.task_timeout, "--task-timeout")?,
+        quarantine: seconds(a.quarantine, "--quarantine")?,
+        job_retention: seconds(a.job_retention, "--job-retention")?,
+        scene_store_max: a.scene_store_max,
+        min_worker_memory: a.min_worker_memory,
+        limits: Limits {
+            max_pixels: a.max_pixels,
+            max_samples: a.max_samples,
+            max_depth: a.max_depth,
+            max_scene_bytes: a.max_scene_bytes,
+            max_jobs: a.max_jobs.max(1),
+            ..Limits::default()
+        },
         ..Config::default()
     };
+    let shared_token = token(&a.token_file)?;
     let sec = Security {
-        token: token(&a.token_file)?,
+        worker_token: token(&a.worker_token_file)?.or(shared_token.clone()),
+        client_token: token(&a.client_token_file)?.or(shared_token),
         tls: a.tls_cert.clone().zip(a.tls_key.clone()),
+        client_ca: a.tls_client_ca.clone(),
     };
-    if sec.token.is_none() {
-        tracing::warn!("no --token-file: anyone who can reach this port can use the cluster");
+    if sec.worker_token.is_none() && sec.client_token.is_none() {
+        tracing::warn!(
+            "no token file: anyone who can reach this port can use the cluster, as a worker or a client"
+        );
+    } else if sec.worker_token.is_none() || sec.client_token.is_none() {
+        anyhow::bail!(
+            "only one role would have a token and the other could not call at all: give both \
+             --worker-token-file and --client-token-file (or --token-file for the one missing)"
+        );
     }
-    runtime()?.block_on(async {
+    let rt = runtime()?;
+    let r = rt.block_on(async {
         let shared = Shared::new(cfg)?;
         let listener = tokio::net::TcpListener::bind(&a.listen)
             .await
@@ -152,7 +242,11 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         // A line for scripts that start a coordinator on port 0.
         eprintln!("sray coordinator listening on {scheme}://{addr}");
         serve(shared, listener, sec, stop_signal()).await
-    })
+    });
+    // Work still on blocking threads (a checkpoint being written is
+    // crash-safe) does not hold the exit up.
+    rt.shutdown_timeout(Duration::from_millis(500));
+    r
 }
 
 pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
@@ -165,6 +259,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
             url: a.coordinator.clone(),
             token: token(&a.token_file)?,
             ca: a.tls_ca.clone(),
+            identity: a.tls_cert.clone().zip(a.tls_key.clone()),
         },
         name: a.name.clone().unwrap_or_else(|| {
             let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
@@ -175,6 +270,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
             .memory
             .unwrap_or_else(sray_engine::sys::default_memory_budget),
         cache_dir: a.cache_dir.clone(),
+        cache_max: a.cache_max,
         tmp_dir: a.tmp_dir.clone(),
     };
     runtime()?.block_on(sray_worker::run(cfg, stop_signal()))

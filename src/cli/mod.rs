@@ -43,6 +43,8 @@ enum Command {
     Coordinator(cluster_cmd::CoordinatorArgs),
     /// Join a cluster: take intersection and shading work from a coordinator
     Worker(cluster_cmd::WorkerArgs),
+    /// Get the image of a job submitted to a cluster (again, or after the client lost its connection)
+    Fetch(cluster::fetch::FetchArgs),
     /// Run the benchmarks (the paper's experiments, POV-Ray, speed against accuracy)
     Bench(sray_bench::BenchArgs),
 }
@@ -59,6 +61,7 @@ pub fn main() -> ExitCode {
         Command::Bench(a) => sray_bench::run(a),
         Command::Coordinator(a) => cluster_cmd::coordinator(a),
         Command::Worker(a) => cluster_cmd::worker(a),
+        Command::Fetch(a) => cluster::fetch::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

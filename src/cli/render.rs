@@ -193,6 +193,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                         .transpose()
                         .map_err(anyhow::Error::msg)?,
                     ca: a.tls_ca.clone(),
+                    identity: None,
                 };
                 client::render(&target, &db, params, shard_rays, format, &bar).await
             }

@@ -4,8 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The `sray` under test (`SRAY_TEST_BIN` runs another build, e.g. to
+/// check that a test fails on an older one).
 pub fn sray() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_sray"))
+    match std::env::var_os("SRAY_TEST_BIN") {
+        Some(b) => Command::new(b),
+        None => Command::new(env!("CARGO_BIN_EXE_sray")),
+    }
 }
 
 /// Runs `sray ARGS` in `dir`.

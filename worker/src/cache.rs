@@ -19,6 +19,8 @@ const MAX_CHUNK: u32 = 16 << 20;
 
 pub struct SceneCache {
     dir: PathBuf,
+    /// Bytes of scenes kept; least recently used are removed past it.
+    max: u64,
     /// Chunks fetched since start, and how many of those replaced a
     /// corrupt or missing chunk of an existing copy.
     pub chunks_fetched: AtomicU64,
@@ -46,11 +48,12 @@ struct Manifest {
 }
 
 impl SceneCache {
-    pub fn new(dir: &Path) -> anyhow::Result<SceneCache> {
+    pub fn new(dir: &Path, max: u64) -> anyhow::Result<SceneCache> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the cache directory {}", dir.display()))?;
         Ok(SceneCache {
             dir: dir.to_path_buf(),
+            max,
             chunks_fetched: AtomicU64::new(0),
             chunks_repaired: AtomicU64::new(0),
         })
@@ -117,7 +120,48 @@ impl SceneCache {
             t.persist(&path)
                 .with_context(|| path.display().to_string())?;
         }
+        // Last use is the file's modification time (symlinks, as a local
+        // render makes, are left alone).
+        if let Ok(f) = OpenOptions::new().write(true).open(&path) {
+            let _ = f.set_modified(std::time::SystemTime::now());
+        }
+        self.evict(hash);
         Ok(path)
+    }
+
+    /// Removes cached scenes, least recently used first, until the cache
+    /// holds at most `max` bytes; never `keep` (the scene in use).
+    fn evict(&self, keep: &str) {
+        let Ok(rd) = std::fs::read_dir(&self.dir) else {
+            return;
+        };
+        let mut files: Vec<(std::time::SystemTime, u64, PathBuf)> = rd
+            .flatten()
+            .filter_map(|f| {
+                let name = f.file_name().to_string_lossy().to_string();
+                let hash = name.strip_suffix(".sdb")?;
+                if check_hash(hash).is_err() || hash == keep {
+                    return None;
+                }
+                let md = std::fs::symlink_metadata(f.path()).ok()?;
+                if !md.is_file() {
+                    return None;
+                }
+                Some((md.modified().ok()?, md.len(), f.path()))
+            })
+            .collect();
+        let keep_size = std::fs::metadata(self.dir.join(format!("{keep}.sdb"))).map_or(0, |m| m.len());
+        let mut total: u64 = keep_size + files.iter().map(|f| f.1).sum::<u64>();
+        files.sort();
+        for (_, size, path) in files {
+            if total <= self.max {
+                break;
+            }
+            if std::fs::remove_file(&path).is_ok() {
+                tracing::info!(path = %path.display(), bytes = size, "cached scene evicted (--cache-max)");
+                total -= size;
+            }
+        }
     }
 
     async fn fetch_chunk(

@@ -17,9 +17,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 use tokio::sync::{mpsc, oneshot};
 
-/// What a job's tasks share.
+/// What a job's tasks share. `key` names the setup by content (the
+/// scene's hash and a hash of the render settings), never by job id: two
+/// jobs with the same key may share an executor, and a job id that a
+/// restarted coordinator might issue again can never select another
+/// scene's executor.
 pub struct JobSetup {
-    pub job_id: u64,
+    pub key: String,
     pub db_path: PathBuf,
     pub opts: RenderOptions,
     pub bf: BfOptions,
@@ -29,13 +33,23 @@ pub struct JobSetup {
 /// channel its output goes to, and where to say how it ended.
 pub struct Work {
     pub task: v1::Task,
-    pub input: Option<tonic::Streaming<v1::RecordChunk>>,
+    pub input: Input,
     pub out: mpsc::Sender<v1::TaskOutput>,
     pub done: oneshot::Sender<Result<(), String>>,
 }
 
+/// A task's input records.
+pub enum Input {
+    /// None (eye rays, intersection).
+    None,
+    /// From the coordinator.
+    Stream(tonic::Streaming<v1::RecordChunk>),
+    /// Files already here (the coordinator tracing a sample itself).
+    Files(Inputs),
+}
+
 pub struct Executor {
-    pub job_id: u64,
+    pub key: String,
     tx: Option<std::sync::mpsc::Sender<Work>>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -56,16 +70,16 @@ impl Executor {
     /// there, before the first task runs.
     pub fn start(setup: JobSetup, rt: tokio::runtime::Handle) -> Executor {
         let (tx, rx) = std::sync::mpsc::channel::<Work>();
-        let job_id = setup.job_id;
+        let key = setup.key.clone();
         let thread = std::thread::Builder::new()
-            .name(format!("job-{job_id}"))
+            .name(format!("setup-{}", &key[..key.len().min(8)]))
             .spawn(move || match setup.opts.precision {
                 Precision::Double => job_thread::<f64>(setup, rt, rx),
                 Precision::Single => job_thread::<f32>(setup, rt, rx),
             })
             .expect("cannot start a thread");
         Executor {
-            job_id,
+            key,
             tx: Some(tx),
             thread: Some(thread),
         }
@@ -99,7 +113,7 @@ fn job_thread<R: Real>(
         Err(e) => return fail_all(rx, &e.to_string()),
     };
     tracing::info!(
-        job = setup.job_id,
+        setup = %setup.key,
         seconds = t0.elapsed().as_secs_f64(),
         "grids built"
     );
@@ -153,23 +167,23 @@ fn send_records<T: bytemuck::Pod>(
     )
 }
 
-/// The input stream's records of one kind, written to a local file.
-struct Inputs {
-    rays: Option<sray_engine::spill::RecordFile<RayRec>>,
-    results: Option<sray_engine::spill::RecordFile<ResultRec>>,
+/// A task's input records, in local files.
+#[derive(Default)]
+pub struct Inputs {
+    pub rays: Option<sray_engine::spill::RecordFile<RayRec>>,
+    pub results: Option<sray_engine::spill::RecordFile<ResultRec>>,
 }
 
 fn read_inputs<R: Real>(
     tracer: &Tracer<R>,
     rt: &tokio::runtime::Handle,
-    stream: Option<tonic::Streaming<v1::RecordChunk>>,
+    input: Input,
 ) -> Result<Inputs, String> {
-    let mut inputs = Inputs {
-        rays: None,
-        results: None,
-    };
-    let Some(mut stream) = stream else {
-        return Ok(inputs);
+    let mut inputs = Inputs::default();
+    let mut stream = match input {
+        Input::None => return Ok(inputs),
+        Input::Files(f) => return Ok(f),
+        Input::Stream(s) => s,
     };
     let io = |e: sray_engine::Error| e.to_string();
     let mut rays: Option<RecordWriter<RayRec>> = None;
@@ -208,7 +222,7 @@ fn run_task<R: Real>(
     eye_rays: u64,
     rt: &tokio::runtime::Handle,
     task: &v1::Task,
-    input: Option<tonic::Streaming<v1::RecordChunk>>,
+    input: Input,
     out: &mpsc::Sender<v1::TaskOutput>,
 ) -> Result<(), String> {
     let t0 = Instant::now();

@@ -3,7 +3,7 @@
 //! job's executor and stream the output back.
 
 use crate::cache::SceneCache;
-use crate::exec::{Executor, JobSetup, Work};
+use crate::exec::{Executor, Input, JobSetup, Work};
 use crate::params::from_proto;
 use anyhow::Context;
 use sray_engine::bf::BfOptions;
@@ -27,6 +27,8 @@ pub struct WorkerConfig {
     /// Memory budget of the tracer, bytes.
     pub memory: u64,
     pub cache_dir: PathBuf,
+    /// Bytes of scenes kept in the cache; least recently used go first.
+    pub cache_max: u64,
     /// Where spilled rays go (default: the system's temp dir).
     pub tmp_dir: Option<PathBuf>,
 }
@@ -39,7 +41,7 @@ pub async fn run(
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
     let client = cfg.target.connect_lazy().map_err(anyhow::Error::msg)?;
-    let cache = Arc::new(SceneCache::new(&cfg.cache_dir)?);
+    let cache = Arc::new(SceneCache::new(&cfg.cache_dir, cfg.cache_max)?);
     let mut node = Node {
         cfg,
         client,
@@ -71,27 +73,24 @@ const RETRY: Duration = Duration::from_secs(1);
 impl Node {
     async fn serve(&mut self) -> anyhow::Result<()> {
         loop {
-            let (id, beat) = self.register().await?;
+            let (session, beat) = self.register().await?;
             let lost = Arc::new(AtomicBool::new(false));
             let hb = tokio::spawn(heartbeat(
                 self.client.clone(),
-                id,
+                session.clone(),
                 beat,
                 self.running.clone(),
                 lost.clone(),
             ));
-            let r = self.take_tasks(id, &lost).await;
+            let r = self.take_tasks(&session, &lost).await;
             hb.abort();
             r?;
-            tracing::warn!(
-                worker = id,
-                "the coordinator no longer knows this worker: registering again"
-            );
+            tracing::warn!("the coordinator no longer knows this worker: registering again");
         }
     }
 
     /// Registers, waiting for the coordinator as long as it takes.
-    async fn register(&mut self) -> anyhow::Result<(u64, Duration)> {
+    async fn register(&mut self) -> anyhow::Result<(String, Duration)> {
         let mut waited = false;
         loop {
             let req = v1::RegisterRequest {
@@ -103,9 +102,9 @@ impl Node {
             match self.client.register(req).await {
                 Ok(r) => {
                     let r = r.into_inner();
-                    tracing::info!(worker = r.worker_id, url = %self.cfg.target.url, "registered");
+                    tracing::info!(run = %r.run_id, url = %self.cfg.target.url, "registered");
                     return Ok((
-                        r.worker_id,
+                        r.session,
                         Duration::from_millis(r.heartbeat_ms.clamp(100, 60_000) as u64),
                     ));
                 }
@@ -123,19 +122,21 @@ impl Node {
         }
     }
 
-    async fn take_tasks(&mut self, id: u64, lost: &AtomicBool) -> anyhow::Result<()> {
+    async fn take_tasks(&mut self, session: &str, lost: &AtomicBool) -> anyhow::Result<()> {
         loop {
             if lost.load(Ordering::Relaxed) {
                 return Ok(());
             }
             match self
                 .client
-                .next_task(v1::NextTaskRequest { worker_id: id })
+                .next_task(v1::NextTaskRequest {
+                    session: session.to_string(),
+                })
                 .await
             {
                 Ok(r) => {
                     if let Some(task) = r.into_inner().task {
-                        self.serve_task(id, task).await?;
+                        self.serve_task(session, task).await?;
                     }
                 }
                 Err(s) if s.code() == Code::NotFound => return Ok(()),
@@ -150,9 +151,9 @@ impl Node {
     /// Runs one task. Task failures are reported to the coordinator (which
     /// gives the task to another worker); only local faults that would
     /// fail every task end the worker.
-    async fn serve_task(&mut self, worker: u64, task: v1::Task) -> anyhow::Result<()> {
+    async fn serve_task(&mut self, session: &str, task: v1::Task) -> anyhow::Result<()> {
         let tref = v1::TaskRef {
-            worker_id: worker,
+            session: session.to_string(),
             task_id: task.task_id,
             attempt: task.attempt,
         };
@@ -165,7 +166,7 @@ impl Node {
             let _ = self
                 .client
                 .fail_task(v1::FailTaskRequest {
-                    task: Some(tref),
+                    task: Some(tref.clone()),
                     error: msg,
                 })
                 .await;
@@ -174,24 +175,26 @@ impl Node {
     }
 
     async fn try_task(&mut self, tref: &v1::TaskRef, task: v1::Task) -> anyhow::Result<()> {
-        if self.exec.as_ref().map(|e| e.job_id) != Some(task.job_id) {
-            // A new job: check (and repair) the cached scene once, then
-            // build the job's grids on its own executor.
+        let hash = task
+            .scene
+            .as_ref()
+            .map(|s| s.hash.clone())
+            .unwrap_or_default();
+        let params = task
+            .params
+            .as_ref()
+            .context("task without render settings")?;
+        let key = setup_key(&hash, params);
+        if self.exec.as_ref().map(|e| e.key.as_str()) != Some(key.as_str()) {
+            // A new setup (scene or settings): check (and repair) the
+            // cached scene once, then build the grids on an executor of
+            // its own. The setup is named by content, never by job id.
             self.exec = None;
-            let hash = task
-                .scene
-                .as_ref()
-                .map(|s| s.hash.clone())
-                .unwrap_or_default();
             let path = self.cache.ensure(&mut self.client, &hash).await?;
-            let params = task
-                .params
-                .as_ref()
-                .context("task without render settings")?;
             let (opts, store) = from_proto(params, self.cfg.threads).map_err(anyhow::Error::msg)?;
             self.exec = Some(Executor::start(
                 JobSetup {
-                    job_id: task.job_id,
+                    key,
                     db_path: path,
                     opts,
                     bf: BfOptions {
@@ -205,15 +208,15 @@ impl Node {
         }
         let shade = task.stage == v1::Stage::Shade as i32;
         let input = if shade || !task.eye_rays {
-            Some(self.client.task_input(*tref).await?.into_inner())
+            Input::Stream(self.client.task_input(tref.clone()).await?.into_inner())
         } else {
-            None
+            Input::None
         };
         // The output stream: our sender stays alive until the outcome is
         // known, so that a failure is reported before the stream ends.
         let (out, rx) = mpsc::channel::<v1::TaskOutput>(4);
         out.send(v1::TaskOutput {
-            part: Some(Part::Header(*tref)),
+            part: Some(Part::Header(tref.clone())),
         })
         .await
         .ok();
@@ -253,7 +256,7 @@ impl Node {
                 let _ = self
                     .client
                     .fail_task(v1::FailTaskRequest {
-                        task: Some(*tref),
+                        task: Some(tref.clone()),
                         error: e.clone(),
                     })
                     .await;
@@ -274,9 +277,21 @@ fn fatal(s: &tonic::Status) -> bool {
     )
 }
 
+/// What a worker's executor is keyed by: the scene's content hash and a
+/// hash of the render settings (their protobuf encoding, which is
+/// deterministic for these scalar fields).
+pub fn setup_key(scene: &str, params: &v1::RenderParams) -> String {
+    use prost::Message;
+    let mut h = blake3::Hasher::new();
+    h.update(scene.as_bytes());
+    h.update(b"\0");
+    h.update(&params.encode_to_vec());
+    h.finalize().to_hex().to_string()
+}
+
 async fn heartbeat(
     mut client: Client,
-    id: u64,
+    session: String,
     every: Duration,
     running: Arc<AtomicU64>,
     lost: Arc<AtomicBool>,
@@ -286,7 +301,7 @@ async fn heartbeat(
         tick.tick().await;
         let t = running.load(Ordering::Relaxed);
         let req = v1::HeartbeatRequest {
-            worker_id: id,
+            session: session.clone(),
             running_tasks: if t == 0 { vec![] } else { vec![t] },
         };
         if let Ok(r) = client.heartbeat(req).await

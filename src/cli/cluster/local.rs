@@ -51,6 +51,8 @@ pub async fn render(
         data_dir: dir.path().join("data"),
         tmp_dir: plan.tmp_dir.clone(),
         worker_wait: Duration::from_secs(30),
+        // The user split their own --memory among the workers.
+        min_worker_memory: 0,
         ..Config::default()
     })?;
     // The workers share one cache, where the scene is already (a link to
@@ -70,9 +72,13 @@ pub async fn render(
         .context("cannot listen on loopback")?;
     let url = format!("http://{}", listener.local_addr()?);
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    // One random token for the workers, another for this client.
+    let client_token = Token::new(&random_token()?).map_err(anyhow::Error::msg)?;
     let sec = Security {
-        token: Some(Token::new(&token).map_err(anyhow::Error::msg)?),
+        worker_token: Some(Token::new(&token).map_err(anyhow::Error::msg)?),
+        client_token: Some(client_token.clone()),
         tls: None,
+        client_ca: None,
     };
     let server = tokio::spawn(serve(shared.clone(), listener, sec.clone(), async {
         let _ = stop_rx.await;
@@ -119,10 +125,11 @@ pub async fn render(
 
     let target = Target {
         url,
-        token: sec.token.clone(),
+        token: Some(client_token),
         ca: None,
+        identity: None,
     };
-    let job = client::render(&target, db, params, shard_rays, format, progress);
+    let job = client::render_with(&target, db, params, shard_rays, format, progress, false);
     let all_exited = async {
         for c in children.iter_mut() {
             let _ = c.wait().await;

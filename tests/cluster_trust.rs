@@ -1,0 +1,633 @@
+//! A cluster that never returns a wrong image and never loses a job: real
+//! `sray coordinator`, `sray worker` and `sray render` processes on
+//! loopback, and fake workers and clients speaking the real protocol
+//! (tonic) that lie, fail, hang or try what they may not.
+//!
+//! Each test names the item of the issue it covers.
+
+mod common;
+
+use common::{Proc, fails, json, ok};
+use sray_proto::auth::Token;
+use sray_proto::net::{Client, Target};
+use sray_proto::v1;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// A coordinator; returns it and its URL. `listen` may name a port
+/// (to restart on the same one).
+fn coordinator_on(dir: &Path, listen: &str, extra: &[&str]) -> (Proc, String) {
+    let mut args = vec![
+        "coordinator",
+        "--listen",
+        listen,
+        "--data-dir",
+        "data",
+        "--heartbeat-ms",
+        "200",
+        "--worker-timeout",
+        "2",
+    ];
+    args.extend_from_slice(extra);
+    let p = Proc::start(dir, &args, &[("RUST_LOG", "info,sray_coordinator=debug")]);
+    let line = p.wait_for(&["listening on"], 30.0);
+    let url = line.rsplit(' ').next().unwrap().to_string();
+    (p, url)
+}
+
+fn coordinator(dir: &Path, extra: &[&str]) -> (Proc, String) {
+    coordinator_on(dir, "127.0.0.1:0", extra)
+}
+
+fn port(url: &str) -> String {
+    format!("127.0.0.1:{}", url.rsplit(':').next().unwrap())
+}
+
+fn worker(dir: &Path, url: &str, name: &str, token: &str, extra: &[&str]) -> Proc {
+    let cache = format!("cache-{name}");
+    let mut args = vec![
+        "worker",
+        "--coordinator",
+        url,
+        "--token-file",
+        token,
+        "--cache-dir",
+        &cache,
+        "--threads",
+        "1",
+        "--memory",
+        "64MiB",
+        "--name",
+        name,
+    ];
+    args.extend_from_slice(extra);
+    Proc::start(dir, &args, &[])
+}
+
+fn registered(coord: &Proc, name: &str) {
+    coord.wait_for(&["worker registered", &format!("worker={name} ")], 30.0);
+}
+
+/// The embedded render of a scene (the reference image).
+fn embedded(dir: &Path, scene: &str, size: &str) -> Vec<u8> {
+    let out = format!("emb-{}.png", scene.replace([':', '/', '.'], "_"));
+    ok(
+        dir,
+        &[
+            "render", scene, "-o", &out, "--mode", "bf", "--width", size, "--height", size,
+        ],
+    );
+    std::fs::read(dir.join(out)).unwrap()
+}
+
+fn render_args<'a>(scene: &'a str, url: &'a str, token: &'a str, out: &'a str, size: &'a str) -> Vec<&'a str> {
+    vec![
+        "render",
+        scene,
+        "-o",
+        out,
+        "--coordinator",
+        url,
+        "--token-file",
+        token,
+        "--width",
+        size,
+        "--height",
+        size,
+        "--shard-rays",
+        "256",
+        "--stats",
+        "cluster.json",
+    ]
+}
+
+/// A client render in the background, its tickets in `dir/tickets`.
+fn client(dir: &Path, args: &[&str]) -> Proc {
+    let tickets = dir.join("tickets");
+    Proc::start(dir, args, &[("SRAY_JOBS_DIR", tickets.to_str().unwrap())])
+}
+
+fn stats(dir: &Path) -> serde_json::Value {
+    json(&std::fs::read_to_string(dir.join("cluster.json")).unwrap())
+}
+
+fn sigterm(p: &Proc) {
+    // SAFETY: kill(2) takes two integers; the pid is our own unreaped
+    // child's, so it cannot name another process.
+    unsafe {
+        libc::kill(p.child.id() as libc::pid_t, libc::SIGTERM);
+    }
+}
+
+// ---- a fake worker or client speaking the real protocol ----
+
+fn rt() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+async fn connect(url: &str, token_file: &Path) -> Client {
+    Target {
+        url: url.to_string(),
+        token: Some(Token::from_file(token_file).unwrap()),
+        ca: None,
+        identity: None,
+    }
+    .connect()
+    .await
+    .unwrap()
+}
+
+async fn register(c: &mut Client, name: &str) -> String {
+    c.register(v1::RegisterRequest {
+        name: name.into(),
+        threads: 1,
+        memory_bytes: 64 << 20,
+        protocol_version: sray_proto::PROTOCOL_VERSION,
+    })
+    .await
+    .unwrap()
+    .into_inner()
+    .session
+}
+
+/// Beats for `session` until the runtime ends.
+fn keep_beating(c: &Client, session: &str) {
+    let mut c = c.clone();
+    let session = session.to_string();
+    tokio::spawn(async move {
+        loop {
+            let _ = c
+                .heartbeat(v1::HeartbeatRequest {
+                    session: session.clone(),
+                    running_tasks: vec![],
+                })
+                .await;
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    });
+}
+
+async fn next(c: &mut Client, session: &str) -> Option<v1::Task> {
+    c.next_task(v1::NextTaskRequest {
+        session: session.into(),
+    })
+    .await
+    .ok()?
+    .into_inner()
+    .task
+}
+
+fn tref(session: &str, t: &v1::Task) -> v1::TaskRef {
+    v1::TaskRef {
+        session: session.into(),
+        task_id: t.task_id,
+        attempt: t.attempt,
+    }
+}
+
+/// Sends an output: intersection results (plausible lies: in-range
+/// object ids at finite distances), or for shading nothing at all.
+async fn lie(c: &mut Client, session: &str, t: &v1::Task, seed: &mut u64) -> bool {
+    use v1::task_output::Part;
+    let mut msgs = vec![v1::TaskOutput {
+        part: Some(Part::Header(tref(session, t))),
+    }];
+    if t.stage == v1::Stage::Intersect as i32 {
+        let mut recs = Vec::new();
+        for i in 0..t.ray_count {
+            *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let r = sray_engine::bf::ResultRec {
+                ray: t.first_ray + i,
+                prim: sray_engine::hit::PrimId((*seed >> 33) % 4),
+                t: 1.0 + (*seed >> 40) as f64 / 1e6,
+            };
+            recs.push(r);
+        }
+        for chunk in recs.chunks(10_000) {
+            msgs.push(v1::TaskOutput {
+                part: Some(Part::Records(v1::RecordChunk {
+                    kind: v1::RecordKind::Results as i32,
+                    data: sray_proto::wire::pack(chunk),
+                })),
+            });
+        }
+    }
+    msgs.push(v1::TaskOutput {
+        part: Some(Part::Summary(v1::TaskSummary::default())),
+    });
+    c.complete_task(tokio_stream::iter(msgs))
+        .await
+        .map(|r| r.into_inner().accepted)
+        .unwrap_or(false)
+}
+
+/// Item 2: a worker that returns plausible lies (random in-range object
+/// ids, empty shading) is caught by verification, quarantined, its work
+/// redone; the image is the embedded one, and the job's log says so.
+#[test]
+fn a_lying_worker_is_caught_and_the_image_is_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:1", "32");
+    let (coord, url) = coordinator(d, &["--token-file", "token"]);
+    let rt = rt();
+    let lies = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let l2 = lies.clone();
+    let (u2, tok) = (url.clone(), d.join("token"));
+    rt.spawn(async move {
+        let mut c = connect(&u2, &tok).await;
+        let session = register(&mut c, "liar").await;
+        keep_beating(&c, &session);
+        let mut seed = 7u64;
+        loop {
+            if let Some(t) = next(&mut c, &session).await
+                && lie(&mut c, &session, &t, &mut seed).await
+            {
+                l2.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+        }
+    });
+    registered(&coord, "liar");
+    let _w = worker(d, &url, "honest", "token", &[]);
+    registered(&coord, "honest");
+    ok(d, &render_args("spd:balls:1", &url, "token", "c.png", "32"));
+    assert!(lies.load(std::sync::atomic::Ordering::Relaxed) > 0, "the liar was never accepted once");
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "wrong image");
+    let s = stats(d);
+    assert!(s["verification"]["mismatches"].as_u64().unwrap() >= 1, "{s}");
+    assert_eq!(s["verification"]["quarantined"], serde_json::json!(["liar"]), "{s}");
+    let log = s["log"].to_string();
+    assert!(log.contains("worker liar quarantined"), "{log}");
+    drop(rt);
+}
+
+/// Item 1: job ids are random and workers key their caches by content:
+/// after a coordinator restart with the same worker up, a render of
+/// another scene gives that scene's image, not the cached one's.
+#[test]
+fn a_restarted_coordinator_never_hands_out_another_scenes_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:tetra:2", "32");
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--verify-fraction", "0"]);
+    let _w = worker(d, &url, "w0", "token", &[]);
+    registered(&coord, "w0");
+    ok(d, &render_args("spd:balls:2", &url, "token", "a.png", "32"));
+    drop(coord);
+    let (coord, url2) = coordinator_on(d, &port(&url), &["--token-file", "token", "--verify-fraction", "0"]);
+    assert_eq!(url, url2);
+    registered(&coord, "w0");
+    ok(d, &render_args("spd:tetra:2", &url, "token", "b.png", "32"));
+    assert!(std::fs::read(d.join("b.png")).unwrap() == want, "tetra rendered as another scene");
+}
+
+/// Item 3: a SIGKILLed coordinator resumes its job from the last finished
+/// round; the client reconnects and gets the image; the image can be
+/// fetched again by job id; no spill file of the killed run is left.
+#[test]
+fn a_killed_coordinator_resumes_and_the_image_can_be_fetched_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let tmp = d.join("tmp");
+    std::fs::create_dir(&tmp).unwrap();
+    let tmp_s = tmp.to_str().unwrap().to_string();
+    let want = embedded(d, "spd:balls:2", "48");
+    let extra = ["--token-file", "token", "--tmp-dir", &tmp_s];
+    let (coord, url) = coordinator(d, &extra);
+    let _w = worker(d, &url, "w0", "token", &[]);
+    registered(&coord, "w0");
+    let mut c = client(d, &render_args("spd:balls:2", &url, "token", "c.png", "48"));
+    // Killed once round 1 is journaled.
+    coord.wait_for(&["checkpoint", "round=2"], 120.0);
+    let before: Vec<_> = walk(&tmp);
+    drop(coord);
+    let (coord, _) = coordinator_on(d, &port(&url), &extra);
+    coord.wait_for(&["resuming at round"], 30.0);
+    for f in &before {
+        assert!(!f.exists(), "spill file of the killed run left: {}", f.display());
+    }
+    assert!(c.wait(180.0).success(), "{}", c.log());
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "wrong image after resuming");
+    let id = stats(d)["job_id"].as_str().unwrap().to_string();
+    let tickets = d.join("tickets");
+    let o = common::sray()
+        .current_dir(d)
+        .args(["fetch", &id, "-o", "again.png", "--token-file", "token"])
+        .env("SRAY_JOBS_DIR", &tickets)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read(d.join("again.png")).unwrap() == want);
+    drop(coord);
+}
+
+fn walk(d: &Path) -> Vec<std::path::PathBuf> {
+    let mut v = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(d) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                v.extend(walk(&p));
+            } else {
+                v.push(p);
+            }
+        }
+    }
+    v
+}
+
+/// Item 4: SIGTERM stops the coordinator within seconds; the client is
+/// told "coordinator restarting" (not a false reason), reconnects to the
+/// next run and gets the right image.
+#[test]
+fn sigterm_stops_promptly_and_the_client_rides_the_restart() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "48");
+    let (mut coord, url) = coordinator(d, &["--token-file", "token"]);
+    let _w = worker(d, &url, "w0", "token", &[]);
+    registered(&coord, "w0");
+    let mut c = client(d, &render_args("spd:balls:2", &url, "token", "c.png", "48"));
+    coord.wait_for(&["task assigned"], 60.0);
+    let t0 = Instant::now();
+    sigterm(&coord);
+    coord.wait(5.0);
+    assert!(t0.elapsed() < Duration::from_secs(5), "stopping took {:?}", t0.elapsed());
+    let (_coord, _) = coordinator_on(d, &port(&url), &["--token-file", "token"]);
+    assert!(c.wait(180.0).success(), "{}", c.log());
+    assert!(c.log().contains("coordinator restarting"), "{}", c.log());
+    assert!(!c.log().contains("no worker"), "{}", c.log());
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+}
+
+/// Item 5: a worker that fails every task does not get the task back, is
+/// quarantined, and the job ends well on the healthy worker.
+#[test]
+fn a_task_that_failed_on_a_worker_goes_elsewhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:1", "32");
+    let (coord, url) = coordinator(d, &["--token-file", "token"]);
+    let rt = rt();
+    let (u2, tok) = (url.clone(), d.join("token"));
+    rt.spawn(async move {
+        let mut c = connect(&u2, &tok).await;
+        let session = register(&mut c, "broken").await;
+        keep_beating(&c, &session);
+        loop {
+            if let Some(t) = next(&mut c, &session).await {
+                let _ = c
+                    .fail_task(v1::FailTaskRequest {
+                        task: Some(tref(&session, &t)),
+                        error: "bad RAM".into(),
+                    })
+                    .await;
+            }
+        }
+    });
+    registered(&coord, "broken");
+    let _w = worker(d, &url, "healthy", "token", &[]);
+    registered(&coord, "healthy");
+    ok(d, &render_args("spd:balls:1", &url, "token", "c.png", "32"));
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+    coord.wait_for(&["worker quarantined", "worker=broken"], 10.0);
+    drop(rt);
+}
+
+/// Item 6: a worker whose heartbeat runs but whose task never returns
+/// does not hang the job: the task gets a backup attempt elsewhere.
+#[test]
+fn a_task_that_never_returns_gets_a_backup() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:1", "32");
+    let (coord, url) = coordinator(
+        d,
+        &["--token-file", "token", "--deadline-min", "1", "--deadline-factor", "2"],
+    );
+    let rt = rt();
+    let (u2, tok) = (url.clone(), d.join("token"));
+    let (got_tx, got_rx) = std::sync::mpsc::channel();
+    rt.spawn(async move {
+        let mut c = connect(&u2, &tok).await;
+        let session = register(&mut c, "stuck").await;
+        keep_beating(&c, &session);
+        loop {
+            if next(&mut c, &session).await.is_some() {
+                let _ = got_tx.send(());
+                // Holds the task forever, beating.
+                std::future::pending::<()>().await;
+            }
+        }
+    });
+    registered(&coord, "stuck");
+    let mut c = client(d, &render_args("spd:balls:1", &url, "token", "c.png", "32"));
+    got_rx.recv_timeout(Duration::from_secs(60)).unwrap();
+    let _w = worker(d, &url, "w0", "token", &[]);
+    assert!(c.wait(120.0).success(), "{}", c.log());
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+    assert!(stats(d)["backup_tasks"].as_u64().unwrap() >= 1);
+    drop(rt);
+}
+
+/// Item 7: a worker below the memory floor is refused at registration
+/// with a message (it would have shrunk every job's grid); the others
+/// plan their own grids.
+#[test]
+fn a_worker_below_the_memory_floor_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token"]);
+    let mut small = worker(d, &url, "tiny", "token", &["--memory", "1MiB"]);
+    assert!(!small.wait(30.0).success());
+    assert!(small.log().contains("floor"), "{}", small.log());
+    drop(coord);
+}
+
+/// Item 8: finished jobs expire after their retention, the coordinator's
+/// scene store and the workers' caches stay under their caps.
+#[test]
+fn finished_jobs_expire_and_scene_stores_are_capped() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let (coord, url) = coordinator(
+        d,
+        &["--token-file", "token", "--job-retention", "2", "--scene-store-max", "1KiB"],
+    );
+    let _w = worker(d, &url, "w0", "token", &["--cache-max", "1KiB"]);
+    registered(&coord, "w0");
+    let sdb = |dir: &Path| {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "sdb"))
+            .count()
+    };
+    ok(d, &render_args("spd:balls:1", &url, "token", "a.png", "16"));
+    let first = stats(d)["job_id"].as_str().unwrap().to_string();
+    ok(d, &render_args("spd:tetra:1", &url, "token", "b.png", "16"));
+    coord.wait_for(&["scene evicted"], 10.0);
+    assert_eq!(sdb(&d.join("data")), 0, "the store kept scenes past its cap");
+    assert!(sdb(&d.join("cache-w0")) <= 1, "the worker's cache kept scenes past its cap");
+    coord.wait_for(&["finished job expired", &first], 10.0);
+    assert!(!d.join("data/jobs").join(&first).exists());
+    let err = fails(
+        d,
+        &["fetch", &format!("{first}:{}", "0".repeat(64)), "-o", "x.png", "--coordinator", &url, "--token-file", "token"],
+    );
+    assert!(err.contains("no job"), "{err}");
+}
+
+/// Item 9: requests beyond the limits are refused with a message, and the
+/// coordinator stays up for the next job.
+#[test]
+fn requests_beyond_the_limits_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--max-pixels", "100000"]);
+    let _w = worker(d, &url, "w0", "token", &[]);
+    registered(&coord, "w0");
+    let rt = rt();
+    let (u2, tok) = (url.clone(), d.join("token"));
+    let errs = rt.block_on(async move {
+        let mut c = connect(&u2, &tok).await;
+        let mut errs = Vec::new();
+        let huge = v1::JobSpec {
+            scene: Some(v1::SceneRef { hash: "0".repeat(64) }),
+            params: Some(v1::RenderParams {
+                width: 32768,
+                height: 32768,
+                max_depth: 5,
+                samples: 1024,
+                ..Default::default()
+            }),
+            protocol_version: sray_proto::PROTOCOL_VERSION,
+            ..Default::default()
+        };
+        errs.push(c.submit_job(huge.clone()).await.unwrap_err());
+        let mut deep = huge.clone();
+        deep.params = Some(v1::RenderParams {
+            width: 16,
+            height: 16,
+            max_depth: 200,
+            samples: 1,
+            ..Default::default()
+        });
+        errs.push(c.submit_job(deep).await.unwrap_err());
+        let header = v1::SceneUpload {
+            part: Some(v1::scene_upload::Part::Header(v1::SceneUploadHeader {
+                size: 1 << 50,
+                hash: "0".repeat(64),
+            })),
+        };
+        errs.push(c.upload_scene(tokio_stream::iter(vec![header])).await.unwrap_err());
+        errs
+    });
+    assert!(errs[0].message().contains("--max-pixels"), "{:?}", errs[0]);
+    assert!(errs[1].message().contains("--max-depth"), "{:?}", errs[1]);
+    assert!(errs[2].message().contains("--max-scene-bytes"), "{:?}", errs[2]);
+    let err = fails(d, &render_args("spd:balls:1", &url, "token", "big.png", "400"));
+    assert!(err.contains("--max-pixels"), "{err}");
+    // Still serving.
+    ok(d, &render_args("spd:balls:1", &url, "token", "small.png", "16"));
+    drop(coord);
+}
+
+/// Item 10: workers and clients hold separate tokens, a worker acts only
+/// under its session secret, and only a job's submitter (holding its
+/// secret) may cancel or watch it; refused calls are logged.
+#[test]
+fn roles_sessions_and_job_secrets_are_enforced() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("wtoken"), "worker-secret\n").unwrap();
+    std::fs::write(d.join("ctoken"), "client-secret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "48");
+    let (coord, url) = coordinator(
+        d,
+        &["--worker-token-file", "wtoken", "--client-token-file", "ctoken"],
+    );
+    // A worker with a client's token is refused.
+    let mut bad = worker(d, &url, "impostor", "ctoken", &[]);
+    assert!(!bad.wait(30.0).success());
+    assert!(bad.log().contains("refused"), "{}", bad.log());
+    let _w = worker(d, &url, "w0", "wtoken", &[]);
+    registered(&coord, "w0");
+    let mut c = client(d, &render_args("spd:balls:2", &url, "ctoken", "c.png", "48"));
+    let line = c.wait_for(&["sray: job", "submitted"], 60.0);
+    let id = line.split_whitespace().nth(2).unwrap().to_string();
+    let rt = rt();
+    let (u2, ct, wt) = (url.clone(), d.join("ctoken"), d.join("wtoken"));
+    let codes = rt.block_on(async move {
+        let mut client = connect(&u2, &ct).await;
+        let mut worker = connect(&u2, &wt).await;
+        let mut codes = Vec::new();
+        // Cancel another client's job by its id without its secret.
+        codes.push(
+            client
+                .cancel_job(v1::JobRef {
+                    job_id: id.clone(),
+                    job_secret: "0".repeat(64),
+                })
+                .await
+                .unwrap_err()
+                .code(),
+        );
+        codes.push(
+            client
+                .watch_job(v1::JobRef {
+                    job_id: id.clone(),
+                    job_secret: String::new(),
+                })
+                .await
+                .err()
+                .map(|s| s.code())
+                .unwrap_or(tonic::Code::Ok),
+        );
+        // A client's token cannot ask for work; a worker's cannot cancel.
+        codes.push(next_err(&mut client, "1").await);
+        codes.push(
+            worker
+                .cancel_job(v1::JobRef {
+                    job_id: id.clone(),
+                    job_secret: "0".repeat(64),
+                })
+                .await
+                .unwrap_err()
+                .code(),
+        );
+        // A worker's token with a guessed session gets nothing.
+        codes.push(next_err(&mut worker, "1").await);
+        codes
+    });
+    use tonic::Code::*;
+    assert_eq!(
+        codes,
+        vec![PermissionDenied, PermissionDenied, PermissionDenied, PermissionDenied, NotFound]
+    );
+    assert!(c.wait(120.0).success(), "{}", c.log());
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+    assert!(coord.log().contains("refused a call"), "{}", coord.log());
+}
+
+async fn next_err(c: &mut Client, session: &str) -> tonic::Code {
+    c.next_task(v1::NextTaskRequest {
+        session: session.into(),
+    })
+    .await
+    .err()
+    .map(|s| s.code())
+    .unwrap_or(tonic::Code::Ok)
+}
