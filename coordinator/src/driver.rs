@@ -110,7 +110,11 @@ impl Job {
                 l.max_grid_voxels
             );
         }
-        let hash = spec.scene.as_ref().map(|s| s.hash.clone()).unwrap_or_default();
+        let hash = spec
+            .scene
+            .as_ref()
+            .map(|s| s.hash.clone())
+            .unwrap_or_default();
         let sh = shared.clone();
         let h = hash.clone();
         let scene = tokio::task::spawn_blocking(move || sh.scenes.get(&h))
@@ -261,18 +265,17 @@ fn start(shared: Arc<Shared>, entry: Arc<JobEntry>, job: Job, rec: Record, resum
         match r {
             Ok((image, stats)) => {
                 let e = entry.clone();
-                let saved = tokio::task::spawn_blocking(move || {
-                    jobs::finish(&e, &mut rec, &image, &stats)
-                })
-                .await;
+                let saved =
+                    tokio::task::spawn_blocking(move || jobs::finish(&e, &mut rec, &image, &stats))
+                        .await;
                 match saved {
                     Ok(Ok(())) => {
                         tracing::info!(job = %entry.id, seconds = t0.elapsed().as_secs_f64(), "job done");
                         entry.set_state(JobState::Done);
                     }
-                    Ok(Err(e)) => entry.set_state(JobState::Failed(format!(
-                        "cannot keep the image: {e:#}"
-                    ))),
+                    Ok(Err(e)) => {
+                        entry.set_state(JobState::Failed(format!("cannot keep the image: {e:#}")))
+                    }
                     Err(e) => entry.set_state(JobState::Failed(format!("internal: {e}"))),
                 }
             }
@@ -419,7 +422,8 @@ async fn drive(
                     .context("an intersection task returned no results")
             })
             .collect::<anyhow::Result<_>>()?;
-        tot.passes.push(round_passes.into_iter().flatten().collect());
+        tot.passes
+            .push(round_passes.into_iter().flatten().collect());
         tot.intersect_seconds += ts.elapsed().as_secs_f64();
 
         // Shade every shard.
@@ -471,7 +475,14 @@ async fn drive(
     // The image, then the statistics.
     let format = job.format;
     let image = tokio::task::spawn_blocking(move || frame.encode(format)).await??;
-    let stats = job_stats(shared, entry, job, &tot, traffic0, t0.elapsed().as_secs_f64());
+    let stats = job_stats(
+        shared,
+        entry,
+        job,
+        &tot,
+        traffic0,
+        t0.elapsed().as_secs_f64(),
+    );
     Ok((image, serde_json::to_string(&stats)?))
 }
 
@@ -743,6 +754,18 @@ impl Stage<'_> {
                             ));
                         }
                     }
+                    // A sample no other worker has taken in time (they are
+                    // busy, or stuck) is traced here.
+                    for id in shared.waiting(&guard.ids, cfg.deadline_min) {
+                        if let Some(&Kind::Verify(i)) = kinds.get(&id)
+                            && let Some((vid, s, k)) = st[i].verify
+                            && vid == id
+                        {
+                            shared.forget_tasks(&[id]);
+                            st[i].verify = Some((0, s, k));
+                            arbiter.trace(self, i, (s, k), Purpose::Verify, &local_tx);
+                        }
+                    }
                     // Work that no worker may take.
                     let stranded = shared.stranded(&guard.ids);
                     let mut main_stranded = None;
@@ -785,7 +808,8 @@ impl Stage<'_> {
             .into_iter()
             .map(|s| {
                 let (o, _) = s.out.expect("every shard is done");
-                Arc::try_unwrap(o).map_err(|_| anyhow::anyhow!("internal: an output is still shared"))
+                Arc::try_unwrap(o)
+                    .map_err(|_| anyhow::anyhow!("internal: an output is still shared"))
             })
             .collect::<anyhow::Result<_>>()?;
         for o in &outs {
@@ -1090,7 +1114,11 @@ fn job_stats(
     seconds: f64,
 ) -> RenderStats {
     let t = shared.traffic.snapshot();
-    let d: Vec<u64> = t.iter().zip(traffic0).map(|(a, b)| a.saturating_sub(b)).collect();
+    let d: Vec<u64> = t
+        .iter()
+        .zip(traffic0)
+        .map(|(a, b)| a.saturating_sub(b))
+        .collect();
     let counts = RayCounts {
         eye_rays: job.opts.eye_rays(),
         eye_hit_rays: tot.eye_hit_rays,

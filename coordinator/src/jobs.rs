@@ -143,7 +143,13 @@ impl Jobs {
         let secret = sray_proto::ids::new_secret();
         let dir = self.dir.join(&id);
         std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
-        let e = self.insert(id, secret_hash(&secret), dir, scene.to_string(), JobState::Running);
+        let e = self.insert(
+            id,
+            secret_hash(&secret),
+            dir,
+            scene.to_string(),
+            JobState::Running,
+        );
         Ok((e, secret))
     }
 
@@ -395,14 +401,21 @@ pub fn load_checkpoint(
     }
     let frame_bytes = std::fs::read(dir.join(format!("frame-{}.bin", rec.round)))?;
     if frame_bytes.len() as u64 != slots * 24 {
-        bail!("the checkpoint's frame has {} bytes, not {}", frame_bytes.len(), slots * 24);
+        bail!(
+            "the checkpoint's frame has {} bytes, not {}",
+            frame_bytes.len(),
+            slots * 24
+        );
     }
     let frame: Vec<[i64; 3]> = bytemuck::pod_collect_to_vec(&frame_bytes);
     let path = dir.join(format!("rays-{}.bin", rec.round));
     let size = std::fs::metadata(&path)?.len();
     let rec_size = std::mem::size_of::<RayRec>() as u64;
     if size != rec.rays * rec_size {
-        bail!("the checkpoint's rays file has {size} bytes, not {}", rec.rays * rec_size);
+        bail!(
+            "the checkpoint's rays file has {size} bytes, not {}",
+            rec.rays * rec_size
+        );
     }
     let rays = if rec.rays == 0 {
         None
@@ -491,8 +504,12 @@ pub fn load_all(jobs: &Jobs, retention: Duration) -> Vec<(Arc<JobEntry>, Record)
 /// emptied at start, so that the files of a coordinator that was killed
 /// are removed by the next one.
 pub fn spill_dir(cfg: &Config) -> anyhow::Result<(SpillDir, PathBuf)> {
-    std::fs::create_dir_all(&cfg.data_dir)
-        .with_context(|| format!("cannot create the data directory {}", cfg.data_dir.display()))?;
+    std::fs::create_dir_all(&cfg.data_dir).with_context(|| {
+        format!(
+            "cannot create the data directory {}",
+            cfg.data_dir.display()
+        )
+    })?;
     let canon = std::fs::canonicalize(&cfg.data_dir)?;
     let tag = &blake3::hash(canon.as_os_str().as_encoded_bytes()).to_hex()[..16];
     let base = cfg.tmp_dir.clone().unwrap_or_else(|| cfg.data_dir.clone());
@@ -524,6 +541,11 @@ pub fn housekeeping(shared: &Shared) {
             let _ = std::fs::remove_dir_all(&e.dir);
         }
     }
-    let in_use: Vec<String> = shared.jobs.running().iter().map(|e| e.scene.clone()).collect();
+    let in_use: Vec<String> = shared
+        .jobs
+        .running()
+        .iter()
+        .map(|e| e.scene.clone())
+        .collect();
     shared.scenes.evict(shared.cfg.scene_store_max, &in_use);
 }

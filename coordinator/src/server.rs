@@ -84,7 +84,9 @@ pub async fn serve(
         }
         builder = builder.tls_config(tls).context("TLS settings")?;
     } else if sec.client_ca.is_some() {
-        anyhow::bail!("--tls-client-ca needs --tls-cert and --tls-key (client certificates need TLS)");
+        anyhow::bail!(
+            "--tls-client-ca needs --tls-cert and --tls-key (client certificates need TLS)"
+        );
     }
     let svc = CoordinatorServer::new(Service {
         shared: shared.clone(),

@@ -431,7 +431,11 @@ impl Coordinator for Service {
 /// then the image and statistics (from the journal) or the error. Ends
 /// with `unavailable("coordinator restarting")` when the coordinator stops,
 /// so that the client reconnects.
-async fn watch(shared: Arc<Shared>, entry: Arc<JobEntry>, tx: mpsc::Sender<Result<v1::JobEvent, Status>>) {
+async fn watch(
+    shared: Arc<Shared>,
+    entry: Arc<JobEntry>,
+    tx: mpsc::Sender<Result<v1::JobEvent, Status>>,
+) {
     let ev = |e: v1::job_event::Event| Ok(v1::JobEvent { event: Some(e) });
     let mut changed = entry.subscribe();
     let mut sent_log = 0;

@@ -227,6 +227,8 @@ pub struct TaskEntry {
     /// How long the winning attempt took.
     took: Option<Duration>,
     backup: bool,
+    /// When it was last queued with no attempt live.
+    queued_at: Instant,
 }
 
 impl TaskEntry {
@@ -429,6 +431,7 @@ impl Shared {
                         .collect(),
                     took: None,
                     backup: false,
+                    queued_at: Instant::now(),
                 },
             );
             g.queue.push_back(id);
@@ -672,7 +675,8 @@ impl Shared {
         tracing::warn!(worker = %worker.name, why, seconds = self.cfg.quarantine.as_secs(), "worker quarantined");
         g.quarantined
             .insert(worker.session.clone(), Quarantine { until });
-        g.quarantined.insert(worker.name.clone(), Quarantine { until });
+        g.quarantined
+            .insert(worker.name.clone(), Quarantine { until });
         let mine: Vec<(u64, u32)> = g
             .tasks
             .iter()
@@ -712,6 +716,7 @@ impl Shared {
         t.state = TaskState::Queued;
         t.took = None;
         t.backup = false;
+        t.queued_at = Instant::now();
         let job = t.task.job_id.clone();
         *g.requeued.entry(job).or_default() += 1;
         g.queue.push_front(id);
@@ -762,6 +767,20 @@ impl Shared {
             self.task_ready.notify_waiters();
         }
         backed
+    }
+
+    /// Tasks among `ids` queued, with no attempt live, for longer than
+    /// `wait` (every worker that may take them is busy or stuck).
+    pub fn waiting(&self, ids: &[u64], wait: Duration) -> Vec<u64> {
+        let g = self.lock();
+        ids.iter()
+            .copied()
+            .filter(|id| {
+                g.tasks
+                    .get(id)
+                    .is_some_and(|t| t.state == TaskState::Queued && t.queued_at.elapsed() > wait)
+            })
+            .collect()
     }
 
     /// Queued tasks among `ids` that no registered worker may take.
@@ -827,6 +846,7 @@ fn requeue_if_idle(g: &mut Inner, id: u64) {
     {
         t.state = TaskState::Queued;
         t.backup = false;
+        t.queued_at = Instant::now();
         let job = t.task.job_id.clone();
         *g.requeued.entry(job).or_default() += 1;
         // To the front: a re-queued task holds up its whole stage.

@@ -115,7 +115,11 @@ impl tonic::service::Interceptor for Check {
 
 /// Whether the request's token grants `role`; logs and refuses if not.
 pub fn require<T>(req: &Request<T>, role: Role, method: &str) -> Result<(), Status> {
-    let g = req.extensions().get::<Granted>().copied().unwrap_or_default();
+    let g = req
+        .extensions()
+        .get::<Granted>()
+        .copied()
+        .unwrap_or_default();
     let ok = match role {
         Role::Worker => g.worker,
         Role::Client => g.client,

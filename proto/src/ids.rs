@@ -47,8 +47,7 @@ pub fn new_session() -> String {
 /// Whether `s` is `digits` lowercase hex digits (a well-formed id).
 pub fn is_hex_id(s: &str, digits: usize) -> bool {
     s.len() == digits
-        && s
-            .bytes()
+        && s.bytes()
             .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 

@@ -150,7 +150,8 @@ impl SceneCache {
                 Some((md.modified().ok()?, md.len(), f.path()))
             })
             .collect();
-        let keep_size = std::fs::metadata(self.dir.join(format!("{keep}.sdb"))).map_or(0, |m| m.len());
+        let keep_size =
+            std::fs::metadata(self.dir.join(format!("{keep}.sdb"))).map_or(0, |m| m.len());
         let mut total: u64 = keep_size + files.iter().map(|f| f.1).sum::<u64>();
         files.sort();
         for (_, size, path) in files {

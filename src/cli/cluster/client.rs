@@ -86,7 +86,8 @@ fn save_ticket(t: &Ticket) -> Option<PathBuf> {
         .mode(0o600)
         .open(&path)
         .ok()?;
-    f.write_all(serde_json::to_string(t).ok()?.as_bytes()).ok()?;
+    f.write_all(serde_json::to_string(t).ok()?.as_bytes())
+        .ok()?;
     Some(path)
 }
 
@@ -358,7 +359,9 @@ async fn watch(
             Some(v1::job_event::Event::ImageChunk(c)) => image.extend_from_slice(&c),
             Some(v1::job_event::Event::StatsJson(s)) => {
                 if image.is_empty() {
-                    return Err(Watch::Fatal(anyhow::anyhow!("the coordinator sent no image")));
+                    return Err(Watch::Fatal(anyhow::anyhow!(
+                        "the coordinator sent no image"
+                    )));
                 }
                 if !has_signature(&image, format) {
                     return Err(Watch::Fatal(anyhow::anyhow!(
