@@ -13,7 +13,7 @@ use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, interse
 use super::records::{RayKind, RayRec, ResultRec};
 use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
 use super::voxels::VoxelGrids;
-use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, REGS_PER_SLOT};
+use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS};
 use crate::error::Error;
 use crate::hit::PrimId;
 use crate::math::Real;
@@ -137,17 +137,20 @@ impl<'db, R: Real> Tracer<'db, R> {
             return Err(Error::Invalid("too many grids".into()));
         }
         let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-        let budget = Budget::plan::<R>(
-            bf.memory,
-            frame_corners,
-            cells,
-            db.scan_buffer_bytes() as u64,
-        )?;
         let threads = if opts.threads == 0 {
             crate::sys::cpus()
         } else {
             opts.threads
         };
+        let store = StorePlan::new(bf.store, &specs);
+        let budget = Budget::plan::<R>(
+            bf.memory,
+            frame_corners,
+            cells,
+            db.scan_buffer_bytes() as u64,
+            &store,
+            threads,
+        )?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -160,7 +163,6 @@ impl<'db, R: Real> Tracer<'db, R> {
         progress.set_message("preprocess: marking voxels");
         let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
         let preprocess_seconds = t0.elapsed().as_secs_f64();
-        let store = StorePlan::new(bf.store, &grids);
         let stats = BfStats {
             memory_budget_bytes: bf.memory,
             db_scans: 1,
@@ -239,7 +241,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
-            registrations: (slots_n * REGS_PER_SLOT) as usize,
+            registrations: (slots_n * budget.regs_per_slot) as usize,
             dense_cells: budget.dense_cells(self.threads),
             eps: self.eps,
         };
