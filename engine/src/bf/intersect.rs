@@ -472,7 +472,7 @@ pub fn intersect_rays<R: Real>(
         let share = (setup.registrations / shards.len()).max(1) as u64;
         pool.install(|| {
             shards.par_iter_mut().for_each(|sh| {
-                let expect = (share as usize).min(1 << 20).max(1024);
+                let expect = (share as usize).clamp(1024, 1 << 20);
                 for g in 0..ngrids {
                     let cells = grids.grids[g].spec.cells();
                     sh.regs[g].clear(expect, if cells <= dense_cells { cells } else { 0 });
