@@ -28,7 +28,7 @@
 //! Slots are split into shards, one per thread; every thread scans the same
 //! decoded block for its own rays, so no ray is touched by two threads.
 
-use super::records::{RayRec, ResultRec};
+use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
 use crate::error::Error;
@@ -170,6 +170,10 @@ struct Cold {
     inv: Vec3,
     t_min: f64,
     t_max: f64,
+    /// The surface at the best hit so far, when surfaces are carried.
+    ng: Vec3,
+    ns: Vec3,
+    material: u32,
 }
 
 fn empty_hot<R: Real>() -> Hot<R> {
@@ -193,6 +197,9 @@ const EMPTY_COLD: Cold = Cold {
     inv: Vec3::new(1.0, f64::INFINITY, f64::INFINITY),
     t_min: 0.0,
     t_max: f64::INFINITY,
+    ng: Vec3::ZERO,
+    ns: Vec3::ZERO,
+    material: 0,
 };
 
 /// Bytes one ray slot takes.
@@ -251,7 +258,7 @@ struct Shard<R> {
     regs: [RegMap; MAX_GRIDS],
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
-    done: Vec<ResultRec>,
+    done: Vec<Outcome>,
     /// Store numbers of the walks registered this pass, and their number.
     store_sum: u64,
     store_walks: u64,
@@ -287,6 +294,9 @@ pub struct IntersectSetup<'a> {
     /// Grids of at most this many voxels get a dense voxel index per shard.
     pub dense_cells: usize,
     pub eps: f64,
+    /// Work out the surface at each ray's best hit as it is found, so that
+    /// shading needs no pass over the objects.
+    pub carry: bool,
 }
 
 /// The ray slots, kept from round to round so that their memory is
@@ -328,7 +338,7 @@ impl<R: Real> Slots<R> {
                     sh.hot.capacity() * size_of::<Hot<R>>()
                         + sh.q.capacity() * size_of::<RayQ<R>>()
                         + sh.cold.capacity() * size_of::<Cold>()
-                        + sh.done.capacity() * size_of::<ResultRec>()
+                        + sh.done.capacity() * size_of::<Outcome>()
                         + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
                 })
                 .sum::<usize>()
@@ -399,6 +409,7 @@ fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
         inv,
         t_min,
         t_max: r.t_max,
+        ..EMPTY_COLD
     };
 }
 
@@ -411,7 +422,7 @@ pub fn intersect_rays<R: Real>(
     slots: &mut Slots<R>,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
     total: u64,
-    emit: &mut dyn FnMut(ResultRec) -> Result<(), Error>,
+    emit: &mut dyn FnMut(Outcome) -> Result<(), Error>,
     progress: &dyn Progress,
 ) -> Result<IntersectStats, Error> {
     // No more slots than rays.
@@ -534,6 +545,7 @@ pub fn intersect_rays<R: Real>(
             let mut scan = setup.db.scan()?;
             let grids = &*setup.grids;
             let found = &mut slots.candidates;
+            let carry = setup.carry;
             while let Some(block) = scan.next_block()? {
                 candidates(&block, grids, &region, found);
                 if found.is_empty() {
@@ -543,7 +555,7 @@ pub fn intersect_rays<R: Real>(
                 pool.install(|| {
                     shards
                         .par_iter_mut()
-                        .for_each(|sh| scan_block(sh, &block, found, grids));
+                        .for_each(|sh| scan_block(sh, &block, found, grids, carry));
                 });
             }
             st.db_scans += 1;
@@ -558,7 +570,12 @@ pub fn intersect_rays<R: Real>(
         }
 
         // Complete.
-        pool.install(|| shards.par_iter_mut().for_each(|sh| complete(sh, ngrids)));
+        let carry = setup.carry;
+        pool.install(|| {
+            shards
+                .par_iter_mut()
+                .for_each(|sh| complete(sh, ngrids, carry))
+        });
         for sh in shards.iter_mut() {
             st.intersection_tests += sh.counts.tests;
             st.tests_skipped_mailbox += sh.counts.skipped_mailbox;
@@ -718,6 +735,7 @@ fn scan_block<R: Real>(
     block: &Block<'_>,
     candidates: &[Candidate],
     grids: &VoxelGrids,
+    carry: bool,
 ) {
     for c in candidates {
         let g = c.group as usize;
@@ -785,6 +803,15 @@ fn scan_block<R: Real>(
                             } else if s.best.loses_to(t, prim) {
                                 s.best = Hit { t, prim };
                                 s.upper = R::from_f64(t).next_up();
+                                if carry {
+                                    // Exactly what the shading join would
+                                    // compute from the ray and this hit.
+                                    let c = &mut sh.cold[slot as usize];
+                                    let surf = o.shape.surface(&RayQ::from_vec3(c.o, c.d), t);
+                                    c.ng = surf.ng;
+                                    c.ns = surf.ns;
+                                    c.material = o.material;
+                                }
                             }
                         }
                     }
@@ -795,7 +822,7 @@ fn scan_block<R: Real>(
 }
 
 /// Finishes the rays whose result is complete, freeing their slots.
-fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
+fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize, carry: bool) {
     for (h, c) in sh.hot.iter_mut().zip(sh.cold.iter_mut()) {
         if !h.active {
             continue;
@@ -810,10 +837,21 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
                 w.state == DONE
             });
         if done {
-            sh.done.push(ResultRec {
+            let res = ResultRec {
                 ray: c.id,
                 prim: h.best.prim,
                 t: h.best.t,
+            };
+            sh.done.push(if carry && !h.shadow && h.best.is_some() {
+                Outcome {
+                    res,
+                    ng: c.ng.to_array(),
+                    ns: c.ns.to_array(),
+                    material: c.material,
+                    has_surface: 1,
+                }
+            } else {
+                Outcome::bare(res)
             });
             h.active = false;
         }

@@ -52,6 +52,35 @@ pub struct BfOptions {
     pub store: StoreNumber,
     /// Where rays and results spill (default: the system's temp dir).
     pub spill_dir: Option<PathBuf>,
+    pub shading: Shading,
+}
+
+/// Where shading gets a hit's normals and material.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    /// Worked out when the hit is found, during the intersection scan, and
+    /// carried with the result: shading reads rays and results in ray order
+    /// and needs no pass over the objects, and the rays it spawns come out
+    /// already in order.
+    #[default]
+    Carry,
+    /// The paper's Pseudocode 4: hits are sorted by object and joined with
+    /// one front-to-back scan of the objects per shading set (what the
+    /// cluster does, where results travel without surfaces, and what `sray
+    /// bench table1` measures).
+    Join,
+}
+
+impl std::str::FromStr for Shading {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Shading, String> {
+        match s {
+            "carry" => Ok(Shading::Carry),
+            "join" => Ok(Shading::Join),
+            _ => Err(format!("unknown shading '{s}' (expected carry or join)")),
+        }
+    }
 }
 
 /// How the memory budget is spent. Whatever is left after the fixed parts
@@ -184,13 +213,14 @@ impl Budget {
 
     /// Whether `n` results may be held in memory, placed by ray id.
     pub fn results_resident(&self, n: u64) -> bool {
-        n * std::mem::size_of::<ResultRec>() as u64
+        n * std::mem::size_of::<records::Outcome>() as u64
             <= (self.shared as f64 * RESIDENT_RESULTS) as u64
     }
 
     /// Records the result sorter holds when results spill.
     pub fn result_sort_records(&self) -> u64 {
-        ((self.shared as f64 * RESIDENT_RESULTS) as u64 / std::mem::size_of::<ResultRec>() as u64)
+        ((self.shared as f64 * RESIDENT_RESULTS) as u64
+            / std::mem::size_of::<records::Outcome>() as u64)
             .max(16)
     }
 
