@@ -230,7 +230,8 @@ enum SortedInner<T: Pod, K: Ord, F> {
     Chain {
         runs: Vec<RecordFile<T>>,
         next: usize,
-        reader: Option<RecordReader<T>>,
+        // Boxed: the variant would otherwise dwarf the others.
+        reader: Option<Box<RecordReader<T>>>,
         tail: Vec<T>,
         at: usize,
     },
@@ -266,7 +267,7 @@ impl<T: Pod, K: Ord + Copy, F: Fn(&T) -> K> Sorted<T, K, F> {
                     *reader = None;
                 }
                 if *next < runs.len() {
-                    *reader = Some(runs[*next].reader_with(super::IO_BUFFER)?);
+                    *reader = Some(Box::new(runs[*next].reader_with(super::IO_BUFFER)?));
                     *next += 1;
                     continue;
                 }
