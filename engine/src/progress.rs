@@ -127,6 +127,7 @@ mod tests {
             mode,
             memory: None,
             store: crate::bf::StoreNumber::Adaptive,
+            shading: Default::default(),
             tmp_dir: None,
         };
         let stages = Rec(Recorder::default());
