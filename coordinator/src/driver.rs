@@ -888,6 +888,7 @@ impl Arbiter {
                             memory: self.shared.cfg.arbiter_memory,
                             store: self.store,
                             spill_dir: Some(self.shared.spill.path().to_path_buf()),
+                            shading: sray_engine::bf::Shading::Join,
                         },
                     },
                     tokio::runtime::Handle::current(),
