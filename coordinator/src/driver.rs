@@ -331,6 +331,9 @@ struct Totals {
     quarantined: Vec<String>,
     redone: u64,
     backups: u64,
+    /// Seconds workers (and the coordinator) spent tracing samples.
+    #[serde(default)]
+    verify_seconds: f64,
 }
 
 impl Totals {
@@ -650,6 +653,7 @@ impl Stage<'_> {
                                 continue;
                             }
                             let Some((main, main_worker)) = st[i].out.clone() else { continue };
+                            tot.verify_seconds += output.summary.seconds;
                             let sample = Arc::new(output);
                             let first = self.shards[i].0;
                             let stage = self.stage;
@@ -697,7 +701,10 @@ impl Stage<'_> {
                     }
                     tot.local_samples += 1;
                     let local = match l.result {
-                        Ok(o) => Arc::new(o),
+                        Ok(o) => {
+                            tot.verify_seconds += o.summary.seconds;
+                            Arc::new(o)
+                        }
                         Err(e) => {
                             self.entry.log(format!(
                                 "the coordinator could not trace a sample of round {} {} shard {i}: {e:#}; the shard is redone on another worker",
@@ -1160,6 +1167,7 @@ fn job_stats(
             "mismatches": tot.mismatches,
             "quarantined": tot.quarantined,
             "outputs_redone": tot.redone,
+            "seconds": tot.verify_seconds,
         },
         "log": entry.view().log.clone(),
     });

@@ -536,9 +536,13 @@ pub fn housekeeping(shared: &Shared) {
                     .is_some_and(|f| now.duration_since(f) >= shared.cfg.job_retention)
         };
         if expired {
-            tracing::info!(job = %e.id, "finished job expired: removed");
             shared.jobs.remove(&e.id);
-            let _ = std::fs::remove_dir_all(&e.dir);
+            match std::fs::remove_dir_all(&e.dir) {
+                Ok(()) => tracing::info!(job = %e.id, "finished job expired: removed"),
+                Err(err) => {
+                    tracing::warn!(job = %e.id, error = %err, "finished job expired, but its journal could not be removed")
+                }
+            }
         }
     }
     let in_use: Vec<String> = shared

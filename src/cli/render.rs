@@ -91,6 +91,12 @@ pub struct RenderArgs {
     /// Certificate (PEM) to trust for an https coordinator
     #[arg(long)]
     pub tls_ca: Option<PathBuf>,
+    /// Client certificate (PEM) for a coordinator that requires one (--tls-client-ca); needs --tls-key
+    #[arg(long, requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// The client certificate's private key (PEM)
+    #[arg(long, requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
 }
 
 fn parse_memory(s: &str) -> Result<u64, String> {
@@ -198,7 +204,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                         .transpose()
                         .map_err(anyhow::Error::msg)?,
                     ca: a.tls_ca.clone(),
-                    identity: None,
+                    identity: a.tls_cert.clone().zip(a.tls_key.clone()),
                 };
                 client::render(&target, &db, params, shard_rays, format, &bar).await
             }

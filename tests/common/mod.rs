@@ -7,10 +7,17 @@ use std::process::{Command, Output};
 /// The `sray` under test (`SRAY_TEST_BIN` runs another build, e.g. to
 /// check that a test fails on an older one).
 pub fn sray() -> Command {
-    match std::env::var_os("SRAY_TEST_BIN") {
+    let mut c = match std::env::var_os("SRAY_TEST_BIN") {
         Some(b) => Command::new(b),
         None => Command::new(env!("CARGO_BIN_EXE_sray")),
-    }
+    };
+    // Job tickets of cluster renders go under target/, not the home
+    // directory (a test that needs them sets its own).
+    c.env(
+        "SRAY_JOBS_DIR",
+        Path::new(env!("CARGO_TARGET_TMPDIR")).join("sray-tickets"),
+    );
+    c
 }
 
 /// Runs `sray ARGS` in `dir`.

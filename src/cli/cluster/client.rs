@@ -46,6 +46,9 @@ pub struct Ticket {
     pub coordinator: String,
     pub token_file: Option<PathBuf>,
     pub tls_ca: Option<PathBuf>,
+    /// The client certificate and its key, if the coordinator requires one.
+    #[serde(default)]
+    pub tls_identity: Option<(PathBuf, PathBuf)>,
 }
 
 /// Where tickets are kept, if anywhere.
@@ -101,6 +104,7 @@ pub fn load_ticket(job: &str) -> anyhow::Result<Ticket> {
             coordinator: String::new(),
             token_file: None,
             tls_ca: None,
+            tls_identity: None,
         });
     }
     if !sray_proto::ids::is_hex_id(job, 32) {
@@ -115,6 +119,10 @@ pub fn load_ticket(job: &str) -> anyhow::Result<Ticket> {
         )
     })?;
     serde_json::from_str(&s).with_context(|| path.display().to_string())
+}
+
+fn absolute(p: &std::path::Path) -> PathBuf {
+    std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf())
 }
 
 /// Renders the object database at `db` on the coordinator `target`.
@@ -172,7 +180,12 @@ pub async fn render_with(
         job_secret: accepted.job_secret,
         coordinator: target.url.clone(),
         token_file: None,
-        tls_ca: target.ca.clone(),
+        // Absolute, so that `sray fetch` finds them from anywhere.
+        tls_ca: target.ca.as_deref().map(absolute),
+        tls_identity: target
+            .identity
+            .as_ref()
+            .map(|(c, k)| (absolute(c), absolute(k))),
     };
     if keep_ticket {
         match save_ticket(&ticket) {

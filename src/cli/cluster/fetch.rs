@@ -56,7 +56,11 @@ pub fn run(a: FetchArgs) -> anyhow::Result<()> {
             .transpose()
             .map_err(anyhow::Error::msg)?,
         ca: a.tls_ca.clone().or(t.tls_ca.clone()),
-        identity: a.tls_cert.clone().zip(a.tls_key.clone()),
+        identity: a
+            .tls_cert
+            .clone()
+            .zip(a.tls_key.clone())
+            .or(t.tls_identity.clone()),
     };
     let outputs = Outputs::open(&a.output, a.stats.as_deref())?;
     let format = outputs.format();
