@@ -454,6 +454,8 @@ pub fn intersect_rays<R: Real>(
     let mut exhausted = false;
     let mut finished: u64 = 0;
     let mut active: u64 = 0;
+    // Rays that left at once and are not yet counted in the progress.
+    let mut sky: u64 = 0;
     loop {
         // Fill empty slots, in slot order. A ray that meets no grid's box
         // (the sky around a model) is a miss at once and takes no slot.
@@ -471,7 +473,12 @@ pub fn intersect_rays<R: Real>(
                                 next_id += 1;
                                 if misses_every_grid(&r, setup.grids, setup.eps) {
                                     finished += 1;
-                                    progress.inc(1);
+                                    // Counted in batches: a progress update
+                                    // costs more than such a ray.
+                                    sky += 1;
+                                    if sky == 1 << 16 {
+                                        progress.inc(std::mem::take(&mut sky));
+                                    }
                                     emit(Outcome::bare(ResultRec {
                                         ray: id,
                                         prim: PrimId::NONE,
@@ -492,6 +499,7 @@ pub fn intersect_rays<R: Real>(
                 }
             }
         }
+        progress.inc(std::mem::take(&mut sky));
         if active == 0 {
             break;
         }

@@ -11,7 +11,6 @@ use crate::fsutil::{persist, temp_beside};
 use crate::spill::{ExternalSorter, SpillDir};
 use bytemuck::{Pod, Zeroable};
 use image::codecs::openexr::OpenExrEncoder;
-use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
 use std::io::Write;
 use std::path::Path;
@@ -208,58 +207,56 @@ impl Frame {
     /// the whole image in memory, so a spilled frame refuses it.
     pub fn write_image(self, format: ImageFormat, out: &mut dyn Write) -> Result<(), Error> {
         let (w, h) = (self.width, self.height);
-        if format == ImageFormat::Exr || self.spilled.is_none() {
-            if self.spilled.is_some() {
-                return Err(Error::Invalid(format!(
-                    "a {w}x{h} OpenEXR image must be held whole in memory ({}), more than this render's budget allows; write .png, or give a larger --memory",
-                    crate::units::fmt_bytes(w as u64 * h as u64 * 12)
-                )));
+        match (format, self.spilled.is_some()) {
+            (ImageFormat::Exr, true) => Err(Error::Invalid(format!(
+                "a {w}x{h} OpenEXR image must be held whole in memory ({}), more than this render's budget allows; write .png, or give a larger --memory",
+                crate::units::fmt_bytes(w as u64 * h as u64 * 12)
+            ))),
+            (ImageFormat::Exr, false) => out
+                .write_all(&self.encode(format)?)
+                .map_err(|e| Error::Invalid(format!("cannot write the image: {e}"))),
+            (ImageFormat::Png, false) => self.write_png(out),
+            (ImageFormat::Png, true) => {
+                let mut rows = PixelRows::new(self)?;
+                let mut row = vec![[0.0f64; 3]; w as usize];
+                write_png(w, h, out, |bytes| {
+                    rows.next_row(&mut row)?;
+                    for (b, c) in bytes.iter_mut().zip(row.iter().flatten()) {
+                        *b = to_u8(*c);
+                    }
+                    Ok(())
+                })
             }
-            let bytes = self.encode(format)?;
-            return out
-                .write_all(&bytes)
-                .map_err(|e| Error::Invalid(format!("cannot write the image: {e}")));
         }
-        let err =
-            |e: png::EncodingError| Error::Invalid(format!("cannot encode the image as PNG: {e}"));
-        let mut enc = png::Encoder::new(out, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Fast);
-        let mut writer = enc.write_header().map_err(err)?;
-        let mut stream = writer.stream_writer().map_err(err)?;
-        let mut rows = PixelRows::new(self)?;
-        let mut row = vec![[0.0f64; 3]; w as usize];
-        let mut bytes = vec![0u8; 3 * w as usize];
-        while rows.next_row(&mut row)? {
-            for (b, c) in bytes.iter_mut().zip(row.iter().flatten()) {
-                *b = to_u8(*c);
-            }
-            stream
-                .write_all(&bytes)
-                .map_err(|e| Error::Invalid(format!("cannot write the image: {e}")))?;
-        }
-        stream.finish().map_err(err)?;
-        Ok(())
+    }
+
+    /// Writes a frame held in memory as PNG, with the same encoder as a
+    /// spilled frame's, so that an image does not depend on the budget
+    /// down to its bytes.
+    fn write_png(&self, out: &mut dyn Write) -> Result<(), Error> {
+        let rgb = self.to_rgb8();
+        let mut rows = rgb.chunks_exact(3 * self.width as usize);
+        write_png(self.width, self.height, out, |bytes| {
+            bytes.copy_from_slice(rows.next().expect("one row per image row"));
+            Ok(())
+        })
     }
 
     /// The image encoded as `format` (a frame in memory).
     pub fn encode(&self, format: ImageFormat) -> Result<Vec<u8>, Error> {
         let mut out = std::io::Cursor::new(Vec::new());
         let (w, h) = (self.width, self.height);
-        let r = match format {
-            ImageFormat::Png => {
-                PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Adaptive)
-                    .write_image(&self.to_rgb8(), w, h, ExtendedColorType::Rgb8)
-            }
-            ImageFormat::Exr => OpenExrEncoder::new(&mut out).write_image(
-                bytemuck::cast_slice(&self.to_rgb_f32()),
-                w,
-                h,
-                ExtendedColorType::Rgb32F,
-            ),
-        };
-        r.map_err(|e| Error::Invalid(format!("cannot encode the image as {format}: {e}")))?;
+        match format {
+            ImageFormat::Png => self.write_png(&mut out)?,
+            ImageFormat::Exr => OpenExrEncoder::new(&mut out)
+                .write_image(
+                    bytemuck::cast_slice(&self.to_rgb_f32()),
+                    w,
+                    h,
+                    ExtendedColorType::Rgb32F,
+                )
+                .map_err(|e| Error::Invalid(format!("cannot encode the image as {format}: {e}")))?,
+        }
         Ok(out.into_inner())
     }
 
@@ -271,6 +268,32 @@ impl Frame {
         tmp.write_all(&bytes).at(path)?;
         persist(tmp, path)
     }
+}
+
+/// Writes an 8-bit RGB PNG of `w` x `h` pixels, row by row: `row` fills
+/// each row's bytes in turn, top to bottom.
+fn write_png(
+    w: u32,
+    h: u32,
+    out: &mut dyn Write,
+    mut row: impl FnMut(&mut [u8]) -> Result<(), Error>,
+) -> Result<(), Error> {
+    let err =
+        |e: png::EncodingError| Error::Invalid(format!("cannot encode the image as PNG: {e}"));
+    let mut enc = png::Encoder::new(out, w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut writer = enc.write_header().map_err(err)?;
+    let mut stream = writer.stream_writer().map_err(err)?;
+    let mut bytes = vec![0u8; 3 * w as usize];
+    for _ in 0..h {
+        row(&mut bytes)?;
+        stream
+            .write_all(&bytes)
+            .map_err(|e| Error::Invalid(format!("cannot write the image: {e}")))?;
+    }
+    stream.finish().map_err(err)
 }
 
 /// A spilled frame's pixels, a row at a time: contributions in slot order
