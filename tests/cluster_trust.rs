@@ -510,7 +510,10 @@ fn a_worker_below_the_memory_floor_is_refused() {
     let _b = worker(d, &url, "large", "token", &["--memory", "512MiB"]);
     registered(&coord, "large");
     ok(d, &render_args("spd:balls:2", &url, "token", "c.png", "32"));
-    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "wrong image");
+    assert!(
+        std::fs::read(d.join("c.png")).unwrap() == want,
+        "wrong image"
+    );
     drop(coord);
 }
 
@@ -886,7 +889,10 @@ fn client_certificates_are_required_where_configured() {
     args.extend(c_args.iter().map(String::as_str));
     let mut c = client(d, &args);
     assert!(c.wait(120.0).success(), "{}", c.log());
-    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "wrong image");
+    assert!(
+        std::fs::read(d.join("c.png")).unwrap() == want,
+        "wrong image"
+    );
     let id = stats(d)["job_id"].as_str().unwrap().to_string();
     // From another directory: the ticket names the files absolutely.
     let elsewhere = d.join("elsewhere");

@@ -459,10 +459,12 @@ async fn watch(
                 return;
             }
         }
-        if progress.is_some() && progress != last_progress {
+        if let Some(p) = progress
+            && progress != last_progress
+        {
             last_progress = progress;
             if tx
-                .send(ev(v1::job_event::Event::Progress(progress.expect("some"))))
+                .send(ev(v1::job_event::Event::Progress(p)))
                 .await
                 .is_err()
             {
