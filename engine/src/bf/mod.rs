@@ -126,6 +126,12 @@ const IDLE_SHARE: f64 = 0.05;
 /// allocations; the database's block buffers come on top.
 const IO_BYTES: u64 =
     5 * spill::IO_BUFFER as u64 + (spill::MERGE_FANIN * spill::MERGE_BUFFER) as u64 + (64 << 10);
+/// Kept free of every planned buffer, for what no plan counts: the
+/// allocator's slack and fragments, small allocations, the rounding of
+/// buffer sizes. A sixteenth of the budget, at most 4 MiB.
+fn slack(total: u64) -> u64 {
+    (total / 16).min(4 << 20)
+}
 /// Fewest rays worth a pass.
 const MIN_SLOTS: u64 = 64;
 /// Databases smaller than this are cheap to scan...
@@ -151,7 +157,7 @@ impl Budget {
     ) -> Result<Budget, Error> {
         let io = IO_BYTES + scan_buffers;
         let overrun = threads.max(1) as u64 * store.overrun() * REGISTRATION_BYTES as u64;
-        let fixed = frame + cells + io + overrun;
+        let fixed = frame + cells + io + overrun + slack(total);
         let slot_bytes = slot_bytes::<R>() as u64 + store.planned() * REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
@@ -160,13 +166,15 @@ impl Budget {
         if total < minimum {
             return Err(Error::Invalid(format!(
                 "a memory budget of {} is too small for this render; it needs at least {} \
-                 (frame buffer {}, voxel flags {}, I/O buffers {}, {MIN_SLOTS} rays {})",
+                 (frame buffer {}, voxel flags {}, I/O buffers {}, {MIN_SLOTS} rays {}, \
+                 allocator slack {})",
                 fmt_bytes(total),
                 fmt_bytes(minimum),
                 fmt_bytes(frame),
                 fmt_bytes(cells),
                 fmt_bytes(io),
                 fmt_bytes(min_shared),
+                fmt_bytes(slack(total)),
             )));
         }
         let shared = total - fixed;
