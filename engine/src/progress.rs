@@ -16,8 +16,14 @@ pub trait Progress: Send + Sync {
     fn inc(&self, n: u64);
     /// Describes the current stage ("depth 2, pass 3").
     fn set_message(&self, msg: &str);
-    /// Names the units counted ("rays", "objects") from now on.
+    /// Names the units counted ("rays", "objects", "bytes") from now on.
     fn set_unit(&self, _unit: &str) {}
+    /// Reports something the user should know that does not stop the work
+    /// (a missing material library, faces skipped as degenerate). Readers
+    /// report each kind of problem once, with a count, not per occurrence.
+    fn warn(&self, msg: &str) {
+        eprintln!("sray: warning: {msg}");
+    }
 }
 
 /// Progress that goes nowhere: for tests, and when output is not a terminal.
@@ -59,6 +65,9 @@ impl Progress for Prefixed<'_> {
     }
     fn set_unit(&self, unit: &str) {
         self.inner.set_unit(unit);
+    }
+    fn warn(&self, msg: &str) {
+        self.inner.warn(msg);
     }
 }
 
@@ -128,6 +137,7 @@ mod tests {
             memory: None,
             store: crate::bf::StoreNumber::Adaptive,
             tmp_dir: None,
+            setup: Default::default(),
         };
         let stages = Rec(Recorder::default());
         render(&req, &stages).unwrap();
