@@ -7,8 +7,9 @@
 //! to the budget; when a chunk does not fit, the face tables go to disk
 //! first (they are read in order anyway), then the vertex tables.
 //!
-//! **Phase 2** ([`MeshBuilder::finish`]): the origin is the centre of the
-//! vertices' bounds; each corner gets its vertex's position relative to it
+//! **Phase 2** ([`MeshBuilder::finish`]): the origin is the world's, or
+//! for a model far from it the centre of its bounds ([`choose_origin`]);
+//! each corner gets its vertex's position relative to it
 //! (in `f32`), normal and colour, and the faces stream out in file order.
 //! With the vertex tables in memory that is a lookup per corner. Without,
 //! it is an external join: the corners, numbered in file order, are sorted
@@ -414,7 +415,7 @@ impl<'a> MeshBuilder<'a> {
         let origin = if nv == 0 {
             [0.0; 3]
         } else {
-            std::array::from_fn(|i| self.lo[i] + (self.hi[i] - self.lo[i]) / 2.0)
+            choose_origin(self.lo, self.hi)
         };
         let has_normals = if self.vertex_normals {
             self.normals.len == nv && nv > 0
@@ -641,6 +642,26 @@ impl<'a> MeshBuilder<'a> {
         progress.inc(done % (1 << 16));
         Ok(em.summary)
     }
+}
+
+/// The origin of a mesh whose vertices span `lo..hi`: the world's own
+/// when the model is about as large as its distance from it (then `f32`
+/// coordinates are as precise relative to the model as they can be), else
+/// its centre, rounded to a multiple of the largest power of two below its
+/// size. The rounding keeps round coordinates round: a vertex at 0 stays
+/// at 0 in world coordinates, exactly.
+pub fn choose_origin(lo: [f64; 3], hi: [f64; 3]) -> [f64; 3] {
+    let size = (0..3).map(|i| (hi[i] - lo[i]).powi(2)).sum::<f64>().sqrt();
+    let far = (0..3).map(|i| lo[i].abs().max(hi[i].abs())).fold(0.0, f64::max);
+    let centre: [f64; 3] = std::array::from_fn(|i| lo[i] + (hi[i] - lo[i]) / 2.0);
+    if !(far > 2.0 * size) {
+        return [0.0; 3];
+    }
+    if !(size > 0.0) {
+        return centre;
+    }
+    let q = 2f64.powi(size.log2().floor() as i32);
+    centre.map(|c| (c / q).round() * q)
 }
 
 fn truncated_table(name: &Path) -> Error {

@@ -178,6 +178,7 @@ pub fn read_ply_from<R: BufRead>(
                 name: name.to_path_buf(),
                 wrapping,
                 line: header.lines + 1,
+                last: header.lines,
                 tok: Vec::with_capacity(MAX_TOKEN),
             };
             read_body(&header, &mut d, &mut b, &mut warnings)?;
@@ -493,6 +494,10 @@ trait Data {
     fn skip(&mut self, t: Scalar) -> Result<(), Fail>;
     /// Where the next value starts.
     fn at(&self) -> At;
+    /// Where the data ended (ASCII: the line of the last value read).
+    fn end_at(&self) -> At {
+        self.at()
+    }
     fn name(&self) -> &Path;
     /// Whether anything but whitespace (ASCII) or nothing (binary) is
     /// left.
@@ -544,6 +549,8 @@ struct Ascii<R> {
     wrapping: Wrapping,
     /// Line of the next token.
     line: u64,
+    /// Line of the last token read.
+    last: u64,
     tok: Vec<u8>,
 }
 
@@ -602,6 +609,7 @@ impl<R: BufRead> Ascii<R> {
                 break;
             }
         }
+        self.last = self.line;
         Ok(true)
     }
 }
@@ -646,6 +654,9 @@ impl<R: BufRead> Data for Ascii<R> {
     }
     fn at(&self) -> At {
         At::Line(self.line)
+    }
+    fn end_at(&self) -> At {
+        At::Line(self.last)
     }
     fn name(&self) -> &Path {
         &self.name
@@ -760,7 +771,7 @@ impl<R: BufRead> Data for Binary<R> {
 /// header declares.
 fn truncated(d: &impl Data, el: &Element, i: u64) -> Error {
     d.err_at(
-        d.at(),
+        d.end_at(),
         format!(
             "the file ends after {i} of the {} '{}' elements its header declares (line {}): truncated",
             el.count, el.name, el.line
