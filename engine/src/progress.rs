@@ -136,6 +136,7 @@ mod tests {
             mode,
             memory: None,
             store: crate::bf::StoreNumber::Adaptive,
+            shading: Default::default(),
             tmp_dir: None,
             setup: Default::default(),
         };

@@ -4,7 +4,7 @@ use super::bar::Bar;
 use super::outputs::Outputs;
 use super::summary;
 use clap::Args;
-use sray_engine::bf::StoreNumber;
+use sray_engine::bf::{Shading, StoreNumber};
 use sray_engine::job::{PrepareOptions, RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
@@ -89,6 +89,10 @@ pub struct RenderArgs {
     /// Breadth-first store number: adaptive, or a fixed number of voxels
     #[arg(long, default_value = "adaptive", value_parser = parse_store)]
     pub store_number: StoreNumber,
+    /// Breadth-first shading: carry (surfaces found with the hits) or join
+    /// (the paper's sort-and-scan of the objects)
+    #[arg(long, default_value = "carry")]
+    pub shading: Shading,
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
@@ -186,6 +190,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         mode: a.mode,
         memory: a.memory,
         store: a.store_number,
+        shading: a.shading,
         tmp_dir: a.tmp_dir.clone(),
         setup: a.setup.setup([a.width, a.height])?,
     };
