@@ -45,14 +45,9 @@ fn read_with(
         spill_dir: None,
     };
     let s = match f {
-        Fmt::Ply => ply::read_ply_from(
-            data,
-            Wrapping::Plain,
-            Path::new("m.ply"),
-            &mut r,
-            &w,
-            &opts,
-        ),
+        Fmt::Ply => {
+            ply::read_ply_from(data, Wrapping::Plain, Path::new("m.ply"), &mut r, &w, &opts)
+        }
         Fmt::Obj => obj::read_obj_from(
             data,
             Wrapping::Plain,
@@ -62,14 +57,9 @@ fn read_with(
             &w,
             &opts,
         ),
-        Fmt::Off => off::read_off_from(
-            data,
-            Wrapping::Plain,
-            Path::new("m.off"),
-            &mut r,
-            &w,
-            &opts,
-        ),
+        Fmt::Off => {
+            off::read_off_from(data, Wrapping::Plain, Path::new("m.off"), &mut r, &w, &opts)
+        }
     }?;
     Ok((r, s, w.0.into_inner().unwrap()))
 }
@@ -233,7 +223,10 @@ fn the_same_mesh_reads_the_same_in_every_format_and_encoding() {
     assert_eq!(s.polygons_kept, 6);
     let want = objects(&reference);
     assert_eq!(want.len(), 6);
-    assert!(want.iter().all(|(k, v)| *k == ShapeKind::Polygon && v.len() == 4));
+    assert!(
+        want.iter()
+            .all(|(k, v)| *k == ShapeKind::Polygon && v.len() == 4)
+    );
     for (f, data) in [
         (Fmt::Ply, cube_ply_binary(false)),
         (Fmt::Ply, cube_ply_binary(true)),
@@ -260,7 +253,8 @@ fn the_same_mesh_reads_the_same_in_every_format_and_encoding() {
     assert_eq!(materials(&reference), vec![NEUTRAL]);
 }
 
-/// A bumpy sphere of quads (most not planar) with normals, as OBJ with
+/// A sphere of quads, smooth in the north (planar quads) and bumpy in the
+/// south (quads not planar), with normals, as OBJ with
 /// separately indexed normals and as PLY with normals per vertex.
 fn sphere(n: usize) -> (Vec<u8>, Vec<u8>) {
     let mut v = Vec::new();
@@ -268,7 +262,14 @@ fn sphere(n: usize) -> (Vec<u8>, Vec<u8>) {
         for j in 0..2 * n {
             let th = std::f64::consts::PI * i as f64 / n as f64;
             let ph = std::f64::consts::PI * j as f64 / n as f64;
-            let r = 1.0 + 0.05 * ((7 * i + 3 * j) % 5) as f64;
+            // Smooth in the northern half (its quads are planar
+            // trapezoids, kept whole), bumpy in the southern (quads that are
+            // not planar, triangulated).
+            let r = if i <= n / 2 {
+                1.0
+            } else {
+                1.0 + 0.05 * ((7 * i + 3 * j) % 5) as f64
+            };
             let d = [th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin()];
             v.push((d.map(|x| x * r), d));
         }
@@ -335,7 +336,11 @@ fn the_external_join_equals_the_lookup() {
 fn obj_corners_in_all_four_forms_and_relative_indices() {
     let base = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nvn 0 0 1\nvn 0 0 1\n";
     let flat = read(Fmt::Obj, format!("{base}f 1 2 3\n").as_bytes()).0;
-    for f in ["f 1/1 2/2 3/3\n", "f -3/-3 -2/-2 -1/-1\n", "f 1/3 -2/2 3/1\n"] {
+    for f in [
+        "f 1/1 2/2 3/3\n",
+        "f -3/-3 -2/-2 -1/-1\n",
+        "f 1/3 -2/2 3/1\n",
+    ] {
         let r = read(Fmt::Obj, format!("{base}{f}").as_bytes()).0;
         assert_eq!(r.events, flat.events, "{f}");
     }
@@ -380,12 +385,12 @@ f 1 2 2 3\n";
         vec![4, 3, 3, 3],
         "{o:?}"
     );
-    assert_eq!((s.faces, s.degenerate, s.polygons_kept, s.triangulated), (6, 3, 1, 1));
-    assert_eq!(w.len(), 1, "{w:?}");
-    assert!(
-        w[0].contains("skipped 3 of 6 faces as degenerate"),
-        "{w:?}"
+    assert_eq!(
+        (s.faces, s.degenerate, s.polygons_kept, s.triangulated),
+        (6, 3, 1, 1)
     );
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(w[0].contains("skipped 3 of 6 faces as degenerate"), "{w:?}");
 }
 
 #[test]
@@ -488,7 +493,12 @@ fn compressed_files_read_like_plain_ones() {
 fn far_from_the_origin_keeps_its_precision() {
     let mut s = String::new();
     for v in CUBE_V {
-        s += &format!("v {} {} {}\n", v[0] * 1e-3 + 1e5, v[1] * 1e-3 - 2e5, v[2] * 1e-3 + 3e5);
+        s += &format!(
+            "v {} {} {}\n",
+            v[0] * 1e-3 + 1e5,
+            v[1] * 1e-3 - 2e5,
+            v[2] * 1e-3 + 3e5
+        );
     }
     for f in CUBE_F {
         s += &format!("f {} {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1, f[3] + 1);
@@ -497,14 +507,16 @@ fn far_from_the_origin_keeps_its_precision() {
     let (near, _, _) = read(Fmt::Obj, &cube_obj());
     // Relative to the origin, the geometry is the cube's, scaled: f32 at
     // 1e5 would have kept steps of 0.008, a whole side of this cube.
-    let local = |r: &Recorder| -> Vec<f32> {
-        r.objects().flat_map(|o| o.numbers().to_vec()).collect()
-    };
+    let local =
+        |r: &Recorder| -> Vec<f32> { r.objects().flat_map(|o| o.numbers().to_vec()).collect() };
     let (a, b) = (local(&far), local(&near));
     assert_eq!(a.len(), b.len());
     let shift: Vec<f64> = (0..3).map(|i| a[i] as f64 - b[i] as f64 * 1e-3).collect();
     for (k, (x, y)) in a.iter().zip(&b).enumerate() {
-        assert!((*x as f64 - *y as f64 * 1e-3 - shift[k % 3]).abs() < 1e-9, "{x} {y}");
+        assert!(
+            (*x as f64 - *y as f64 * 1e-3 - shift[k % 3]).abs() < 1e-9,
+            "{x} {y}"
+        );
     }
     // The origin: the centre, rounded to a multiple of 2^-10 (the largest
     // power of two below the model's size, 0.0017).
@@ -571,17 +583,53 @@ fn bad_ply_names_file_and_line_or_byte() {
     }
     let body = |b: &str| [PLY_HEAD.as_bytes(), b.as_bytes()].concat();
     for (b, at, what) in [
-        ("0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "13:", "vertex index 3 is out of range"),
-        ("0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n", "13:", "vertex index -1 is out of range"),
-        ("0 0 0\n1 0 0\n0 1 0\n2 0 1\n", "13:", "at least 3 are needed"),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+            "13:",
+            "vertex index 3 is out of range",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n3 0 -1 2\n",
+            "13:",
+            "vertex index -1 is out of range",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+            "13:",
+            "at least 3 are needed",
+        ),
         ("0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n", "11:", "not finite"),
         ("0 0 0\n1 0 0\n0 1 inf\n3 0 1 2\n", "12:", "not finite"),
-        ("0 0 0\n1 0 0\n0 1 1e39\n3 0 1 2\n", "12:", "beyond the range"),
-        ("0 0 0\n1 0 0\n0 1 x\n3 0 1 2\n", "12:", "'x' is not a number"),
-        ("0 0 0\n1 0 0\n0 1 0\n3 0 1 2.5\n", "13:", "'2.5' is not a whole number"),
-        ("0 0 0\n1 0 0\n0 1 0\n300 0 1 2\n", "13:", "300 is out of range for uchar"),
-        ("0 0 0\n1 0 0\n", "11:", "after 2 of the 3 'vertex' elements its header declares (line 3): truncated"),
-        ("0 0 0\n1 0 0\n0 1 0\n3 0 1\n", "13:", "after 0 of the 1 'face' elements"),
+        (
+            "0 0 0\n1 0 0\n0 1 1e39\n3 0 1 2\n",
+            "12:",
+            "beyond the range",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 x\n3 0 1 2\n",
+            "12:",
+            "'x' is not a number",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n3 0 1 2.5\n",
+            "13:",
+            "'2.5' is not a whole number",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n300 0 1 2\n",
+            "13:",
+            "300 is out of range for uchar",
+        ),
+        (
+            "0 0 0\n1 0 0\n",
+            "11:",
+            "after 2 of the 3 'vertex' elements its header declares (line 3): truncated",
+        ),
+        (
+            "0 0 0\n1 0 0\n0 1 0\n3 0 1\n",
+            "13:",
+            "after 0 of the 1 'face' elements",
+        ),
     ] {
         names(&err(Fmt::Ply, &body(b)), "m.ply", at, what);
     }
@@ -609,30 +657,79 @@ fn bad_ply_names_file_and_line_or_byte() {
     let e = err(Fmt::Ply, &[&h[..], &verts, &face(3, &[0, 1, 7])].concat());
     names(&e, "m.ply", &at(hl + 36), "vertex index 7 is out of range");
     let e = err(Fmt::Ply, &[&h[..], &verts, &face(3, &[0, 1])].concat());
-    names(&e, "m.ply", &at(hl + 45), "after 0 of the 1 'face' elements");
+    names(
+        &e,
+        "m.ply",
+        &at(hl + 45),
+        "after 0 of the 1 'face' elements",
+    );
     let mut nan = verts.clone();
     nan[16..20].copy_from_slice(&f32::NAN.to_le_bytes());
     let e = err(Fmt::Ply, &[&h[..], &nan, &face(3, &[0, 1, 2])].concat());
-    names(&e, "m.ply", &at(hl + 12), "vertex 1: a coordinate is not finite");
+    names(
+        &e,
+        "m.ply",
+        &at(hl + 12),
+        "vertex 1: a coordinate is not finite",
+    );
     let e = err(Fmt::Ply, &[&h[..], &verts[..20]].concat());
-    names(&e, "m.ply", &at(hl + 20), "after 1 of the 3 'vertex' elements");
+    names(
+        &e,
+        "m.ply",
+        &at(hl + 20),
+        "after 1 of the 3 'vertex' elements",
+    );
     // Absurd counts cost nothing: no allocation by a count.
-    let e = err(Fmt::Ply, &[&head(u64::MAX / 2, "uchar")[..], &verts].concat());
+    let e = err(
+        Fmt::Ply,
+        &[&head(u64::MAX / 2, "uchar")[..], &verts].concat(),
+    );
     assert!(e.contains("after 3 of the"), "{e}");
-    let e = err(Fmt::Ply, &[&head(3, "uint")[..], &verts, &u32::MAX.to_le_bytes()].concat());
+    let e = err(
+        Fmt::Ply,
+        &[&head(3, "uint")[..], &verts, &u32::MAX.to_le_bytes()].concat(),
+    );
     assert!(e.contains("more than the limit"), "{e}");
 }
 
 #[test]
 fn bad_obj_names_file_and_line() {
     for (data, at, what) in [
-        ("v 0 0 0\nv 1 0 0\nf 1 2 3\n", "3:", "vertex index 3 is out of range: 2 are defined before this line"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "4:", "OBJ indices start at 1"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n", "4:", "vertex index -4 is out of range"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "4:", "a face of 2 vertices; at least 3 are needed"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2 3\n", "4:", "texture coordinate index 1 is out of range"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//2 2 3\n", "4:", "normal index 2 is out of range"),
-        ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/2/3/4 2 3\n", "4:", "not a face corner"),
+        (
+            "v 0 0 0\nv 1 0 0\nf 1 2 3\n",
+            "3:",
+            "vertex index 3 is out of range: 2 are defined before this line",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
+            "4:",
+            "OBJ indices start at 1",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n",
+            "4:",
+            "vertex index -4 is out of range",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n",
+            "4:",
+            "a face of 2 vertices; at least 3 are needed",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2 3\n",
+            "4:",
+            "texture coordinate index 1 is out of range",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//2 2 3\n",
+            "4:",
+            "normal index 2 is out of range",
+        ),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/2/3/4 2 3\n",
+            "4:",
+            "not a face corner",
+        ),
         ("v 0 0 0\nv NaN 0 0\n", "2:", "not a finite number"),
         ("v 0 0\n", "1:", "'v' needs 3 coordinates"),
         ("vn 0 0 1 1\n", "1:", "'vn' takes 3 numbers"),
@@ -652,15 +749,51 @@ fn bad_off_names_file_and_line() {
         ("OFF BINARY\n", "1:", "binary OFF"),
         ("OFF\n3\n", "2:", "the counts line"),
         ("OFF\n3 x 0\n", "2:", "the number of faces 'x'"),
-        ("OFF\n3 1 0\n0 0 0\n1 0 0\n", "4:", "after 2 of the 3 vertices its header (line 2) declares: truncated"),
-        ("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "6:", "after 1 of the 2 faces"),
-        ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n", "6:", "face 0: vertex index 3 is out of range"),
-        ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n", "6:", "at least 3 are needed"),
-        ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", "6:", "it lists 3 vertex indices, its count says 4"),
-        ("OFF\n3 1 0\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n", "4:", "not a finite number"),
-        ("OFF\n3 1 0\n0 0 0\n1 0\n0 1 0\n3 0 1 2\n", "4:", "vertex 1 has 2 values"),
-        ("COFF\n3 1 0\n0 0 0 1 1\n", "3:", "COFF takes x y z r g b [a]"),
-        ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1 2\n", "6:", "2 values after the vertex indices"),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n",
+            "4:",
+            "after 2 of the 3 vertices its header (line 2) declares: truncated",
+        ),
+        (
+            "OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+            "6:",
+            "after 1 of the 2 faces",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+            "6:",
+            "face 0: vertex index 3 is out of range",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n",
+            "6:",
+            "at least 3 are needed",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n",
+            "6:",
+            "it lists 3 vertex indices, its count says 4",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 inf 0\n0 1 0\n3 0 1 2\n",
+            "4:",
+            "not a finite number",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0\n0 1 0\n3 0 1 2\n",
+            "4:",
+            "vertex 1 has 2 values",
+        ),
+        (
+            "COFF\n3 1 0\n0 0 0 1 1\n",
+            "3:",
+            "COFF takes x y z r g b [a]",
+        ),
+        (
+            "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2 1 2\n",
+            "6:",
+            "2 values after the vertex indices",
+        ),
     ] {
         names(&err(Fmt::Off, data.as_bytes()), "m.off", at, what);
     }

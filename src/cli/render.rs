@@ -19,8 +19,9 @@ use std::path::PathBuf;
 pub struct SetupArgs {
     /// The camera, any of: from=X,Y,Z at=X,Y,Z up=X,Y,Z fov=DEG (separate
     /// words, or one quoted word); the rest stays the scene's (a mesh's:
-    /// the default framing, with these parts)
-    #[arg(long, num_args = 1.., allow_hyphen_values = true, value_name = "KEY=VALUE")]
+    /// the default framing, with these parts). Separate words run to the
+    /// next option, so put the scene before --camera or quote the parts
+    #[arg(long, num_args = 1.., value_name = "KEY=VALUE")]
     pub camera: Vec<String>,
     /// A point light at X,Y,Z with colour R,G,B (white scaled by
     /// 1/sqrt(lights) without one); repeatable; replaces the scene's (or

@@ -652,7 +652,9 @@ impl<'a> MeshBuilder<'a> {
 /// at 0 in world coordinates, exactly.
 pub fn choose_origin(lo: [f64; 3], hi: [f64; 3]) -> [f64; 3] {
     let size = (0..3).map(|i| (hi[i] - lo[i]).powi(2)).sum::<f64>().sqrt();
-    let far = (0..3).map(|i| lo[i].abs().max(hi[i].abs())).fold(0.0, f64::max);
+    let far = (0..3)
+        .map(|i| lo[i].abs().max(hi[i].abs()))
+        .fold(0.0, f64::max);
     let centre: [f64; 3] = std::array::from_fn(|i| lo[i] + (hi[i] - lo[i]) / 2.0);
     if !(far > 2.0 * size) {
         return [0.0; 3];

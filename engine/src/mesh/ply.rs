@@ -181,6 +181,8 @@ pub fn read_ply_from<R: BufRead>(
                 last: header.lines,
                 tok: Vec::with_capacity(MAX_TOKEN),
             };
+            // The first value's line, past blank lines.
+            d.skip_space()?;
             read_body(&header, &mut d, &mut b, &mut warnings)?;
         }
         Encoding::Little | Encoding::Big => {
@@ -555,10 +557,8 @@ struct Ascii<R> {
 }
 
 impl<R: BufRead> Ascii<R> {
-    /// Reads the next token into `tok`; `false` at the end of the data.
-    fn token(&mut self) -> Result<bool, Error> {
-        self.tok.clear();
-        // Whitespace before the token.
+    /// Skips whitespace, counting lines; `false` at the end of the data.
+    fn skip_space(&mut self) -> Result<bool, Error> {
         loop {
             let buf = match self.src.fill_buf() {
                 Ok(b) => b,
@@ -578,8 +578,18 @@ impl<R: BufRead> Ascii<R> {
             let all = i == buf.len();
             self.src.consume(i);
             if !all {
-                break;
+                return Ok(true);
             }
+        }
+    }
+
+    /// Reads the next token into `tok`; `false` at the end of the data.
+    /// The whitespace after it is skipped too, so that `line` is where the
+    /// next value starts (errors about a face name the face's line).
+    fn token(&mut self) -> Result<bool, Error> {
+        self.tok.clear();
+        if !self.skip_space()? {
+            return Ok(false);
         }
         // The token.
         loop {
@@ -610,6 +620,7 @@ impl<R: BufRead> Ascii<R> {
             }
         }
         self.last = self.line;
+        self.skip_space()?;
         Ok(true)
     }
 }
@@ -621,7 +632,7 @@ impl<R: BufRead> Data for Ascii<R> {
         }
         let tok = &self.tok[..];
         let s = std::str::from_utf8(tok).unwrap_or("");
-        let line = self.line;
+        let line = self.last;
         let bad = |m: String| {
             Fail::Bad(Error::Parse {
                 file: self.name.clone(),
