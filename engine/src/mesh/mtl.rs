@@ -69,14 +69,9 @@ pub(crate) fn read_mtl<R: BufRead>(
     let mut out: Vec<(String, Material)> = Vec::new();
     let mut cur: Option<(String, Partial)> = None;
     let mut line: Vec<u8> = Vec::new();
-    loop {
-        match lines.next_line()? {
-            Some(l) => {
-                line.clear();
-                line.extend_from_slice(l);
-            }
-            None => break,
-        }
+    while let Some(l) = lines.next_line()? {
+        line.clear();
+        line.extend_from_slice(l);
         let l = match line.iter().position(|&b| b == b'#') {
             Some(i) => &line[..i],
             None => &line[..],

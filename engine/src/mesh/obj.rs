@@ -282,10 +282,7 @@ pub fn read_obj_from<R: BufRead>(
                         if materials.len() >= super::mtl::MAX_LIBRARY_MATERIALS * 4 {
                             return Err(lines.err("too many materials in the libraries"));
                         }
-                        if !materials.contains_key(&mname) {
-                            let id = b.add_material(m);
-                            materials.insert(mname, id);
-                        }
+                        materials.entry(mname).or_insert_with(|| b.add_material(m));
                     }
                 }
             }
