@@ -14,6 +14,15 @@ pub enum Error {
         message: String,
     },
 
+    /// Malformed input in a mesh file (PLY, OBJ, OFF, MTL): where in the
+    /// file, a line of text or a byte of binary data.
+    #[error("{}:{at}: {message}", file.display())]
+    Parse {
+        file: PathBuf,
+        at: At,
+        message: String,
+    },
+
     #[error("{}: {location}: {message}", file.display())]
     Database {
         file: PathBuf,
@@ -33,6 +42,23 @@ pub enum Error {
     /// Work stopped by request (Ctrl-C, a cancelled job).
     #[error("cancelled")]
     Cancelled,
+}
+
+/// Where in a file: a line (text) or a byte offset (binary data, counted
+/// in the decompressed stream of a `.gz` or `.zst` file).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum At {
+    Line(u64),
+    Byte(u64),
+}
+
+impl std::fmt::Display for At {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            At::Line(n) => write!(f, "{n}"),
+            At::Byte(n) => write!(f, " byte {n}"),
+        }
+    }
 }
 
 impl Error {

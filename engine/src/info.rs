@@ -1,8 +1,9 @@
 //! `sray info`: what a scene file holds.
 
 use crate::error::{Error, IoContext};
+use crate::mesh::MeshOptions;
 use crate::progress::Progress;
-use crate::scene::{Aabb, Light, Material, SceneSink, View};
+use crate::scene::{Aabb, Light, Material, MeshFacts, SceneSink, View};
 use crate::sdb::{Database, MAX_MATERIALS};
 use crate::shapes::{KindCounts, Shape};
 use crate::source::{detect_format, is_database};
@@ -22,12 +23,24 @@ pub struct SceneInfo {
     pub materials: u64,
     /// Material statements (`f` lines) in the scene as written.
     pub material_statements: u64,
-    /// Bounds of all objects; `null` for a scene of none.
+    /// Bounds of all objects, in world coordinates; `null` for a scene of
+    /// none.
     pub bbox_min: Option<[f32; 3]>,
     pub bbox_max: Option<[f32; 3]>,
+    /// Triangles the polygons and patches make (`n - 2` for a polygon of
+    /// `n` vertices).
+    pub triangles: u64,
+    /// A mesh's vertex table (used by faces or not); for NFF, the
+    /// vertices its polygons and patches list.
+    pub vertices: u64,
     pub file_bytes: u64,
-    /// "none" or "zstd".
+    /// "none", "zstd" (a database's blocks, or a zstd-wrapped scene file)
+    /// or "gzip" (a gzip-wrapped scene file).
     pub compression: &'static str,
+    /// Mesh file only: faces skipped as degenerate (repeated or collinear
+    /// vertices).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub degenerate_faces: Option<u64>,
     /// Object database only: uncompressed record bytes and block count.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub raw_bytes: Option<u64>,
@@ -35,20 +48,53 @@ pub struct SceneInfo {
     pub blocks: Option<u64>,
 }
 
-fn bbox_fields(b: Aabb) -> (Option<[f32; 3]>, Option<[f32; 3]>) {
+/// Bounds in world coordinates: `b` relative to `origin`.
+fn bbox_fields(b: Aabb, origin: [f64; 3]) -> (Option<[f32; 3]>, Option<[f32; 3]>) {
     if b.is_empty() {
         (None, None)
     } else {
-        (Some(b.min), Some(b.max))
+        let w = |p: [f32; 3]| std::array::from_fn(|i| (p[i] as f64 + origin[i]) as f32);
+        (Some(w(b.min)), Some(w(b.max)))
     }
 }
 
-/// Reads the header of a database, or streams through an NFF file.
+/// Triangles and listed vertices of a database, by a scan (for files
+/// written before the header recorded them).
+fn scan_counts(db: &Database) -> Result<(u64, u64), Error> {
+    let (mut t, mut v) = (0, 0);
+    let mut scan = db.scan()?;
+    while let Some(block) = scan.next_block()? {
+        for o in block.objects() {
+            let n = o.shape.triangles();
+            if n > 0 {
+                t += n;
+                v += o.shape.count() as u64;
+            }
+        }
+    }
+    Ok((t, v))
+}
+
+/// Reads the header of a database, or streams through a scene file (a
+/// mesh with the default memory budget).
 pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Error> {
+    scene_info_with(path, progress, &MeshOptions::default())
+}
+
+/// As [`scene_info`], a mesh within the memory of `opts`.
+pub fn scene_info_with(
+    path: &Path,
+    progress: &dyn Progress,
+    opts: &MeshOptions,
+) -> Result<SceneInfo, Error> {
     let file_bytes = std::fs::metadata(path).at(path)?.len();
     if is_database(path)? {
         let db = Database::open(path)?;
-        let (bbox_min, bbox_max) = bbox_fields(db.bbox());
+        let (bbox_min, bbox_max) = bbox_fields(db.bbox(), db.origin());
+        let (triangles, vertices) = match (db.triangles(), db.vertices()) {
+            (Some(t), Some(v)) => (t, v),
+            _ => scan_counts(&db)?,
+        };
         return Ok(SceneInfo {
             format: "sdb",
             objects: db.object_count(),
@@ -58,22 +104,26 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
             material_statements: db.material_statements(),
             bbox_min,
             bbox_max,
+            triangles,
+            vertices,
             file_bytes,
             compression: db.compression().name(),
+            degenerate_faces: None,
             raw_bytes: Some(db.raw_bytes()),
             blocks: Some(db.block_count()),
         });
     }
     let format = detect_format(path)?;
+    let (_, wrapping) = crate::input::head(path, 4)?;
     let mut c = Counter::default();
-    format.read(path, &mut c, progress)?;
-    if !c.saw_view {
+    let summary = format.read(path, &mut c, progress, opts)?;
+    if !c.saw_view && !format.is_mesh() {
         return Err(Error::Scene(format!(
             "{}: the scene has no view ('v')",
             path.display()
         )));
     }
-    let (bbox_min, bbox_max) = bbox_fields(c.bbox);
+    let (bbox_min, bbox_max) = bbox_fields(c.bbox, c.origin);
     Ok(SceneInfo {
         format: format.name(),
         objects: c.counts.total(),
@@ -83,8 +133,11 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
         material_statements: c.statements,
         bbox_min,
         bbox_max,
+        triangles: c.triangles,
+        vertices: c.mesh_vertices.unwrap_or(c.listed_vertices),
         file_bytes,
-        compression: "none",
+        compression: wrapping.name(),
+        degenerate_faces: summary.mesh.map(|m| m.degenerate),
         raw_bytes: None,
         blocks: None,
     })
@@ -100,6 +153,10 @@ struct Counter {
     any_material: bool,
     bbox: Aabb,
     saw_view: bool,
+    origin: [f64; 3],
+    triangles: u64,
+    listed_vertices: u64,
+    mesh_vertices: Option<u64>,
 }
 
 impl SceneSink for Counter {
@@ -133,6 +190,19 @@ impl SceneSink for Counter {
         }
         self.counts.add(s.kind());
         self.bbox.union(&s.bounds());
+        let t = s.triangles();
+        if t > 0 {
+            self.triangles += t;
+            self.listed_vertices += s.count() as u64;
+        }
+        Ok(())
+    }
+    fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
+        self.origin = origin;
+        Ok(())
+    }
+    fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
+        self.mesh_vertices = Some(self.mesh_vertices.unwrap_or(0) + facts.vertices);
         Ok(())
     }
 }

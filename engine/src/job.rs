@@ -4,8 +4,10 @@
 use crate::bf::{self, BfOptions, Shading, StoreNumber};
 use crate::df;
 use crate::error::{Error, IoContext};
+use crate::mesh::MeshOptions;
 use crate::progress::Progress;
 use crate::render::{Frame, Mode, RenderOptions, RenderStats};
+use crate::scene::setup::{Setup, SetupSink};
 use crate::sdb::{Compression, Database, DbWriter};
 use crate::source::SceneSource;
 use crate::units::fmt_bytes;
@@ -26,6 +28,9 @@ pub struct RenderRequest {
     /// Where temporary databases and spilled rays go (default: the system's
     /// temp dir).
     pub tmp_dir: Option<PathBuf>,
+    /// Camera, lights and material from the command line, and the
+    /// defaults of meshes (its image size is the render's).
+    pub setup: Setup,
 }
 
 pub struct RenderResult {
@@ -47,14 +52,92 @@ pub struct PreparedScene {
     pub convert_seconds: f64,
 }
 
-/// Opens a database directly, or streams an NFF file or an SPD generator
-/// into a temporary one.
+/// How [`prepare`] makes a database of a scene.
+#[derive(Clone, Copy, Debug)]
+pub struct PrepareOptions<'a> {
+    /// Where the database and spill files go (the system's temp dir if
+    /// `None`).
+    pub tmp_dir: Option<&'a Path>,
+    /// Memory budget of the conversion (a mesh's tables and sorts).
+    pub memory: u64,
+    pub setup: &'a Setup,
+}
+
+/// Output buffer of a database written under a memory budget.
+pub const BUDGET_WRITE_BUFFER: usize = 1 << 20;
+
+/// Least `--memory` that reads a mesh: the reader's tables and sorts
+/// ([`crate::mesh::builder::MIN_MEMORY`]), the input's buffers and the
+/// database writer's.
+pub const MIN_MESH_MEMORY: u64 = 2 << 20;
+
+/// What a mesh reader may hold of a conversion's budget: the rest after
+/// the input's and the database writer's buffers.
+pub fn mesh_memory(budget: u64) -> Result<u64, Error> {
+    if budget < MIN_MESH_MEMORY {
+        return Err(Error::Invalid(format!(
+            "--memory {} is too small to read a mesh: at least {}",
+            fmt_bytes(budget),
+            fmt_bytes(MIN_MESH_MEMORY)
+        )));
+    }
+    let fixed = crate::input::INPUT_BYTES
+        + BUDGET_WRITE_BUFFER as u64
+        + 2 * crate::sdb::BLOCK_TARGET as u64
+        + (64 << 10);
+    Ok(budget
+        .saturating_sub(fixed)
+        .max(crate::mesh::builder::MIN_MEMORY))
+}
+
+/// Streams `scene` through `setup` into the database writer `w`; refuses
+/// a mesh that leaves nothing to render.
+pub fn write_database(
+    scene: &SceneSource,
+    w: &mut DbWriter,
+    opts: &PrepareOptions<'_>,
+    progress: &dyn crate::progress::Progress,
+) -> Result<(), Error> {
+    let mesh_opts = MeshOptions {
+        memory: if scene.is_mesh() {
+            mesh_memory(opts.memory)?
+        } else {
+            opts.memory
+        },
+        spill_dir: opts.tmp_dir.map(Path::to_path_buf),
+    };
+    let mut s = SetupSink::new(w, opts.setup);
+    let summary = scene.stream_into_with(&mut s, progress, &mesh_opts)?;
+    s.finish()?;
+    if let Some(m) = summary.mesh
+        && m.objects == 0
+    {
+        return Err(Error::Scene(if m.faces == 0 {
+            format!(
+                "{scene}: nothing to render: the mesh has no faces (a point cloud of {} vertices)",
+                m.vertices
+            )
+        } else {
+            format!(
+                "{scene}: nothing to render: all {} faces of the mesh are degenerate",
+                m.faces
+            )
+        }));
+    }
+    Ok(())
+}
+
+/// Opens a database directly (unless the setup changes it), or streams a
+/// scene file or an SPD generator into a temporary one.
 pub fn prepare(
     scene: &SceneSource,
-    tmp_dir: Option<&Path>,
+    opts: &PrepareOptions<'_>,
     stages: &dyn Stages,
 ) -> Result<PreparedScene, Error> {
-    if let SceneSource::Database(p) = scene {
+    let tmp_dir = opts.tmp_dir;
+    if let SceneSource::Database(p) = scene
+        && opts.setup.overrides_nothing()
+    {
         return Ok(PreparedScene {
             db: Database::open(p)?,
             _tmp: None,
@@ -74,8 +157,8 @@ pub fn prepare(
     };
     let path = dir.path().join("scene.sdb");
     let progress = stages.stage("preparing scene");
-    let mut w = DbWriter::create(&path, Compression::None)?;
-    scene.stream_into(&mut w, &*progress)?;
+    let mut w = DbWriter::create_with_buffer(&path, Compression::None, BUDGET_WRITE_BUFFER)?;
+    write_database(scene, &mut w, opts, &*progress)?;
     w.finish()?;
     drop(progress);
     Ok(PreparedScene {
@@ -122,7 +205,19 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
     let t0 = Instant::now();
     req.options.validate()?;
     let memory = req.memory.unwrap_or_else(crate::sys::default_memory_budget);
-    let scene = prepare(&req.scene, req.tmp_dir.as_deref(), stages)?;
+    let setup = Setup {
+        image: [req.options.width, req.options.height],
+        ..req.setup.clone()
+    };
+    let scene = prepare(
+        &req.scene,
+        &PrepareOptions {
+            tmp_dir: req.tmp_dir.as_deref(),
+            memory,
+            setup: &setup,
+        },
+        stages,
+    )?;
     let (mode, reason) = choose_mode(req.mode, &scene.db, req.options.frame_slots(), memory);
     let progress = stages.stage("rendering");
     let (frame, mut stats) = match mode {

@@ -3,6 +3,7 @@
 //! - [`scene`]: the scene model and the [`scene::SceneSink`] scene sources
 //!   stream into;
 //! - [`nff`]: the Neutral File Format, read in constant memory;
+//! - [`mesh`]: polygon meshes (PLY, OBJ, OFF), read in bounded memory;
 //! - [`spd`]: generators for the Standard Procedural Databases;
 //! - [`sdb`]: the object database, read strictly front to back;
 //! - [`source`]: scene sources (`.nff`, `.sdb`, `spd:NAME:SIZE`);
@@ -15,9 +16,11 @@ pub mod fsutil;
 pub mod grid;
 pub mod hit;
 pub mod info;
+pub mod input;
 pub mod intersect;
 pub mod job;
 pub mod math;
+pub mod mesh;
 pub mod nff;
 pub mod objects;
 pub mod paging;

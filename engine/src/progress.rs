@@ -16,8 +16,14 @@ pub trait Progress: Send + Sync {
     fn inc(&self, n: u64);
     /// Describes the current stage ("depth 2, pass 3").
     fn set_message(&self, msg: &str);
-    /// Names the units counted ("rays", "objects") from now on.
+    /// Names the units counted ("rays", "objects", "bytes") from now on.
     fn set_unit(&self, _unit: &str) {}
+    /// Reports something the user should know that does not stop the work
+    /// (a missing material library, faces skipped as degenerate). Readers
+    /// report each kind of problem once, with a count, not per occurrence.
+    fn warn(&self, msg: &str) {
+        eprintln!("sray: warning: {msg}");
+    }
 }
 
 /// Progress that goes nowhere: for tests, and when output is not a terminal.
@@ -59,6 +65,9 @@ impl Progress for Prefixed<'_> {
     }
     fn set_unit(&self, unit: &str) {
         self.inner.set_unit(unit);
+    }
+    fn warn(&self, msg: &str) {
+        self.inner.warn(msg);
     }
 }
 
@@ -129,6 +138,7 @@ mod tests {
             store: crate::bf::StoreNumber::Adaptive,
             shading: Default::default(),
             tmp_dir: None,
+            setup: Default::default(),
         };
         let stages = Rec(Recorder::default());
         render(&req, &stages).unwrap();

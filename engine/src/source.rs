@@ -3,15 +3,17 @@
 //!
 //! File formats sit behind one interface, [`SceneFormat`], listed once in
 //! [`FORMATS`]; a file's format is told by its content, then by its name.
+//! Any of them may be gzip- or zstd-compressed ([`crate::input`]): the
+//! content is judged decompressed, the name without `.gz` or `.zst`.
 
-use crate::error::{Error, IoContext};
+use crate::error::Error;
+use crate::mesh::{MeshOptions, MeshSummary};
 use crate::nff::read_nff;
 use crate::progress::Progress;
-use crate::scene::{Material, SceneSink};
+use crate::scene::{Material, MeshFacts, SceneSink};
 use crate::sdb::Database;
 use crate::spd::SpdScene;
 use std::fmt;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// How sure a format is that a file's first bytes are its own.
@@ -34,18 +36,33 @@ pub trait SceneFormat: Sync {
     /// Judges the first bytes of a file (up to [`SNIFF_BYTES`]).
     fn sniff(&self, head: &[u8]) -> Sniff;
     /// Streams the scene into `sink`, in object order; errors name the
-    /// file and the line or byte.
+    /// file and the line or byte. `opts` bounds the memory of formats that
+    /// need more than a line at a time (meshes).
     fn read(
         &self,
         path: &Path,
         sink: &mut dyn SceneSink,
         progress: &dyn Progress,
-    ) -> Result<(), Error>;
+        opts: &MeshOptions,
+    ) -> Result<ReadSummary, Error>;
     /// Whether `read` reports progress in bytes of the file (else in
     /// objects).
     fn progress_in_bytes(&self) -> bool {
         true
     }
+    /// Whether the format is a mesh: no view and no lights of its own
+    /// (they come from [`crate::scene::setup`]), and nothing to render
+    /// without faces.
+    fn is_mesh(&self) -> bool {
+        false
+    }
+}
+
+/// What reading a scene file found besides the scene itself.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadSummary {
+    /// For a mesh: its vertices, faces and what became of them.
+    pub mesh: Option<MeshSummary>,
 }
 
 /// Bytes of a file's start that formats judge it by.
@@ -74,14 +91,142 @@ impl SceneFormat for Nff {
         path: &Path,
         sink: &mut dyn SceneSink,
         progress: &dyn Progress,
-    ) -> Result<(), Error> {
-        read_nff(path, sink, progress)
+        _: &MeshOptions,
+    ) -> Result<ReadSummary, Error> {
+        read_nff(path, sink, progress)?;
+        Ok(ReadSummary::default())
+    }
+}
+
+/// PLY: starts with the line `ply`.
+pub struct Ply;
+
+impl SceneFormat for Ply {
+    fn name(&self) -> &'static str {
+        "ply"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["ply"]
+    }
+    fn sniff(&self, head: &[u8]) -> Sniff {
+        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
+            Sniff::Yes
+        } else {
+            Sniff::No
+        }
+    }
+    fn read(
+        &self,
+        path: &Path,
+        sink: &mut dyn SceneSink,
+        progress: &dyn Progress,
+        opts: &MeshOptions,
+    ) -> Result<ReadSummary, Error> {
+        let m = crate::mesh::ply::read_ply(path, sink, progress, opts)?;
+        Ok(ReadSummary { mesh: Some(m) })
+    }
+    fn is_mesh(&self) -> bool {
+        true
+    }
+}
+
+/// Wavefront OBJ: text whose statements (`v x y z`, `vn`, `vt`, `mtllib`,
+/// `usemtl`, `f a/b/c`) no NFF file has.
+pub struct Obj;
+
+impl SceneFormat for Obj {
+    fn name(&self) -> &'static str {
+        "obj"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["obj"]
+    }
+    fn sniff(&self, head: &[u8]) -> Sniff {
+        if head.contains(&0) {
+            return Sniff::No;
+        }
+        let number = |t: &[u8]| {
+            std::str::from_utf8(t)
+                .ok()
+                .is_some_and(|s| s.parse::<f64>().is_ok())
+        };
+        for line in head.split(|&b| b == b'\n') {
+            let mut w = crate::mesh::text::words(line);
+            match w.next() {
+                Some(b"vn" | b"vt" | b"mtllib" | b"usemtl") => return Sniff::Yes,
+                Some(b"v") => {
+                    let rest: Vec<&[u8]> = w.collect();
+                    if rest.len() >= 3 && rest.iter().all(|t| number(t)) {
+                        return Sniff::Yes;
+                    }
+                }
+                Some(b"f") if line.contains(&b'/') => return Sniff::Yes,
+                _ => {}
+            }
+        }
+        Sniff::Maybe
+    }
+    fn read(
+        &self,
+        path: &Path,
+        sink: &mut dyn SceneSink,
+        progress: &dyn Progress,
+        opts: &MeshOptions,
+    ) -> Result<ReadSummary, Error> {
+        let m = crate::mesh::obj::read_obj(path, sink, progress, opts)?;
+        Ok(ReadSummary { mesh: Some(m) })
+    }
+    fn is_mesh(&self) -> bool {
+        true
+    }
+}
+
+/// OFF and its variants: the first word (after `#` comments) is `OFF`,
+/// `COFF`, `NOFF`, ...
+pub struct Off;
+
+impl SceneFormat for Off {
+    fn name(&self) -> &'static str {
+        "off"
+    }
+    fn extensions(&self) -> &'static [&'static str] {
+        &["off", "coff", "noff"]
+    }
+    fn sniff(&self, head: &[u8]) -> Sniff {
+        for line in head.split(|&b| b == b'\n') {
+            let body = match line.iter().position(|&b| b == b'#') {
+                Some(i) => &line[..i],
+                None => line,
+            };
+            if let Some(w) = crate::mesh::text::words(body).next() {
+                let variant = w.len() <= 8
+                    && w.ends_with(b"OFF")
+                    && w[..w.len() - 3].iter().all(|c| b"STCN4n".contains(c));
+                return if variant { Sniff::Yes } else { Sniff::No };
+            }
+        }
+        Sniff::No
+    }
+    fn read(
+        &self,
+        path: &Path,
+        sink: &mut dyn SceneSink,
+        progress: &dyn Progress,
+        opts: &MeshOptions,
+    ) -> Result<ReadSummary, Error> {
+        let m = crate::mesh::off::read_off(path, sink, progress, opts)?;
+        Ok(ReadSummary { mesh: Some(m) })
+    }
+    fn is_mesh(&self) -> bool {
+        true
     }
 }
 
 /// Every scene file format sray reads (object databases aside, which are
-/// rendered in place rather than read as a scene stream).
-pub static FORMATS: &[&dyn SceneFormat] = &[&Nff];
+/// rendered in place rather than read as a scene stream). NFF, which has
+/// no signature, comes first: of formats that only find a file plausible,
+/// the first wins.
+pub static FORMATS: &[&dyn SceneFormat] = &[&Nff, &Ply, &Obj, &Off];
 
 /// Where a scene comes from.
 #[derive(Clone)]
@@ -142,17 +287,9 @@ impl fmt::Display for SceneSource {
     }
 }
 
-/// The first bytes of a file (fewer if it is shorter).
-fn head(path: &Path, n: usize) -> Result<Vec<u8>, Error> {
-    let f = std::fs::File::open(path).at(path)?;
-    let mut buf = Vec::with_capacity(n);
-    f.take(n as u64).read_to_end(&mut buf).at(path)?;
-    Ok(buf)
-}
-
 /// Whether the file starts like an object database.
 pub fn is_database(path: &Path) -> Result<bool, Error> {
-    Ok(head(path, 8)? == crate::sdb::MAGIC)
+    Ok(crate::input::raw_head(path, 8)? == crate::sdb::MAGIC)
 }
 
 /// The format of the scene file at `path`: one that recognises its
@@ -160,16 +297,13 @@ pub fn is_database(path: &Path) -> Result<bool, Error> {
 /// what is wrong with the content, if anything); else one that finds the
 /// content plausible; else an error naming the formats there are.
 pub fn detect_format(path: &Path) -> Result<&'static dyn SceneFormat, Error> {
-    let head = head(path, SNIFF_BYTES)?;
+    let (head, _) = crate::input::head(path, SNIFF_BYTES)?;
     let judged: Vec<(Sniff, &'static dyn SceneFormat)> =
         FORMATS.iter().map(|f| (f.sniff(&head), *f)).collect();
     if let Some((_, f)) = judged.iter().find(|(s, _)| *s == Sniff::Yes) {
         return Ok(*f);
     }
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(|e| e.to_ascii_lowercase());
+    let ext = crate::input::inner_extension(path);
     if let Some(ext) = &ext
         && let Some(f) = FORMATS
             .iter()
@@ -228,20 +362,42 @@ impl SceneSource {
         Ok(SceneSource::File { path, format })
     }
 
-    /// Streams the scene, in object order, into `sink`.
+    /// Streams the scene, in object order, into `sink` (a mesh with the
+    /// default memory budget).
     pub fn stream_into(
         &self,
         sink: &mut dyn SceneSink,
         progress: &dyn Progress,
     ) -> Result<(), Error> {
+        self.stream_into_with(sink, progress, &MeshOptions::default())
+            .map(|_| ())
+    }
+
+    /// Streams the scene, in object order, into `sink`; a mesh within the
+    /// memory of `opts`.
+    pub fn stream_into_with(
+        &self,
+        sink: &mut dyn SceneSink,
+        progress: &dyn Progress,
+        opts: &MeshOptions,
+    ) -> Result<ReadSummary, Error> {
         match self {
-            SceneSource::File { path, format } => format.read(path, sink, progress),
-            SceneSource::Spd { scene, size } => scene.generate(*size, sink, progress),
+            SceneSource::File { path, format } => format.read(path, sink, progress, opts),
+            SceneSource::Spd { scene, size } => {
+                scene.generate(*size, sink, progress)?;
+                Ok(ReadSummary::default())
+            }
             SceneSource::Database(p) => {
                 let db = Database::open(p)?;
-                stream_database(&db, sink, progress)
+                stream_database(&db, sink, progress)?;
+                Ok(ReadSummary::default())
             }
         }
+    }
+
+    /// Whether the source is a mesh file (no view or lights of its own).
+    pub fn is_mesh(&self) -> bool {
+        matches!(self, SceneSource::File { format, .. } if format.is_mesh())
     }
 }
 
@@ -255,9 +411,17 @@ pub fn stream_database(
     let scene = db.scene();
     progress.set_total(db.object_count());
     sink.background(scene.background)?;
-    sink.view(&scene.view)?;
-    for l in &scene.lights {
+    sink.view(db.world_view())?;
+    for l in db.world_lights() {
         sink.light(l)?;
+    }
+    sink.origin(db.origin())?;
+    if db.is_mesh() {
+        sink.mesh(&MeshFacts {
+            vertices: db.vertices().unwrap_or(0),
+            bounds: db.world_bounds(),
+            up: None,
+        })?;
     }
     let mut current: Option<u32> = None;
     let mut scan = db.scan()?;

@@ -193,14 +193,15 @@ fn wrong_magic_and_wrong_version() {
     let e = Database::open(&bad).unwrap_err().to_string();
     assert!(e.contains("wrong magic"), "{e}");
 
-    // A future version with a valid header checksum.
+    // A future version with a valid header checksum (2 is a database
+    // whose geometry is relative to an origin).
     let mut b = good.clone();
-    b[8..12].copy_from_slice(&2u32.to_le_bytes());
+    b[8..12].copy_from_slice(&3u32.to_le_bytes());
     let crc = crc32fast::hash(&b[..252]);
     b[252..256].copy_from_slice(&crc.to_le_bytes());
     std::fs::write(&bad, &b).unwrap();
     let e = Database::open(&bad).unwrap_err().to_string();
-    assert!(e.contains("version 2 is not supported"), "{e}");
+    assert!(e.contains("version 3 is not supported"), "{e}");
 }
 
 #[test]

@@ -23,38 +23,22 @@ pub fn quiet() -> bool {
     QUIET.load(Ordering::Relaxed)
 }
 
-/// What a bar counts.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Kind {
-    /// Units named by the bar (objects, rays, ...), shown as integers.
-    Count,
-    /// Bytes, shown in binary units.
-    Bytes,
-}
-
 /// A progress bar on stderr; invisible when stderr is not a terminal or
 /// with `--quiet`.
-pub struct Bar(pub ProgressBar, Kind);
+pub struct Bar(pub ProgressBar);
 
 impl Bar {
     /// A bar counting `unit`s ("objects"; "" for a count whose unit the
     /// engine names, or leaves unnamed).
     pub fn new(prefix: &str, unit: &str) -> Bar {
-        let bar = Bar(Bar::make(prefix), Kind::Count);
+        let bar = Bar(Bar::make(prefix));
         bar.0.set_style(count_style(unit));
         bar
     }
 
     pub fn bytes(prefix: &str) -> Bar {
-        let bar = Bar(Bar::make(prefix), Kind::Bytes);
-        bar.0.set_style(
-            ProgressStyle::with_template(
-                "{prefix} [{elapsed_precise}] {wide_bar} {pct} {bytes}/{total_bytes} ({bytes_per_sec}, eta {eta}) {msg}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .with_key("pct", pct_key)
-            .progress_chars("=> "),
-        );
+        let bar = Bar(Bar::make(prefix));
+        bar.0.set_style(bytes_style());
         bar
     }
 
@@ -71,6 +55,16 @@ impl Bar {
     pub fn finish(&self) {
         self.0.finish_and_clear();
     }
+}
+
+/// The style of a bar counting bytes.
+fn bytes_style() -> ProgressStyle {
+    ProgressStyle::with_template(
+        "{prefix} [{elapsed_precise}] {wide_bar} {pct} {bytes}/{total_bytes} ({bytes_per_sec}, eta {eta}) {msg}",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar())
+    .with_key("pct", pct_key)
+    .progress_chars("=> ")
 }
 
 /// The style of a counting bar of `unit`s.
@@ -140,10 +134,19 @@ impl Progress for Bar {
     fn set_message(&self, msg: &str) {
         self.0.set_message(msg.to_string());
     }
+    /// `bytes` switches to the bytes style (a scene file being read);
+    /// other units to a count of them.
     fn set_unit(&self, unit: &str) {
-        if self.1 == Kind::Count {
+        if unit == "bytes" {
+            self.0.set_style(bytes_style());
+        } else {
             self.0.set_style(count_style(unit));
         }
+    }
+    /// A warning on its own line above the bar (printed with `--quiet`
+    /// too: only progress and the summary are quiet).
+    fn warn(&self, msg: &str) {
+        self.0.suspend(|| eprintln!("sray: warning: {msg}"));
     }
 }
 
@@ -153,7 +156,7 @@ mod tests {
 
     #[test]
     fn each_total_starts_a_new_count() {
-        let b = Bar(ProgressBar::hidden(), Kind::Count);
+        let b = Bar(ProgressBar::hidden());
         b.set_total(10);
         b.inc(10);
         assert_eq!((b.0.position(), b.0.length()), (10, Some(10)));

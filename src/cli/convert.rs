@@ -1,11 +1,15 @@
 //! `sray convert`: the paper's preprocess into binary form (or back to NFF).
 
 use super::bar::Bar;
+use super::render::SetupArgs;
 use super::{OutputKind, output_kind, parse_compression};
 use anyhow::Context;
 use clap::Args;
+use sray_engine::job::{BUDGET_WRITE_BUFFER, PrepareOptions, write_database};
+use sray_engine::mesh::MeshOptions;
 use sray_engine::nff::NffWriter;
 use sray_engine::progress::Progress;
+use sray_engine::scene::setup::{Setup, SetupSink};
 use sray_engine::sdb::{Compression, DbWriter};
 use sray_engine::source::SceneSource;
 use std::io::{BufWriter, Write};
@@ -13,7 +17,8 @@ use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct ConvertArgs {
-    /// The scene: an .nff file, an .sdb file, or spd:NAME:SIZE
+    /// The scene: a scene file (.nff, .ply, .obj, .off, any of them .gz or
+    /// .zst compressed), an .sdb file, or spd:NAME:SIZE
     pub scene: String,
     /// Output file: .sdb for an object database, .nff for NFF text
     #[arg(short, long)]
@@ -21,9 +26,23 @@ pub struct ConvertArgs {
     /// Compress the object database: none, zstd or zstd:LEVEL (1-22)
     #[arg(long, value_parser = parse_compression, default_value = "none")]
     pub compress: Compression,
+    /// Memory budget of the conversion (a mesh's vertex and face tables
+    /// and sorts; the rest goes to --tmp-dir), e.g. 64MiB (default: half
+    /// of the available memory)
+    #[arg(long, value_parser = parse_memory)]
+    pub memory: Option<u64>,
+    /// Directory for temporary files (default: the system's)
+    #[arg(long)]
+    pub tmp_dir: Option<PathBuf>,
     /// No progress bar (errors are still printed)
     #[arg(short, long)]
     pub quiet: bool,
+    #[command(flatten)]
+    pub setup: SetupArgs,
+}
+
+fn parse_memory(s: &str) -> Result<u64, String> {
+    sray_engine::units::parse_bytes(s)
 }
 
 pub fn run(a: ConvertArgs) -> anyhow::Result<()> {
@@ -33,22 +52,39 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<()> {
         SceneSource::File { format, .. } if format.progress_in_bytes() => Bar::bytes("convert"),
         _ => Bar::new("convert", "objects"),
     };
-    write_scene(&source, &a.output, a.compress, &bar)?;
+    let setup = a.setup.setup([512, 512])?;
+    let memory = a
+        .memory
+        .unwrap_or_else(sray_engine::sys::default_memory_budget);
+    write_scene(
+        &source,
+        &a.output,
+        a.compress,
+        &PrepareOptions {
+            tmp_dir: a.tmp_dir.as_deref(),
+            memory,
+            setup: &setup,
+        },
+        &bar,
+    )?;
     bar.finish();
     Ok(())
 }
 
-/// Streams `source` into `output` (.sdb or .nff, by extension), atomically.
+/// Streams `source` into `output` (.sdb or .nff, by extension), through
+/// `opts.setup` (a mesh's default view and lights, the command line's
+/// overrides), atomically.
 pub fn write_scene(
     source: &SceneSource,
     output: &Path,
     compress: Compression,
+    opts: &PrepareOptions<'_>,
     progress: &dyn Progress,
 ) -> anyhow::Result<()> {
     match output_kind(output)? {
         OutputKind::Database => {
-            let mut w = DbWriter::create(output, compress)?;
-            source.stream_into(&mut w, progress)?;
+            let mut w = DbWriter::create_with_buffer(output, compress, BUDGET_WRITE_BUFFER)?;
+            write_database(source, &mut w, opts, progress)?;
             w.finish()?;
         }
         OutputKind::Nff => {
@@ -57,7 +93,19 @@ pub fn write_scene(
             }
             let tmp = sray_engine::fsutil::temp_beside(output)?;
             let mut w = NffWriter::new(BufWriter::with_capacity(1 << 20, tmp), output);
-            source.stream_into(&mut w, progress)?;
+            let mesh_opts = MeshOptions {
+                memory: if source.is_mesh() {
+                    sray_engine::job::mesh_memory(opts.memory)?
+                } else {
+                    opts.memory
+                },
+                spill_dir: opts.tmp_dir.map(Path::to_path_buf),
+            };
+            {
+                let mut s = SetupSink::new(&mut w, opts.setup);
+                source.stream_into_with(&mut s, progress, &mesh_opts)?;
+                s.finish()?;
+            }
             let mut buf = w.into_inner();
             buf.flush().with_context(|| output.display().to_string())?;
             let tmp = buf
@@ -68,4 +116,9 @@ pub fn write_scene(
         }
     }
     Ok(())
+}
+
+/// A setup that changes nothing (for generated scenes).
+pub fn no_setup() -> Setup {
+    Setup::default()
 }

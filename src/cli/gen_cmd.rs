@@ -42,6 +42,11 @@ pub fn run(a: GenArgs) -> anyhow::Result<()> {
         },
         &a.output,
         a.compress,
+        &sray_engine::job::PrepareOptions {
+            tmp_dir: None,
+            memory: sray_engine::sys::default_memory_budget(),
+            setup: &super::convert::no_setup(),
+        },
         &bar,
     )?;
     bar.finish();

@@ -2,25 +2,45 @@
 
 use super::bar::Bar;
 use clap::Args;
-use sray_engine::info::{SceneInfo, scene_info};
+use sray_engine::info::{SceneInfo, scene_info_with};
+use sray_engine::mesh::MeshOptions;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// An .nff or .sdb file
+    /// A scene file (.nff, .ply, .obj, .off, any of them .gz or .zst
+    /// compressed) or an .sdb file
     pub file: PathBuf,
     /// Print one JSON object on stdout
     #[arg(long)]
     pub json: bool,
+    /// Memory budget for reading a mesh (default: half of the available
+    /// memory)
+    #[arg(long, value_parser = parse_memory)]
+    pub memory: Option<u64>,
+    /// Directory for temporary files (default: the system's)
+    #[arg(long)]
+    pub tmp_dir: Option<PathBuf>,
     /// No progress bar (errors are still printed)
     #[arg(short, long)]
     pub quiet: bool,
 }
 
+fn parse_memory(s: &str) -> Result<u64, String> {
+    sray_engine::units::parse_bytes(s)
+}
+
 pub fn run(a: InfoArgs) -> anyhow::Result<()> {
     super::bar::set_quiet(a.quiet);
     let bar = Bar::bytes("info");
-    let info = scene_info(&a.file, &bar)?;
+    let opts = MeshOptions {
+        memory: match a.memory {
+            Some(m) => sray_engine::job::mesh_memory(m)?,
+            None => sray_engine::sys::default_memory_budget(),
+        },
+        spill_dir: a.tmp_dir.clone(),
+    };
+    let info = scene_info_with(&a.file, &bar, &opts)?;
     bar.finish();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
@@ -44,6 +64,11 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
         "  materials    {} distinct ({} statements)",
         i.materials, i.material_statements
     );
+    println!("  triangles    {}", i.triangles);
+    println!("  vertices     {}", i.vertices);
+    if let Some(d) = i.degenerate_faces {
+        println!("  degenerate   {d} faces skipped");
+    }
     match (i.bbox_min, i.bbox_max) {
         (Some(a), Some(b)) => println!("  bounds       {a:?} .. {b:?}"),
         _ => println!("  bounds       (no objects)"),

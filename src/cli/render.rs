@@ -5,15 +5,55 @@ use super::outputs::Outputs;
 use super::summary;
 use clap::Args;
 use sray_engine::bf::{Shading, StoreNumber};
-use sray_engine::job::{RenderRequest, Stages, render};
+use sray_engine::job::{PrepareOptions, RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
+use sray_engine::scene::setup::{CameraOverride, Setup, parse_light, parse_material};
+use sray_engine::scene::{Light, Material};
 use sray_engine::source::SceneSource;
 use std::path::PathBuf;
 
+/// `--camera`, `--light`, `--material`: for `sray render` and `sray
+/// convert`, for any scene.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SetupArgs {
+    /// The camera, any of: from=X,Y,Z at=X,Y,Z up=X,Y,Z fov=DEG (separate
+    /// words, or one quoted word); the rest stays the scene's (a mesh's:
+    /// the default framing, with these parts). Separate words run to the
+    /// next option, so put the scene before --camera or quote the parts
+    #[arg(long, num_args = 1.., value_name = "KEY=VALUE")]
+    pub camera: Vec<String>,
+    /// A point light at X,Y,Z with colour R,G,B (white scaled by
+    /// 1/sqrt(lights) without one); repeatable; replaces the scene's (or
+    /// the default) lights
+    #[arg(long, allow_hyphen_values = true, value_name = "X,Y,Z[,R,G,B]", value_parser = parse_light)]
+    pub light: Vec<Light>,
+    /// The material of every object, as NFF's f line: r,g,b,Kd,Ks,shine,T,ior
+    #[arg(long, allow_hyphen_values = true, value_name = "r,g,b,Kd,Ks,shine,T,ior", value_parser = parse_material)]
+    pub material: Option<Material>,
+}
+
+impl SetupArgs {
+    /// The setup these flags make, framing an image of `image` pixels.
+    pub fn setup(&self, image: [u32; 2]) -> anyhow::Result<Setup> {
+        let camera = if self.camera.is_empty() {
+            CameraOverride::default()
+        } else {
+            CameraOverride::parse(&self.camera.join(" ")).map_err(anyhow::Error::msg)?
+        };
+        Ok(Setup {
+            camera,
+            lights: self.light.clone(),
+            material: self.material,
+            image,
+        })
+    }
+}
+
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// The scene: an .nff file, an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
+    /// The scene: a scene file (.nff, .ply, .obj, .off, any of them .gz or
+    /// .zst compressed), an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
     pub scene: String,
     /// Output image: .png (8-bit RGB) or .exr (OpenEXR, linear 32-bit float
     /// RGB, unclamped)
@@ -97,6 +137,8 @@ pub struct RenderArgs {
     /// The client certificate's private key (PEM)
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
+    #[command(flatten)]
+    pub setup: SetupArgs,
 }
 
 fn parse_memory(s: &str) -> Result<u64, String> {
@@ -157,6 +199,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         store: a.store_number,
         shading: a.shading,
         tmp_dir: a.tmp_dir.clone(),
+        setup: a.setup.setup([a.width, a.height])?,
     };
     let outputs = Outputs::open(&a.output, a.stats.as_deref())?;
     if a.coordinator.is_some() || a.local_workers.is_some() {
@@ -185,7 +228,19 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     }
     req.options.validate()?;
     let t0 = std::time::Instant::now();
-    let scene = sray_engine::job::prepare(&req.scene, req.tmp_dir.as_deref(), &BarStages)?;
+    // The camera, lights and material are baked into the database the
+    // workers read: nothing of them travels in the render settings.
+    let scene = sray_engine::job::prepare(
+        &req.scene,
+        &PrepareOptions {
+            tmp_dir: req.tmp_dir.as_deref(),
+            memory: req
+                .memory
+                .unwrap_or_else(sray_engine::sys::default_memory_budget),
+            setup: &req.setup,
+        },
+        &BarStages,
+    )?;
     let params = sray_worker::params::to_proto(&req.options, req.store);
     let shard_rays = a.shard_rays.unwrap_or(0);
     let rt = tokio::runtime::Builder::new_multi_thread()

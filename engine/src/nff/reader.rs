@@ -12,22 +12,26 @@ use std::path::{Path, PathBuf};
 /// Longest line accepted. Real NFF lines are under a hundred bytes.
 pub const MAX_LINE_BYTES: usize = 64 * 1024;
 
-/// Reads the NFF file at `path` into `sink`, reporting bytes read.
+/// Reads the NFF file at `path` (gzip or zstd wrapped or not) into
+/// `sink`, reporting bytes of the file read.
 pub fn read_nff(
     path: &Path,
     sink: &mut dyn SceneSink,
     progress: &dyn Progress,
 ) -> Result<(), Error> {
-    let file = File::open(path).at(path)?;
-    if let Ok(meta) = file.metadata() {
-        progress.set_total(meta.len());
+    let input = crate::input::open(path, progress)?;
+    if input.wrapping == crate::input::Wrapping::Plain {
+        drop(input);
+        let file = File::open(path).at(path)?;
+        return read_nff_from(
+            BufReader::with_capacity(1 << 20, file),
+            path,
+            sink,
+            progress,
+        );
     }
-    read_nff_from(
-        BufReader::with_capacity(1 << 20, file),
-        path,
-        sink,
-        progress,
-    )
+    // The input counts the compressed bytes itself.
+    read_nff_from(input.reader, path, sink, &crate::progress::NoProgress)
 }
 
 /// Reads NFF text from `src`; `name` is used in error messages.

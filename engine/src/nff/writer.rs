@@ -6,11 +6,15 @@ use std::io::Write;
 use std::path::PathBuf;
 
 /// Writes a scene stream as NFF text, numbers printed as the SPD programs
-/// print them (`%g`), cones on one line as the SPD writes them.
+/// print them (`%g`), cones on one line as the SPD writes them. NFF has no
+/// origin: geometry relative to one (a recentred mesh) is written in world
+/// coordinates, every number in full (shortest exact) precision, as `%g`'s
+/// six digits would lose what the origin kept.
 pub struct NffWriter<W: Write> {
     out: W,
     name: PathBuf,
     line: String,
+    origin: [f64; 3],
 }
 
 impl<W: Write> NffWriter<W> {
@@ -19,6 +23,23 @@ impl<W: Write> NffWriter<W> {
             out,
             name: name.into(),
             line: String::with_capacity(256),
+            origin: [0.0; 3],
+        }
+    }
+
+    /// Points of geometry, in world coordinates.
+    fn points(&mut self, p: [f32; 3]) {
+        if self.origin == [0.0; 3] {
+            self.nums(&f3(p));
+        } else {
+            for i in 0..3 {
+                if !self.line.is_empty() && !self.line.ends_with(' ') && !self.line.ends_with('\n')
+                {
+                    self.line.push(' ');
+                }
+                let x = p[i] as f64 + self.origin[i];
+                self.line.push_str(&format!("{x}"));
+            }
         }
     }
 
@@ -59,6 +80,11 @@ fn f3(a: [f32; 3]) -> [f64; 3] {
 }
 
 impl<W: Write> SceneSink for NffWriter<W> {
+    fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
+        self.origin = origin;
+        Ok(())
+    }
+
     fn background(&mut self, rgb: [f32; 3]) -> Result<(), Error> {
         self.word("b");
         self.nums(&f3(rgb));
@@ -112,7 +138,7 @@ impl<W: Write> SceneSink for NffWriter<W> {
         match *shape {
             Shape::Sphere(Sphere { center, radius }) => {
                 self.word("s");
-                self.nums(&f3(center));
+                self.points(center);
                 self.num(radius as f64);
                 self.end_line();
             }
@@ -123,23 +149,23 @@ impl<W: Write> SceneSink for NffWriter<W> {
                 apex_radius,
             }) => {
                 self.word("c");
-                self.nums(&f3(base));
+                self.points(base);
                 self.num(base_radius as f64);
-                self.nums(&f3(apex));
+                self.points(apex);
                 self.num(apex_radius as f64);
                 self.end_line();
             }
             Shape::Polygon(Polygon { vertices }) => {
                 self.word(&format!("p {}\n", vertices.len()));
                 for v in vertices {
-                    self.nums(&f3(*v));
+                    self.points(*v);
                     self.end_line();
                 }
             }
             Shape::Patch(Patch { vertices, normals }) => {
                 self.word(&format!("pp {}\n", vertices.len()));
                 for (v, n) in vertices.iter().zip(normals) {
-                    self.nums(&f3(*v));
+                    self.points(*v);
                     self.nums(&f3(*n));
                     self.end_line();
                 }

@@ -5,6 +5,7 @@
 
 pub(crate) mod aabb;
 pub mod recorder;
+pub mod setup;
 mod sink;
 mod sizes;
 
@@ -83,6 +84,19 @@ impl Light {
             [s, s, s]
         })
     }
+}
+
+/// What a mesh file (PLY, OBJ, OFF) says about its geometry, before its
+/// objects.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct MeshFacts {
+    /// Vertices in the file's vertex table, used by faces or not.
+    pub vertices: u64,
+    /// Bounds, in world coordinates, of the vertices its faces use; `None`
+    /// when it has no faces (a point cloud).
+    pub bounds: Option<([f64; 3], [f64; 3])>,
+    /// The up direction the file declares in a comment, if any.
+    pub up: Option<[f64; 3]>,
 }
 
 /// Everything about a scene except its objects: small, held in memory by

@@ -1,7 +1,7 @@
 //! A scene stream captured in memory, for tests and tools that compare
 //! scenes. Not for large scenes.
 
-use super::{Light, Material, SceneSink, View};
+use super::{Light, Material, MeshFacts, SceneSink, View};
 use crate::Error;
 use crate::shapes::{OwnedShape, Shape};
 
@@ -13,6 +13,8 @@ pub enum Event {
     Light(Light),
     Material(Material),
     Object(OwnedShape),
+    Origin([f64; 3]),
+    Mesh(MeshFacts),
 }
 
 /// Records a scene stream.
@@ -38,6 +40,8 @@ impl Recorder {
                 Event::Light(l) => sink.light(l)?,
                 Event::Material(m) => sink.material(m)?,
                 Event::Object(o) => sink.object(&o.shape())?,
+                Event::Origin(o) => sink.origin(*o)?,
+                Event::Mesh(m) => sink.mesh(m)?,
             }
         }
         Ok(())
@@ -63,6 +67,14 @@ impl SceneSink for Recorder {
     }
     fn object(&mut self, s: &Shape<'_>) -> Result<(), Error> {
         self.events.push(Event::Object(OwnedShape::from_shape(s)));
+        Ok(())
+    }
+    fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
+        self.events.push(Event::Origin(origin));
+        Ok(())
+    }
+    fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
+        self.events.push(Event::Mesh(*facts));
         Ok(())
     }
 }

@@ -7,7 +7,18 @@ use bytemuck::{Pod, Zeroable};
 compile_error!("the object database format is little-endian; big-endian targets are not supported");
 
 pub const MAGIC: [u8; 8] = *b"SRAYSDB\0";
+/// The version written when the geometry is relative to the world's
+/// origin; such files read the same in every sray that reads version 1.
 pub const VERSION: u32 = 1;
+/// The version written when the geometry is relative to another origin
+/// (a mesh, recentred): an older sray refuses it rather than misplacing
+/// the geometry.
+pub const VERSION_ORIGIN: u32 = 2;
+/// Header flag: `vertices` is the size of a mesh's vertex table.
+pub const FLAG_MESH: u32 = 1;
+/// Header flag: `triangles` and `vertices` are recorded (files written
+/// before they were have zeros there).
+pub const FLAG_COUNTS: u32 = 2;
 pub const HEADER_BYTES: usize = 256;
 pub const BLOCK_MAGIC: [u8; 4] = *b"SBLK";
 pub const BLOCK_HEADER_BYTES: usize = 32;
@@ -96,7 +107,19 @@ pub struct RawHeader {
     pub raw_bytes: u64,
     pub bbox: [f32; 6],
     pub tables_crc: u32,
-    pub reserved: [u32; 20],
+    /// The point (world coordinates) that every record's geometry is
+    /// relative to: three `f64`, each as two little-endian words. Zero in
+    /// version 1 files, where these words were reserved.
+    pub origin: [u32; 6],
+    /// Triangles the polygons and patches make (`n - 2` each), as two
+    /// words, low first.
+    pub triangles: [u32; 2],
+    /// A mesh's vertex table (with [`FLAG_MESH`]), else the vertices the
+    /// polygons and patches list; two words, low first.
+    pub vertices: [u32; 2],
+    /// [`FLAG_MESH`], [`FLAG_COUNTS`].
+    pub flags: u32,
+    pub reserved: [u32; 9],
     /// CRC-32 of the 252 bytes before it.
     pub header_crc: u32,
 }
@@ -107,6 +130,28 @@ impl RawHeader {
     pub fn compute_crc(&self) -> u32 {
         crc32fast::hash(&bytemuck::bytes_of(self)[..HEADER_BYTES - 4])
     }
+
+    pub fn origin(&self) -> [f64; 3] {
+        std::array::from_fn(|i| f64::from_bits(join64(self.origin[2 * i], self.origin[2 * i + 1])))
+    }
+
+    pub fn set_origin(&mut self, o: [f64; 3]) {
+        for (i, x) in o.iter().enumerate() {
+            let b = x.to_bits();
+            self.origin[2 * i] = b as u32;
+            self.origin[2 * i + 1] = (b >> 32) as u32;
+        }
+    }
+}
+
+/// A `u64` from two words, low first.
+pub fn join64(lo: u32, hi: u32) -> u64 {
+    lo as u64 | (hi as u64) << 32
+}
+
+/// A `u64` as two words, low first.
+pub fn split64(v: u64) -> [u32; 2] {
+    [v as u32, (v >> 32) as u32]
 }
 
 #[derive(Clone, Copy, Pod, Zeroable)]

@@ -22,7 +22,7 @@ mod format;
 mod reader;
 mod writer;
 
-pub use format::{Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
-pub use writer::{DbWriter, WriteSummary};
+pub use writer::{DbWriter, WRITE_BUFFER, WriteSummary};

@@ -34,6 +34,14 @@ pub struct Database {
     raw_bytes: u64,
     file_bytes: u64,
     largest_block: usize,
+    origin: [f64; 3],
+    /// The view and lights as stored, in world coordinates (`scene` has
+    /// them relative to the origin, as the geometry is).
+    world_view: View,
+    world_lights: Vec<Light>,
+    triangles: Option<u64>,
+    vertices: Option<u64>,
+    mesh: bool,
     /// The file as it was opened: a scan refuses a file changed since.
     stamp: (u64, Option<SystemTime>),
     /// Set once a scan has checked every block's checksum and records:
@@ -75,11 +83,11 @@ impl Database {
             ));
         }
         let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-        if h.version != VERSION {
+        if h.version != VERSION && h.version != VERSION_ORIGIN {
             return Err(err(
                 "header",
                 format!(
-                    "database version {} is not supported (this sray reads version {VERSION}); regenerate it with `sray convert` or `sray gen`",
+                    "database version {} is not supported (this sray reads versions {VERSION} and {VERSION_ORIGIN}); regenerate it with `sray convert` or `sray gen`",
                     h.version
                 ),
             ));
@@ -135,8 +143,22 @@ impl Database {
                 "checksum mismatch: the tables are corrupt".into(),
             ));
         }
-        let (scene, sizes) =
+        let (mut scene, sizes) =
             decode_tables(&tables).ok_or_else(|| err("tables", "malformed tables".into()))?;
+        let origin = h.origin();
+        if !origin.iter().all(|c| c.is_finite()) {
+            return Err(err("header", "the origin is not finite".into()));
+        }
+        let world_view = scene.view;
+        let world_lights = scene.lights.clone();
+        // Shading and cameras work in the geometry's frame.
+        let local = |p: [f64; 3]| std::array::from_fn(|i| p[i] - origin[i]);
+        scene.view.from = local(scene.view.from);
+        scene.view.at = local(scene.view.at);
+        for l in &mut scene.lights {
+            l.position = local(l.position);
+        }
+        let counts_known = h.flags & FLAG_COUNTS != 0;
         if sizes.total() != h.object_count {
             return Err(err(
                 "tables",
@@ -158,14 +180,62 @@ impl Database {
             raw_bytes: h.raw_bytes,
             file_bytes,
             largest_block: h.block_raw_max as usize,
+            origin,
+            world_view,
+            world_lights,
+            triangles: counts_known.then(|| join64(h.triangles[0], h.triangles[1])),
+            vertices: counts_known.then(|| join64(h.vertices[0], h.vertices[1])),
+            mesh: h.flags & FLAG_MESH != 0,
             stamp,
             verified: Arc::new(AtomicBool::new(false)),
         })
     }
 
+    /// The point (world coordinates) the geometry is relative to; the
+    /// view and lights of [`Database::scene`] are relative to it too.
+    pub fn origin(&self) -> [f64; 3] {
+        self.origin
+    }
+    /// The view as stored, in world coordinates.
+    pub fn world_view(&self) -> &View {
+        &self.world_view
+    }
+    /// The lights as stored, in world coordinates.
+    pub fn world_lights(&self) -> &[Light] {
+        &self.world_lights
+    }
+    /// Bounds of all objects in world coordinates (`None` for a scene of
+    /// none).
+    pub fn world_bounds(&self) -> Option<([f64; 3], [f64; 3])> {
+        (!self.bbox.is_empty()).then(|| {
+            let o = self.origin;
+            (
+                std::array::from_fn(|i| self.bbox.min[i] as f64 + o[i]),
+                std::array::from_fn(|i| self.bbox.max[i] as f64 + o[i]),
+            )
+        })
+    }
+    /// Triangles the polygons and patches make, if recorded (files
+    /// written before sray kept it have no record).
+    pub fn triangles(&self) -> Option<u64> {
+        self.triangles
+    }
+    /// A mesh's vertex table, or the vertices the polygons and patches
+    /// list, if recorded.
+    pub fn vertices(&self) -> Option<u64> {
+        self.vertices
+    }
+    /// Whether the scene came from a mesh file.
+    pub fn is_mesh(&self) -> bool {
+        self.mesh
+    }
+
     pub fn path(&self) -> &Path {
         &self.path
     }
+    /// View, background, lights and materials; the view and the lights
+    /// relative to [`Database::origin`], like the geometry, which is what
+    /// cameras and shading need.
     pub fn scene(&self) -> &SceneHeader {
         &self.scene
     }

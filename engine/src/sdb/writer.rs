@@ -3,7 +3,7 @@
 
 use super::format::*;
 use crate::error::{Error, IoContext};
-use crate::scene::{Aabb, Light, Material, SceneHeader, SceneSink, SizeSummary, View};
+use crate::scene::{Aabb, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View};
 use crate::shapes::{KindCounts, Shape};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -48,13 +48,32 @@ pub struct DbWriter {
     material_index: HashMap<[u32; 8], u32>,
     current_material: Option<u32>,
     material_statements: u64,
+    origin: [f64; 3],
+    /// A mesh's vertex table, when the source is a mesh.
+    mesh_vertices: Option<u64>,
+    /// Vertices the polygons and patches list.
+    listed_vertices: u64,
+    triangles: u64,
 }
+
+/// The output buffer of [`DbWriter::create`].
+pub const WRITE_BUFFER: usize = 4 << 20;
 
 impl DbWriter {
     /// Starts a database at `path` (written to a temporary file beside it).
     pub fn create(path: &Path, compression: Compression) -> Result<DbWriter, Error> {
+        Self::create_with_buffer(path, compression, WRITE_BUFFER)
+    }
+
+    /// As [`DbWriter::create`], with an output buffer of `buffer` bytes
+    /// (for writers under a tight memory budget).
+    pub fn create_with_buffer(
+        path: &Path,
+        compression: Compression,
+        buffer: usize,
+    ) -> Result<DbWriter, Error> {
         let tmp = crate::fsutil::temp_beside(path)?;
-        let mut out = BufWriter::with_capacity(4 << 20, tmp);
+        let mut out = BufWriter::with_capacity(buffer, tmp);
         out.write_all(&[0u8; HEADER_BYTES]).at(path)?;
         let compressor = match compression {
             Compression::None => None,
@@ -84,7 +103,17 @@ impl DbWriter {
             material_index: HashMap::new(),
             current_material: None,
             material_statements: 0,
+            origin: [0.0; 3],
+            mesh_vertices: None,
+            listed_vertices: 0,
+            triangles: 0,
         })
+    }
+
+    /// Memory the writer holds besides its buffer: one block of records
+    /// and, compressing, one compressed block.
+    pub fn block_bytes(&self) -> usize {
+        BLOCK_TARGET * if self.compressor.is_some() { 2 } else { 1 } + (64 << 10)
     }
 
     pub fn objects_written(&self) -> u64 {
@@ -196,7 +225,11 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: VERSION,
+            version: if self.origin == [0.0; 3] {
+                VERSION
+            } else {
+                VERSION_ORIGIN
+            },
             header_bytes: HEADER_BYTES as u32,
             compression: match self.compression {
                 Compression::None => 0,
@@ -221,9 +254,19 @@ impl DbWriter {
             raw_bytes: self.raw_bytes,
             bbox: self.bbox.to_array(),
             tables_crc: crc32fast::hash(&tables),
-            reserved: [0; 20],
+            origin: [0; 6],
+            triangles: split64(self.triangles),
+            vertices: split64(self.mesh_vertices.unwrap_or(self.listed_vertices)),
+            flags: FLAG_COUNTS
+                | if self.mesh_vertices.is_some() {
+                    FLAG_MESH
+                } else {
+                    0
+                },
+            reserved: [0; 9],
             header_crc: 0,
         };
+        h.set_origin(self.origin);
         h.header_crc = h.compute_crc();
         let path = self.path.clone();
         let mut out = self.out.take().expect("finish runs once");
@@ -292,6 +335,24 @@ impl SceneSink for DbWriter {
         Ok(())
     }
 
+    fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
+        if self.objects > 0 {
+            return Err(Error::Scene(
+                "the scene's origin comes after its first object".into(),
+            ));
+        }
+        if !origin.iter().all(|c| c.is_finite()) {
+            return Err(Error::Scene("the scene's origin is not finite".into()));
+        }
+        self.origin = origin;
+        Ok(())
+    }
+
+    fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
+        self.mesh_vertices = Some(self.mesh_vertices.unwrap_or(0) + facts.vertices);
+        Ok(())
+    }
+
     fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
         if self.objects >= u32::MAX as u64 {
             return Err(Error::Scene(format!("more than {} objects", u32::MAX)));
@@ -322,6 +383,11 @@ impl SceneSink for DbWriter {
         b.push(material);
         b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
         shape.encode(b);
+        let triangles = shape.triangles();
+        if triangles > 0 {
+            self.triangles += triangles;
+            self.listed_vertices += count as u64;
+        }
         self.counts.add(kind);
         self.objects += 1;
         self.block_objects += 1;
