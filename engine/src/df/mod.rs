@@ -3,7 +3,10 @@
 //! It is the reference the breadth-first tracer is checked against, and the
 //! fast path for scenes that fit in memory.
 
+mod lanes;
 mod object_grid;
+mod packet;
+mod single;
 mod trace;
 
 pub use object_grid::ObjectGrid;
@@ -37,6 +40,10 @@ pub struct DfScene<'t> {
     pub grids: Vec<ObjectGrid>,
     pub shade: ShadeScene,
     pub camera: Camera,
+    /// A distance far above the rounding of any hit's position (in either
+    /// precision) and above the grids' margin around an object: packets of
+    /// rays skip a candidate only when it lies at least this far from them.
+    pub slack: f64,
 }
 
 /// Memory the depth-first tracer needs for `db`, roughly.
@@ -92,6 +99,18 @@ impl<'t> DfScene<'t> {
         }
         let header = db.scene();
         let eps = epsilon(&db.bbox(), opts.precision);
+        // Single precision rounds a position to about 6e-8 of its size;
+        // the grids' margin is 1e-6 of a voxel.
+        let mut scale: f64 = 0.0;
+        for g in &grids {
+            for i in 0..3 {
+                scale = scale
+                    .max(g.spec.hi[i] - g.spec.lo[i])
+                    .max(g.spec.lo[i].abs())
+                    .max(g.spec.hi[i].abs());
+            }
+        }
+        let slack = 1e-5 * scale;
         Ok(DfScene {
             shapes,
             bboxes,
@@ -102,6 +121,7 @@ impl<'t> DfScene<'t> {
             grids,
             shade: ShadeScene::new(header, opts.max_depth, eps),
             camera: Camera::new(&header.view, opts.width, opts.height)?,
+            slack,
         })
     }
 
