@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release -p sray-engine --example dfbench -- SCENE.nff
 //! [--size N] [--precision single|double] [--threads N] [--reps N]
-//! [--depth N]`
+//! [--depth N] [--density VOXELS_PER_OBJECT]`
 
 use sray_engine::df;
 use sray_engine::progress::NoProgress;
@@ -39,6 +39,7 @@ fn main() {
             "--threads" => opts.threads = v.parse().expect("threads"),
             "--reps" => reps = v.parse().expect("reps"),
             "--depth" => opts.max_depth = v.parse().expect("depth"),
+            "--density" => opts.grid_density = v.parse().expect("density"),
             a => panic!("unknown argument {a}"),
         }
         i += 2;

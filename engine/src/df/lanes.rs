@@ -7,13 +7,16 @@ use crate::intersect::{RayQ, triangle};
 use crate::math::{Real, V3, Vec3, Vec3Ext};
 use crate::render::KindCounts;
 use crate::scene::Aabb;
-use crate::shapes::{Kind, Prepared, Shape, SphereKind};
+use crate::shapes::{Kind, Shape, SphereKind};
+
+/// Eye rays go in packets of PACKET_SIDE x PACKET_SIDE pixel corners.
+pub const PACKET_SIDE: usize = 4;
 
 /// Most rays in a packet.
-pub const LANES: usize = 16;
+pub const LANES: usize = PACKET_SIDE * PACKET_SIDE;
 
 /// A set of lanes, one bit each.
-pub type Mask = u32;
+pub type Mask = u64;
 
 /// Iterates over the lanes of a mask, lowest first.
 #[inline(always)]
@@ -100,7 +103,7 @@ impl<R> Rays<R> {
     /// Every lane in use.
     #[inline]
     pub fn all(&self) -> Mask {
-        if self.n >= 32 {
+        if self.n >= Mask::BITS as usize {
             Mask::MAX
         } else {
             (1 << self.n) - 1
@@ -126,8 +129,8 @@ impl<R> Rays<R> {
 /// One candidate, ready to be tested against the lanes of a packet: each
 /// lane's test is exactly the scalar test of the candidate's kind.
 pub struct LaneTests<'a, 't> {
+    s: &'a DfScene<'t>,
     shape: &'a Shape<'t>,
-    prep: Option<&'a Prepared>,
     bbox: &'a Aabb,
     id: u32,
 }
@@ -136,8 +139,8 @@ impl<'a, 't> LaneTests<'a, 't> {
     #[inline(always)]
     pub fn new(s: &'a DfScene<'t>, id: u32) -> Self {
         LaneTests {
+            s,
             shape: &s.shapes[id as usize],
-            prep: s.prep(id),
             bbox: &s.bboxes[id as usize],
             id,
         }
@@ -174,10 +177,10 @@ impl<'a, 't> LaneTests<'a, 't> {
                     }
                 }
             }
-            shape => {
+            _ => {
                 for i in lanes(m) {
                     let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
-                    if let Some(t) = shape.intersect(self.prep, self.bbox, q, lo, hi) {
+                    if let Some(t) = self.s.intersect(id, q, lo, hi) {
                         won |= (best.offer(i, t, id) as Mask) << i;
                     }
                 }
@@ -210,10 +213,10 @@ impl<'a, 't> LaneTests<'a, 't> {
                     }
                 }
             }
-            shape => {
+            _ => {
                 for i in lanes(*m) {
                     let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
-                    if shape.intersect(self.prep, self.bbox, q, lo, hi).is_some() {
+                    if self.s.intersect(self.id, q, lo, hi).is_some() {
                         hit |= 1 << i;
                     }
                 }

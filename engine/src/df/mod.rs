@@ -6,6 +6,7 @@
 mod lanes;
 mod object_grid;
 mod packet;
+mod polygon;
 mod single;
 mod trace;
 
@@ -18,7 +19,10 @@ use crate::progress::Progress;
 use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
+use crate::intersect::RayQ;
+use crate::math::Real;
 use crate::shapes::{Prepared, Shape};
+use polygon::EdgeBins;
 use std::time::Instant;
 
 /// `prep_of` entry of objects without prepared data.
@@ -34,6 +38,10 @@ pub struct DfScene<'t> {
     /// `PLAIN` for objects with none worth keeping (spheres, triangles).
     pub prep_of: Vec<u32>,
     pub preps: Vec<Prepared>,
+    /// Index into `edge_bins` of each many-sided polygon's binned edges,
+    /// or `PLAIN`.
+    pub bins_of: Vec<u32>,
+    pub edge_bins: Vec<EdgeBins>,
     pub material_of: Vec<u32>,
     pub materials: Vec<Material>,
     /// One grid per object group; the last holds the large objects, if any.
@@ -73,16 +81,32 @@ impl<'t> DfScene<'t> {
         let mut material_of = Vec::with_capacity(n);
         let mut prep_of = Vec::with_capacity(n);
         let mut preps = Vec::new();
+        let mut bins_of = Vec::with_capacity(n);
+        let mut edge_bins = Vec::new();
         for id in 0..n as u32 {
             let o = objects.get(id);
             shapes.push(o.shape);
             bboxes.push(o.bbox);
             material_of.push(o.material);
-            match o.shape.prepare() {
+            let prep = o.shape.prepare();
+            let bins = match (&o.shape, &prep) {
+                (Shape::Polygon(p), Some(Prepared::Polygon(plane))) => {
+                    EdgeBins::new(p.vertices, plane)
+                }
+                _ => None,
+            };
+            match prep {
                 None => prep_of.push(PLAIN),
                 Some(p) => {
                     prep_of.push(preps.len() as u32);
                     preps.push(p);
+                }
+            }
+            match bins {
+                None => bins_of.push(PLAIN),
+                Some(b) => {
+                    bins_of.push(edge_bins.len() as u32);
+                    edge_bins.push(b);
                 }
             }
         }
@@ -116,6 +140,8 @@ impl<'t> DfScene<'t> {
             bboxes,
             prep_of,
             preps,
+            bins_of,
+            edge_bins,
             material_of,
             materials: header.materials.clone(),
             grids,
@@ -131,6 +157,20 @@ impl<'t> DfScene<'t> {
         match self.prep_of[id as usize] {
             PLAIN => None,
             i => Some(&self.preps[i as usize]),
+        }
+    }
+
+    /// Nearest `t` in `(t_min, t_max)` at which `ray` meets object `id`:
+    /// the object's kind's test, through its prepared data.
+    #[inline(always)]
+    pub fn intersect<R: Real>(&self, id: u32, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
+        let i = id as usize;
+        match (self.bins_of[i], &self.shapes[i]) {
+            (PLAIN, shape) => shape.intersect(self.prep(id), &self.bboxes[i], ray, t_min, t_max),
+            (b, Shape::Polygon(p)) => {
+                self.edge_bins[b as usize].intersect(p.vertices, &self.bboxes[i], ray, t_min, t_max)
+            }
+            (_, shape) => shape.intersect(self.prep(id), &self.bboxes[i], ray, t_min, t_max),
         }
     }
 

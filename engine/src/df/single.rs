@@ -147,7 +147,5 @@ fn blocks<R: Real>(
     *m = stamp;
     let shape = &s.shapes[id as usize];
     sc.tests.add(shape.kind());
-    shape
-        .intersect(s.prep(id), &s.bboxes[id as usize], q, rmin, rmax)
-        .is_some()
+    s.intersect(id, q, rmin, rmax).is_some()
 }

@@ -6,7 +6,7 @@
 //! the order in which a slot's contributions arrive does not matter.
 
 use super::DfScene;
-use super::lanes::{LANES, Mask, Rays, lanes};
+use super::lanes::{LANES, Mask, PACKET_SIDE, Rays, lanes};
 use super::packet::{self, Hits, Plan};
 use super::single;
 use crate::error::Error;
@@ -14,20 +14,20 @@ use crate::intersect::RayQ;
 use crate::math::{Real, Vec3};
 use crate::progress::Progress;
 use crate::render::{
-    EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Sampling, Spawn, shade,
+    EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade,
     to_fixed,
 };
 use rayon::prelude::*;
 
 /// Rows of frame slots per task: packets are square blocks of slots, so a
 /// task takes a band of rows.
-const BAND: usize = 4;
+const BAND: usize = PACKET_SIDE;
 
 /// A shadow ray waiting for its light's packet.
 #[derive(Clone, Copy, Debug)]
 struct ShadowRay {
     light: u32,
-    lane: u8,
+    lane: u16,
     dir: Vec3,
     dist: f64,
     color: [f32; 3],
@@ -215,11 +215,10 @@ fn trace_band<R: Real>(
 ) {
     let spp = eye.sampling.per_slot() as usize;
     // Blocks of side x side slots, of at most LANES rays when they fit.
-    let side = match eye.sampling {
-        Sampling::Corners => 4,
-        Sampling::Jittered { .. } if spp * 4 <= LANES => 2,
-        Sampling::Jittered { .. } => 1,
-    };
+    let mut side = PACKET_SIDE;
+    while side > 1 && side * side * spp > LANES {
+        side /= 2;
+    }
     let rows = out.len() / row_len;
     let origin = eye.camera.eye;
     let mut rays = Rays::<R>::new();
@@ -238,7 +237,7 @@ fn trace_band<R: Real>(
                         if rays.n == LANES {
                             sc.rays.eye_rays += rays.n as u64;
                             rays.pad();
-                            trace_packet(s, sc, &rays, &carry, 1, origin, out);
+                            trace_packet(s, sc, &rays, &carry, 1, Some(origin), out);
                             rays.n = 0;
                         }
                     }
@@ -247,7 +246,7 @@ fn trace_band<R: Real>(
             if rays.n > 0 {
                 sc.rays.eye_rays += rays.n as u64;
                 rays.pad();
-                trace_packet(s, sc, &rays, &carry, 1, origin, out);
+                trace_packet(s, sc, &rays, &carry, 1, Some(origin), out);
                 rays.n = 0;
             }
         }
@@ -265,14 +264,14 @@ fn add(out: &mut [[i64; 3]], slot: u32, c: [f32; 3]) {
 
 /// Follows a packet of rays of tree depth `depth` (eye rays: 1) and
 /// everything they spawn, adding colour to `out`. `reference` is a point
-/// near which the rays' lines pass.
+/// the rays' lines pass through (the eye), if there is one.
 fn trace_packet<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &Rays<R>,
     carry: &Carry,
     depth: u8,
-    reference: Vec3,
+    reference: Option<Vec3>,
     out: &mut [[i64; 3]],
 ) {
     let t0 = sc.profile.then(std::time::Instant::now);
@@ -298,7 +297,7 @@ fn trace_packet<R: Real>(
     refract.n = 0;
     let mut points = [Vec3::ZERO; LANES];
     // Where each lane's shadow rays end in `shadows`.
-    let mut ends = [0u16; LANES];
+    let mut ends = [0u32; LANES];
     for i in 0..rays.n {
         let (slot, weight) = (carry.slot[i], carry.weight[i]);
         // Objects of the database are the only primitives here.
@@ -328,7 +327,7 @@ fn trace_packet<R: Real>(
                         sc.rays.shadow_rays += 1;
                         shadows.push(ShadowRay {
                             light,
-                            lane: i as u8,
+                            lane: i as u16,
                             dir,
                             dist,
                             color,
@@ -351,17 +350,17 @@ fn trace_packet<R: Real>(
         } else {
             add(out, slot, s.shade.background(weight));
         }
-        ends[i] = shadows.len() as u16;
+        ends[i] = shadows.len() as u32;
     }
     // The shadow rays toward each light, as one packet: each lane's are
     // in the order of the lights, so the next light is the least of the
     // lanes' next ones.
     let max_depth = s.shade.max_depth as usize;
-    let mut next = [0u16; LANES];
+    let mut next = [0u32; LANES];
     for i in 1..rays.n {
         next[i] = ends[i - 1];
     }
-    let mut member = [0u16; LANES];
+    let mut member = [0u32; LANES];
     loop {
         let mut light = u32::MAX;
         for i in 0..rays.n {
@@ -399,20 +398,19 @@ fn trace_packet<R: Real>(
     ] {
         if next.n > 0 {
             next.pad();
-            let reference = mean_origin(next);
-            trace_packet(s, sc, next, next_carry, depth + 1, reference, out);
+            trace_packet(s, sc, next, next_carry, depth + 1, None, out);
         }
     }
     sc.levels[depth as usize] = Some(lv);
 }
 
-/// The mean of a packet's origins.
-fn mean_origin<R>(rays: &Rays<R>) -> Vec3 {
+/// The mean of the origins of the lanes `m`.
+fn mean_origin<R>(rays: &Rays<R>, m: Mask) -> Vec3 {
     let mut sum = Vec3::ZERO;
-    for i in 0..rays.n {
+    for i in lanes(m) {
         sum += rays.o(i);
     }
-    sum / rays.n as f64
+    sum / m.count_ones() as f64
 }
 
 /// The nearest hit of every ray of the packet: walking together if they
@@ -421,16 +419,28 @@ fn nearest_all<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &Rays<R>,
-    reference: Vec3,
+    reference: Option<Vec3>,
     best: &mut Hits<R>,
 ) {
-    if rays.n >= 2
-        && let Some(plan) = Plan::new(s, rays, rays.all(), reference)
-    {
-        packet::nearest(s, sc, rays, rays.all(), &plan, best);
-        return;
+    let all = rays.all();
+    let mut rest = all;
+    if rays.n as u32 >= MIN_PACKET {
+        let whole = reference.unwrap_or_else(|| mean_origin(rays, all));
+        if let Some(plan) = Plan::new(s, rays, all, whole) {
+            packet::nearest(s, sc, rays, all, &plan, best);
+            return;
+        }
+        for m in octants(rays) {
+            if m != all && m.count_ones() >= MIN_PACKET {
+                let at = reference.unwrap_or_else(|| mean_origin(rays, m));
+                if let Some(plan) = Plan::new(s, rays, m, at) {
+                    packet::nearest(s, sc, rays, m, &plan, best);
+                    rest &= !m;
+                }
+            }
+        }
     }
-    for i in 0..rays.n {
+    for i in lanes(rest) {
         single::nearest(
             s,
             sc,
@@ -445,27 +455,58 @@ fn nearest_all<R: Real>(
     }
 }
 
-/// The lanes of a packet of shadow rays that nothing blocks; `slot` is
-/// their shadow cache slot.
+/// Fewest rays worth walking as a packet.
+const MIN_PACKET: u32 = 3;
+
+/// The lanes of each octant of directions: a packet that is not coherent
+/// as a whole may be in parts.
+fn octants<R>(rays: &Rays<R>) -> [Mask; 8] {
+    let mut octants = [0 as Mask; 8];
+    for i in 0..rays.n {
+        let o = (rays.d[0][i] < 0.0) as usize
+            | ((rays.d[1][i] < 0.0) as usize) << 1
+            | ((rays.d[2][i] < 0.0) as usize) << 2;
+        octants[o] |= 1 << i;
+    }
+    octants
+}
+
+/// The lanes of a packet of shadow rays toward the light at `light` that
+/// nothing blocks; `slot` is their shadow cache slot.
 fn occluded_all<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &Rays<R>,
     slot: usize,
-    reference: Vec3,
+    light: Vec3,
 ) -> Mask {
-    let mut m = rays.all();
-    if rays.n >= 2
-        && let Some(plan) = Plan::new(s, rays, m, reference)
-    {
-        let mut last = NO_OBJECT;
-        packet::occluded(s, sc, rays, &mut m, &plan, sc.shadow_cache[slot], &mut last);
-        if last != NO_OBJECT {
-            sc.shadow_cache[slot] = last;
+    let all = rays.all();
+    let mut lit = all;
+    let mut rest = all;
+    if rays.n as u32 >= MIN_PACKET {
+        let split = octants(rays).into_iter().filter(|&m| m != all);
+        for m in std::iter::once(all).chain(split) {
+            if m.count_ones() < MIN_PACKET {
+                continue;
+            }
+            let Some(plan) = Plan::new(s, rays, m, light) else {
+                continue;
+            };
+            let mut unblocked = m;
+            let mut last = NO_OBJECT;
+            let cached = sc.shadow_cache[slot];
+            packet::occluded(s, sc, rays, &mut unblocked, &plan, cached, &mut last);
+            if last != NO_OBJECT {
+                sc.shadow_cache[slot] = last;
+            }
+            lit &= !(m & !unblocked);
+            rest &= !m;
+            if rest == 0 {
+                break;
+            }
         }
-        return m;
     }
-    for i in 0..rays.n {
+    for i in lanes(rest) {
         if single::occluded(
             s,
             sc,
@@ -477,8 +518,8 @@ fn occluded_all<R: Real>(
             rays.t_min[i],
             rays.t_max[i],
         ) {
-            m &= !(1 << i);
+            lit &= !(1 << i);
         }
     }
-    m
+    lit
 }
