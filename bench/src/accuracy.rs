@@ -74,14 +74,13 @@ pub(super) fn plan(ctx: &Ctx) -> Plan {
 
 /// 8-bit RGB pixels of a PNG.
 fn pixels(path: &Path) -> anyhow::Result<Vec<u8>> {
-    let dec = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(path).with_context(|| path.display().to_string())?,
-    ));
-    let mut rd = dec.read_info()?;
-    let mut buf = vec![0; rd.output_buffer_size().context("image too large")?];
-    let info = rd.next_frame(&mut buf)?;
-    buf.truncate(info.buffer_size());
-    Ok(buf)
+    let img = image::ImageReader::open(path)
+        .with_context(|| path.display().to_string())?
+        .with_guessed_format()
+        .with_context(|| path.display().to_string())?
+        .decode()
+        .with_context(|| path.display().to_string())?;
+    Ok(img.into_rgb8().into_raw())
 }
 
 /// Root mean square difference, in units of full scale (0..1).

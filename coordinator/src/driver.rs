@@ -17,7 +17,7 @@ use crate::state::{Shared, TaskEvent, TaskInput, TaskOutput};
 use anyhow::{Context, bail};
 use sray_engine::bf::{RayRec, plan_grids};
 use sray_engine::render::{
-    Camera, Frame, GridRes, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
+    Camera, Frame, GridRes, ImageFormat, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
 };
 use sray_engine::sdb::Database;
 use sray_engine::spill::{ExternalSorter, RecordFile, RecordWriter};
@@ -33,6 +33,8 @@ pub struct Job {
     pub params: v1::RenderParams,
     pub opts: RenderOptions,
     pub shard_rays: u64,
+    /// The format of the image sent back.
+    pub format: ImageFormat,
     pub objects: u64,
     pub eps: f64,
     pub grids: Vec<sray_engine::grid::GridStat>,
@@ -58,6 +60,14 @@ impl Job {
             0 => shared.cfg.shard_rays,
             n if SHARD_RAYS.contains(&n) => n,
             n => bail!("{n} rays per shard is out of range {SHARD_RAYS:?}"),
+        };
+        let format = match v1::ImageFormat::try_from(spec.image_format) {
+            Ok(v1::ImageFormat::Png) => ImageFormat::Png,
+            Ok(v1::ImageFormat::Exr) => ImageFormat::Exr,
+            Err(_) => bail!(
+                "image format {} is unknown here: this coordinator writes PNG or OpenEXR",
+                spec.image_format
+            ),
         };
         let db = Database::open(&scene.path)?;
         Camera::new(&db.scene().view, opts.width, opts.height)?;
@@ -86,6 +96,7 @@ impl Job {
             params,
             opts,
             shard_rays,
+            format,
             grids,
         })
     }
@@ -268,8 +279,9 @@ async fn drive(
     }
 
     // The image, then the statistics.
-    let png = tokio::task::spawn_blocking(move || frame.png_bytes()).await??;
-    for c in png.chunks(sray_proto::wire::RECORD_CHUNK_BYTES) {
+    let format = job.format;
+    let image = tokio::task::spawn_blocking(move || frame.encode(format)).await??;
+    for c in image.chunks(sray_proto::wire::RECORD_CHUNK_BYTES) {
         send(events, v1::job_event::Event::ImageChunk(c.to_vec())).await?;
     }
     let stats = job_stats(shared, id, job, &tot, traffic0, t0.elapsed().as_secs_f64());

@@ -1,7 +1,7 @@
 //! One render, start to finish: resolve the scene into an object database,
 //! pick the tracer, trace, write the image and statistics.
 
-use crate::bf::{self, BfOptions, StoreNumber};
+use crate::bf::{self, BfOptions, Shading, StoreNumber};
 use crate::df;
 use crate::error::{Error, IoContext};
 use crate::progress::Progress;
@@ -21,6 +21,8 @@ pub struct RenderRequest {
     /// Memory budget in bytes (default: half of the available memory).
     pub memory: Option<u64>,
     pub store: StoreNumber,
+    /// Where the breadth-first tracer's shading gets surfaces.
+    pub shading: Shading,
     /// Where temporary databases and spilled rays go (default: the system's
     /// temp dir).
     pub tmp_dir: Option<PathBuf>,
@@ -131,6 +133,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
                     memory,
                     store: req.store,
                     spill_dir: req.tmp_dir.clone(),
+                    shading: req.shading,
                 },
                 &*progress,
             )?;

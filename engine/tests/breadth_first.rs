@@ -230,6 +230,7 @@ fn too_small_a_budget_says_the_minimum() {
         memory: 64 << 10,
         store: StoreNumber::Adaptive,
         spill_dir: None,
+        shading: Default::default(),
     };
     let e = bf::render(&db, &opts(1, true), &b, &NoProgress)
         .err()

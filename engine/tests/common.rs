@@ -47,7 +47,7 @@ pub const DEFAULT_SCENES: [(&str, u32); 7] = [
     ("teapot", 12),
 ];
 
-use sray_engine::bf::{self, BfOptions, StoreNumber};
+use sray_engine::bf::{self, BfOptions, Shading, StoreNumber};
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{RenderOptions, RenderStats};
 use sray_engine::sdb::Database;
@@ -63,10 +63,22 @@ pub fn df_render(db: &Database, o: &RenderOptions) -> Render {
 
 /// A breadth-first render with the given store number and budget.
 pub fn bf_render(db: &Database, o: &RenderOptions, store: StoreNumber, memory: u64) -> Render {
+    bf_render_with(db, o, store, memory, Shading::Carry)
+}
+
+/// As [`bf_render`], shading as given.
+pub fn bf_render_with(
+    db: &Database,
+    o: &RenderOptions,
+    store: StoreNumber,
+    memory: u64,
+    shading: Shading,
+) -> Render {
     let b = BfOptions {
         memory,
         store,
         spill_dir: None,
+        shading,
     };
     let out = bf::render(db, o, &b, &NoProgress).unwrap();
     (out.frame.to_rgb8(), out.stats)

@@ -21,9 +21,13 @@ pub struct ConvertArgs {
     /// Compress the object database: none, zstd or zstd:LEVEL (1-22)
     #[arg(long, value_parser = parse_compression, default_value = "none")]
     pub compress: Compression,
+    /// No progress bar (errors are still printed)
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 pub fn run(a: ConvertArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     let source = SceneSource::parse(&a.scene)?;
     let bar = match source {
         SceneSource::File { format, .. } if format.progress_in_bytes() => Bar::bytes("convert"),

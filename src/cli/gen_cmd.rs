@@ -22,9 +22,13 @@ pub struct GenArgs {
     /// Compress the object database: none, zstd or zstd:LEVEL (1-22)
     #[arg(long, value_parser = parse_compression, default_value = "none")]
     pub compress: Compression,
+    /// No progress bar (errors are still printed)
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 pub fn run(a: GenArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     let size = a.size.unwrap_or_else(|| a.name.default_size());
     let max = a.name.max_size();
     if size == 0 || size > max {

@@ -12,9 +12,13 @@ pub struct InfoArgs {
     /// Print one JSON object on stdout
     #[arg(long)]
     pub json: bool,
+    /// No progress bar (errors are still printed)
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 pub fn run(a: InfoArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     let bar = Bar::bytes("info");
     let info = scene_info(&a.file, &bar)?;
     bar.finish();

@@ -8,6 +8,7 @@ mod gen_cmd;
 mod info_cmd;
 mod outputs;
 mod render;
+mod summary;
 mod verify;
 
 use clap::{Parser, Subcommand};
@@ -28,7 +29,7 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Render a scene (.nff, .sdb or spd:NAME:SIZE) to a PNG
+    /// Render a scene (.nff, .sdb or spd:NAME:SIZE) to a PNG or OpenEXR image
     Render(render::RenderArgs),
     /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
     Gen(gen_cmd::GenArgs),

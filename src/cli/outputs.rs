@@ -3,14 +3,17 @@
 //! render starts, so that an unwritable path fails at once instead of after
 //! an hour of tracing; both are renamed into place only when both are
 //! complete, so a failure never leaves one without the other or a partial
-//! file under either name.
+//! file under either name. The image's format follows its extension
+//! (.png or .exr), checked here too, before any work.
 
 use sray_engine::fsutil::{persist, temp_beside};
+use sray_engine::render::ImageFormat;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use tempfile::NamedTempFile;
 
 pub struct Outputs {
+    format: ImageFormat,
     image: (PathBuf, NamedTempFile),
     stats: Option<(PathBuf, NamedTempFile)>,
 }
@@ -20,7 +23,9 @@ impl Outputs {
         if stats == Some(image) {
             anyhow::bail!("--stats and -o name the same file, {}", image.display());
         }
+        let format = ImageFormat::from_path(image)?;
         Ok(Outputs {
+            format,
             image: (image.to_path_buf(), temp_beside(image)?),
             stats: stats
                 .map(|p| Ok::<_, anyhow::Error>((p.to_path_buf(), temp_beside(p)?)))
@@ -28,12 +33,17 @@ impl Outputs {
         })
     }
 
-    /// Writes the PNG bytes and the statistics, then moves both into place.
-    /// Unwritten temporary files are removed when dropped.
-    pub fn write(self, png: &[u8], stats: &impl serde::Serialize) -> anyhow::Result<()> {
+    /// The format the image file is to be in, by its extension.
+    pub fn format(&self) -> ImageFormat {
+        self.format
+    }
+
+    /// Writes the image file's bytes and the statistics, then moves both
+    /// into place. Unwritten temporary files are removed when dropped.
+    pub fn write(self, image_file: &[u8], stats: &impl serde::Serialize) -> anyhow::Result<()> {
         let (image_path, mut image) = self.image;
         image
-            .write_all(png)
+            .write_all(image_file)
             .map_err(|e| sray_engine::Error::io(&image_path, e))?;
         let stats = match self.stats {
             Some((p, mut tmp)) => {

@@ -1,9 +1,10 @@
-//! `sray render`: a scene to a PNG.
+//! `sray render`: a scene to an image file (PNG or OpenEXR).
 
 use super::bar::Bar;
 use super::outputs::Outputs;
+use super::summary;
 use clap::Args;
-use sray_engine::bf::StoreNumber;
+use sray_engine::bf::{Shading, StoreNumber};
 use sray_engine::job::{RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
@@ -14,7 +15,8 @@ use std::path::PathBuf;
 pub struct RenderArgs {
     /// The scene: an .nff file, an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
     pub scene: String,
-    /// Output image (PNG)
+    /// Output image: .png (8-bit RGB) or .exr (OpenEXR, linear 32-bit float
+    /// RGB, unclamped)
     #[arg(short, long)]
     pub output: PathBuf,
     /// Tracer: df (depth-first, in memory), bf (breadth-first) or auto
@@ -48,6 +50,10 @@ pub struct RenderArgs {
     /// Breadth-first store number: adaptive, or a fixed number of voxels
     #[arg(long, default_value = "adaptive", value_parser = parse_store)]
     pub store_number: StoreNumber,
+    /// Breadth-first shading: carry (surfaces found with the hits) or join
+    /// (the paper's sort-and-scan of the objects)
+    #[arg(long, default_value = "carry")]
+    pub shading: Shading,
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
@@ -62,6 +68,10 @@ pub struct RenderArgs {
     /// Write statistics as JSON to this file
     #[arg(long)]
     pub stats: Option<PathBuf>,
+    /// No progress bars, and no summary line at the end (errors are still
+    /// printed)
+    #[arg(short, long)]
+    pub quiet: bool,
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
@@ -118,6 +128,7 @@ impl Stages for BarStages {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
     }
@@ -138,6 +149,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         mode: a.mode,
         memory: a.memory,
         store: a.store_number,
+        shading: a.shading,
         tmp_dir: a.tmp_dir.clone(),
     };
     let outputs = Outputs::open(&a.output, a.stats.as_deref())?;
@@ -145,7 +157,10 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         return run_cluster(&a, &req, outputs);
     }
     let result = render(&req, &BarStages)?;
-    outputs.write(&result.frame.png_bytes()?, &result.stats)
+    let image = result.frame.encode(outputs.format())?;
+    outputs.write(&image, &result.stats)?;
+    summary::print(&serde_json::to_value(&result.stats)?, &a.output, a.quiet);
+    Ok(())
 }
 
 /// Renders on a cluster: a remote coordinator, or local worker processes.
@@ -170,6 +185,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
         .build()?;
     let bar = Bar::new("cluster", "");
     let db = scene.db.path().to_path_buf();
+    let format = outputs.format();
     let result = rt.block_on(async {
         match (&a.coordinator, a.local_workers) {
             (Some(url), _) => {
@@ -183,7 +199,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                         .map_err(anyhow::Error::msg)?,
                     ca: a.tls_ca.clone(),
                 };
-                client::render(&target, &db, params, shard_rays, &bar).await
+                client::render(&target, &db, params, shard_rays, format, &bar).await
             }
             (None, Some(n)) => {
                 let plan = local::LocalPlan {
@@ -194,7 +210,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                     threads: req.options.threads,
                     tmp_dir: req.tmp_dir.clone(),
                 };
-                local::render(&plan, &db, params, shard_rays, &bar).await
+                local::render(&plan, &db, params, shard_rays, format, &bar).await
             }
             (None, None) => unreachable!("checked by the caller"),
         }
@@ -203,5 +219,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     let mut result = result?;
     result.stats["convert_seconds"] = scene.convert_seconds.into();
     result.stats["client_seconds"] = t0.elapsed().as_secs_f64().into();
-    outputs.write(&result.png, &result.stats)
+    outputs.write(&result.image, &result.stats)?;
+    summary::print(&result.stats, &a.output, a.quiet);
+    Ok(())
 }

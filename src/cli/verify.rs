@@ -14,9 +14,13 @@ pub struct VerifyArgs {
     /// Print one JSON object on stdout
     #[arg(long)]
     pub json: bool,
+    /// No progress bar (errors are still printed)
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
+    super::bar::set_quiet(a.quiet);
     let db = Database::open(&a.file)?;
     let bar = Bar::bytes("verify");
     bar.0.set_length(db.file_bytes());

@@ -195,6 +195,9 @@ impl Node {
                     db_path: path,
                     opts,
                     bf: BfOptions {
+                        // Results travel to the coordinator without the
+                        // surfaces the carry mode would work out.
+                        shading: sray_engine::bf::Shading::Join,
                         memory: self.cfg.memory,
                         store,
                         spill_dir: self.cfg.tmp_dir.clone(),

@@ -28,8 +28,8 @@
 //! Slots are split into shards, one per thread; every thread scans the same
 //! decoded block for its own rays, so no ray is touched by two threads.
 
-use super::records::{RayRec, ResultRec};
-use super::regmap::{END, RegMap};
+use super::records::{Outcome, RayRec, ResultRec};
+use super::regmap::RegMap;
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
@@ -38,7 +38,7 @@ use crate::intersect::RayQ;
 use crate::math::{Real, Vec3, Vec3Ext};
 use crate::progress::Progress;
 use crate::render::KindCounts;
-use crate::sdb::{Block, Database};
+use crate::sdb::{Block, Database, ObjectRef};
 use crate::shapes::Prepared;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -58,27 +58,51 @@ pub enum StoreNumber {
 #[derive(Clone, Copy, Debug)]
 pub struct StorePlan {
     fixed: Option<u32>,
+    grids: usize,
     base: [u32; MAX_GRIDS],
     max: [u32; MAX_GRIDS],
+    /// Most voxels a walk can cross in the grid (res x + y + z).
+    walk: [u32; MAX_GRIDS],
 }
 
 impl StorePlan {
-    pub fn new(policy: StoreNumber, grids: &VoxelGrids) -> StorePlan {
+    pub fn new(policy: StoreNumber, grids: &[GridSpec]) -> StorePlan {
         let mut base = [1; MAX_GRIDS];
         let mut max = [1; MAX_GRIDS];
-        for (g, grid) in grids.grids.iter().enumerate() {
-            let res = *grid.spec.res.iter().max().unwrap_or(&1);
+        let mut walk = [1; MAX_GRIDS];
+        for (g, spec) in grids.iter().enumerate().take(MAX_GRIDS) {
+            let res = *spec.res.iter().max().unwrap_or(&1);
             base[g] = ((res as f64 / 10.0).round() as u32).max(1);
             max[g] = res.max(base[g]);
+            walk[g] = spec.res.iter().sum();
         }
         StorePlan {
             fixed: match policy {
                 StoreNumber::Fixed(n) => Some(n.max(1)),
                 StoreNumber::Adaptive => None,
             },
+            grids: grids.len().min(MAX_GRIDS),
             base,
             max,
+            walk,
         }
+    }
+
+    /// Registrations a fresh ray makes at most in its first pass: what a
+    /// ray slot plans for (the paper's memory / (ray + store number x
+    /// registration)). Survivors of later passes use what finished rays
+    /// leave.
+    pub fn planned(&self) -> u64 {
+        (0..self.grids)
+            .map(|g| self.store(g, 0).min(self.walk[g]) as u64)
+            .sum()
+    }
+
+    /// The most registrations one ray can make in one pass.
+    pub fn overrun(&self) -> u64 {
+        (0..self.grids)
+            .map(|g| self.store(g, 30).min(self.walk[g]) as u64)
+            .sum()
     }
 
     /// Store number in grid `g` for a ray's pass number `k` there.
@@ -88,11 +112,6 @@ impl StorePlan {
             Some(n) => n,
             None => self.max[g].min(self.base[g].saturating_mul(1 << k.min(20))),
         }
-    }
-
-    /// The most registrations one ray can ask for in a pass.
-    pub fn worst(&self, grids: usize) -> u32 {
-        (0..grids).map(|g| self.store(g, 30)).sum()
     }
 }
 
@@ -137,7 +156,6 @@ struct Hot<R> {
     /// (`NONE16` in [0] when none): the last-voxel rule's voxel.
     prev: [[u16; 3]; MAX_GRIDS],
     active: bool,
-    admitted: bool,
     shadow: bool,
     blocked: bool,
 }
@@ -152,6 +170,10 @@ struct Cold {
     inv: Vec3,
     t_min: f64,
     t_max: f64,
+    /// The surface at the best hit so far, when surfaces are carried.
+    ng: Vec3,
+    ns: Vec3,
+    material: u32,
 }
 
 fn empty_hot<R: Real>() -> Hot<R> {
@@ -162,7 +184,6 @@ fn empty_hot<R: Real>() -> Hot<R> {
         t_min: R::ZERO,
         prev: [[NONE16; 3]; MAX_GRIDS],
         active: false,
-        admitted: false,
         shadow: false,
         blocked: false,
     }
@@ -176,6 +197,9 @@ const EMPTY_COLD: Cold = Cold {
     inv: Vec3::new(1.0, f64::INFINITY, f64::INFINITY),
     t_min: 0.0,
     t_max: f64::INFINITY,
+    ng: Vec3::ZERO,
+    ns: Vec3::ZERO,
+    material: 0,
 };
 
 /// Bytes one ray slot takes.
@@ -234,7 +258,10 @@ struct Shard<R> {
     regs: [RegMap; MAX_GRIDS],
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
-    done: Vec<ResultRec>,
+    done: Vec<Outcome>,
+    /// Store numbers of the walks registered this pass, and their number.
+    store_sum: u64,
+    store_walks: u64,
 }
 
 /// Statistics of one round's intersection.
@@ -267,12 +294,17 @@ pub struct IntersectSetup<'a> {
     /// Grids of at most this many voxels get a dense voxel index per shard.
     pub dense_cells: usize,
     pub eps: f64,
+    /// Work out the surface at each ray's best hit as it is found, so that
+    /// shading needs no pass over the objects.
+    pub carry: bool,
 }
 
 /// The ray slots, kept from round to round so that their memory is
 /// allocated once.
 pub struct Slots<R> {
     shards: Vec<Shard<R>>,
+    /// The current block's candidate objects, shared by the shards.
+    candidates: Vec<Candidate>,
 }
 
 impl<R: Real> Slots<R> {
@@ -287,29 +319,35 @@ impl<R: Real> Slots<R> {
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
                     done: Vec::new(),
+                    store_sum: 0,
+                    store_walks: 0,
                 })
                 .collect(),
+            candidates: Vec::new(),
         }
     }
 
     /// Bytes the slots hold.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        self.shards
-            .iter()
-            .map(|sh| {
-                sh.hot.capacity() * size_of::<Hot<R>>()
-                    + sh.q.capacity() * size_of::<RayQ<R>>()
-                    + sh.cold.capacity() * size_of::<Cold>()
-                    + sh.done.capacity() * size_of::<ResultRec>()
-                    + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
-            })
-            .sum()
+        self.candidates.capacity() * size_of::<Candidate>()
+            + self
+                .shards
+                .iter()
+                .map(|sh| {
+                    sh.hot.capacity() * size_of::<Hot<R>>()
+                        + sh.q.capacity() * size_of::<RayQ<R>>()
+                        + sh.cold.capacity() * size_of::<Cold>()
+                        + sh.done.capacity() * size_of::<Outcome>()
+                        + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
+                })
+                .sum::<usize>()
     }
 
     /// Gives the slots' memory back at the end of a round's intersection,
     /// so that shading can use the same share of the budget.
     pub fn release(&mut self) {
+        self.candidates = Vec::new();
         for sh in self.shards.iter_mut() {
             sh.hot = Vec::new();
             sh.q = Vec::new();
@@ -359,7 +397,6 @@ fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
         t_min: R::from_f64(t_min),
         prev: [[NONE16; 3]; MAX_GRIDS],
         active: true,
-        admitted: false,
         shadow,
         blocked: false,
     };
@@ -372,6 +409,7 @@ fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
         inv,
         t_min,
         t_max: r.t_max,
+        ..EMPTY_COLD
     };
 }
 
@@ -384,7 +422,7 @@ pub fn intersect_rays<R: Real>(
     slots: &mut Slots<R>,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
     total: u64,
-    emit: &mut dyn FnMut(ResultRec) -> Result<(), Error>,
+    emit: &mut dyn FnMut(Outcome) -> Result<(), Error>,
     progress: &dyn Progress,
 ) -> Result<IntersectStats, Error> {
     // No more slots than rays.
@@ -432,62 +470,60 @@ pub fn intersect_rays<R: Real>(
             total - finished
         ));
 
-        // Admit rays in slot order while their registrations fit.
-        let cap = setup.registrations.max(setup.store.worst(ngrids) as usize) as u64;
-        let mut budget = cap;
-        let (mut s_sum, mut s_n) = (0u64, 0u64);
-        for sh in shards.iter_mut() {
-            for (h, c) in sh.hot.iter_mut().zip(&sh.cold) {
-                h.admitted = false;
-                if !h.active || h.blocked {
-                    continue;
-                }
-                let (mut need, mut walks) = (0u64, 0u64);
-                for g in (0..ngrids).filter(|&g| c.walks[g].state != DONE) {
-                    need += setup.store.store(g, c.walks[g].k) as u64;
-                    walks += 1;
-                }
-                if need > 0 && need <= budget {
-                    h.admitted = true;
-                    budget -= need;
-                    s_sum += need;
-                    s_n += walks;
-                }
-            }
-        }
-        // The mean store number over the walks admitted to this pass.
-        st.store_numbers.push(if s_n > 0 {
-            s_sum as f64 / s_n as f64
-        } else {
-            0.0
-        });
-
-        // Register, per shard.
+        // Register, per shard: each shard takes its rays in slot order
+        // while its share of the registrations lasts. A ray reserves
+        // nothing beforehand; it registers what its walk finds (up to its
+        // store number per grid), so the last ray admitted may overrun the
+        // share by at most one ray's store numbers, which the budget
+        // allows for. A ray left out waits for the next pass unchanged:
+        // what it registers, and so every count, does not depend on when.
         let grids = &*setup.grids;
         let store = setup.store;
         let dense_cells = setup.dense_cells;
+        let share = (setup.registrations / shards.len()).max(1) as u64;
         pool.install(|| {
             shards.par_iter_mut().for_each(|sh| {
-                let expect = sh.regs.iter().map(|r| r.len()).max().unwrap_or(0).max(1024);
+                let expect = (share as usize).clamp(1024, 1 << 20);
                 for g in 0..ngrids {
                     let cells = grids.grids[g].spec.cells();
                     sh.regs[g].clear(expect, if cells <= dense_cells { cells } else { 0 });
                     sh.region[g] = NO_REGION;
                 }
+                sh.store_sum = 0;
+                sh.store_walks = 0;
+                let mut used = 0u64;
                 for i in 0..sh.hot.len() {
-                    if sh.hot[i].admitted {
-                        register(
-                            &mut sh.hot[i],
-                            &mut sh.cold[i],
-                            i as u32,
-                            grids,
-                            &store,
-                            &mut sh.regs,
-                            &mut sh.region,
-                        );
+                    let h = &sh.hot[i];
+                    if !h.active || h.blocked || used >= share {
+                        continue;
                     }
+                    let before: usize = sh.regs.iter().map(RegMap::len).sum();
+                    let (sum, walks) = register(
+                        &mut sh.hot[i],
+                        &mut sh.cold[i],
+                        i as u32,
+                        grids,
+                        &store,
+                        &mut sh.regs,
+                        &mut sh.region,
+                    );
+                    sh.store_sum += sum;
+                    sh.store_walks += walks;
+                    used += (sh.regs.iter().map(RegMap::len).sum::<usize>() - before) as u64;
+                }
+                for r in sh.regs.iter_mut() {
+                    r.finish();
                 }
             })
+        });
+        let (s_sum, s_n) = shards
+            .iter()
+            .fold((0, 0), |(a, b), sh| (a + sh.store_sum, b + sh.store_walks));
+        // The mean store number over the walks registered in this pass.
+        st.store_numbers.push(if s_n > 0 {
+            s_sum as f64 / s_n as f64
+        } else {
+            0.0
         });
         let regs: u64 = shards
             .iter()
@@ -508,11 +544,18 @@ pub fn intersect_rays<R: Real>(
         if regs > 0 {
             let mut scan = setup.db.scan()?;
             let grids = &*setup.grids;
+            let found = &mut slots.candidates;
+            let carry = setup.carry;
             while let Some(block) = scan.next_block()? {
+                candidates(&block, grids, &region, found);
+                if found.is_empty() {
+                    continue;
+                }
+                let found = &found[..];
                 pool.install(|| {
                     shards
                         .par_iter_mut()
-                        .for_each(|sh| scan_block(sh, &block, grids, &region));
+                        .for_each(|sh| scan_block(sh, &block, found, grids, carry));
                 });
             }
             st.db_scans += 1;
@@ -527,7 +570,12 @@ pub fn intersect_rays<R: Real>(
         }
 
         // Complete.
-        pool.install(|| shards.par_iter_mut().for_each(|sh| complete(sh, ngrids)));
+        let carry = setup.carry;
+        pool.install(|| {
+            shards
+                .par_iter_mut()
+                .for_each(|sh| complete(sh, ngrids, carry))
+        });
         for sh in shards.iter_mut() {
             st.intersection_tests += sh.counts.tests;
             st.tests_skipped_mailbox += sh.counts.skipped_mailbox;
@@ -546,7 +594,8 @@ pub fn intersect_rays<R: Real>(
 
 /// Walks a ray through each grid, storing it in up to its store number of
 /// voxels: where it enters some object's voxel boundary, or the first
-/// voxel of its walk if that is occupied.
+/// voxel of its walk if that is occupied. Returns the sum of the store
+/// numbers of the walks it continued, and their number (for statistics).
 #[allow(clippy::too_many_arguments)]
 fn register<R: Real>(
     h: &mut Hot<R>,
@@ -556,12 +605,15 @@ fn register<R: Real>(
     store: &StorePlan,
     regs: &mut [RegMap; MAX_GRIDS],
     region: &mut [Region; MAX_GRIDS],
-) {
+) -> (u64, u64) {
+    let (mut store_sum, mut walks) = (0u64, 0u64);
     for (g, grid) in grids.grids.iter().enumerate() {
         let w = &mut c.walks[g];
         if w.state == DONE {
             continue;
         }
+        store_sum += store.store(g, w.k) as u64;
+        walks += 1;
         h.prev[g] = w.last;
         let spec: &GridSpec = &grid.spec;
         if spec.cells() == 1 {
@@ -635,43 +687,79 @@ fn register<R: Real>(
             w.k = w.k.saturating_add(1);
         }
     }
+    (store_sum, walks)
 }
 
-/// Tests one block's objects against the shard's registered rays.
-fn scan_block<R: Real>(
-    sh: &mut Shard<R>,
+/// An object of the block being scanned that some registered voxel may
+/// hold: where its record is, its group and its voxel box. Worked out once
+/// per block for every shard.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Candidate {
+    at: u32,
+    index: u32,
+    group: u8,
+    lo: [u16; 3],
+    hi: [u16; 3],
+}
+
+/// The objects of `block` whose voxel box meets `region`, the box of the
+/// voxels rays are registered in this pass.
+fn candidates(
     block: &Block<'_>,
     grids: &VoxelGrids,
     region: &[Region; MAX_GRIDS],
+    out: &mut Vec<Candidate>,
 ) {
-    for o in block.objects() {
-        let g = grids.partition.group(&o.bbox);
-        if sh.regs[g].is_empty() {
-            continue;
-        }
-        let grid = &grids.grids[g];
-        let Some((lo, hi)) = grid.spec.cell_range(&o.bbox) else {
+    out.clear();
+    for b in block.boxes() {
+        let g = grids.partition.group(&b.bbox);
+        let Some((lo, hi)) = grids.grids[g].spec.cell_range(&b.bbox) else {
             continue;
         };
         if !region[g].overlaps(lo, hi) {
             continue;
         }
-        let mut prep: Option<Option<Prepared>> = None;
-        let prim = o.prim();
+        out.push(Candidate {
+            at: b.at,
+            index: b.index,
+            group: g as u8,
+            lo: lo.map(|c| c as u16),
+            hi: hi.map(|c| c as u16),
+        });
+    }
+}
+
+/// Tests one block's candidate objects against the shard's registered rays.
+fn scan_block<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    candidates: &[Candidate],
+    grids: &VoxelGrids,
+    carry: bool,
+) {
+    for c in candidates {
+        let g = c.group as usize;
+        if sh.regs[g].is_empty() {
+            continue;
+        }
+        let (lo, hi) = (c.lo.map(u32::from), c.hi.map(u32::from));
+        if !sh.region[g].overlaps(lo, hi) {
+            continue;
+        }
+        let grid = &grids.grids[g];
+        let dense = sh.regs[g].is_dense();
+        // Decoded on the first ray to test, and then kept.
+        let mut object: Option<(ObjectRef<'_>, Option<Prepared>)> = None;
+        let prim = PrimId::object(c.index);
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 let row = grid.spec.index([0, y, z]);
                 for x in lo[0]..=hi[0] {
                     let v = row + x as usize;
-                    if !sh.regs[g].is_dense() && grid.flags[v] & REGISTERED == 0 {
+                    if !dense && grid.flags[v] & REGISTERED == 0 {
                         continue;
                     }
-                    let Some(mut r) = sh.regs[g].first(v as u32) else {
-                        continue;
-                    };
-                    while r != END {
-                        let (slot, next) = sh.regs[g].link(r);
-                        r = next;
+                    for &slot in sh.regs[g].slots_in(v as u32) {
                         let s = &mut sh.hot[slot as usize];
                         if s.blocked {
                             continue;
@@ -693,7 +781,16 @@ fn scan_block<R: Real>(
                             sh.counts.skipped_last_voxel += 1;
                             continue;
                         }
-                        let pr = prep.get_or_insert_with(|| o.shape.prepare());
+                        if object.is_none() {
+                            // Records were checked when the block was read.
+                            let Some(o) = block.object_at(c.at, c.index) else {
+                                return;
+                            };
+                            object = Some((o, o.shape.prepare()));
+                        }
+                        let Some((o, pr)) = &object else {
+                            continue;
+                        };
                         sh.counts.tests.add(o.shape.kind());
                         let q = &sh.q[slot as usize];
                         if let Some(t) =
@@ -706,6 +803,15 @@ fn scan_block<R: Real>(
                             } else if s.best.loses_to(t, prim) {
                                 s.best = Hit { t, prim };
                                 s.upper = R::from_f64(t).next_up();
+                                if carry {
+                                    // Exactly what the shading join would
+                                    // compute from the ray and this hit.
+                                    let c = &mut sh.cold[slot as usize];
+                                    let surf = o.shape.surface(&RayQ::from_vec3(c.o, c.d), t);
+                                    c.ng = surf.ng;
+                                    c.ns = surf.ns;
+                                    c.material = o.material;
+                                }
                             }
                         }
                     }
@@ -716,7 +822,7 @@ fn scan_block<R: Real>(
 }
 
 /// Finishes the rays whose result is complete, freeing their slots.
-fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
+fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize, carry: bool) {
     for (h, c) in sh.hot.iter_mut().zip(sh.cold.iter_mut()) {
         if !h.active {
             continue;
@@ -731,10 +837,21 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize) {
                 w.state == DONE
             });
         if done {
-            sh.done.push(ResultRec {
+            let res = ResultRec {
                 ray: c.id,
                 prim: h.best.prim,
                 t: h.best.t,
+            };
+            sh.done.push(if carry && !h.shadow && h.best.is_some() {
+                Outcome {
+                    res,
+                    ng: c.ng.to_array(),
+                    ns: c.ns.to_array(),
+                    material: c.material,
+                    has_surface: 1,
+                }
+            } else {
+                Outcome::bare(res)
             });
             h.active = false;
         }

@@ -33,7 +33,7 @@ pub use voxels::{VoxelGrid, VoxelGrids};
 use crate::error::Error;
 use crate::grid::{GridSpec, MAX_CELLS, choose_resolution, plan_groups};
 use crate::math::Real;
-use crate::progress::Progress;
+use crate::progress::{Prefixed, Progress};
 use crate::render::{
     Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
 };
@@ -52,6 +52,35 @@ pub struct BfOptions {
     pub store: StoreNumber,
     /// Where rays and results spill (default: the system's temp dir).
     pub spill_dir: Option<PathBuf>,
+    pub shading: Shading,
+}
+
+/// Where shading gets a hit's normals and material.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Shading {
+    /// Worked out when the hit is found, during the intersection scan, and
+    /// carried with the result: shading reads rays and results in ray order
+    /// and needs no pass over the objects, and the rays it spawns come out
+    /// already in order.
+    #[default]
+    Carry,
+    /// The paper's Pseudocode 4: hits are sorted by object and joined with
+    /// one front-to-back scan of the objects per shading set (what the
+    /// cluster does, where results travel without surfaces, and what `sray
+    /// bench table1` measures).
+    Join,
+}
+
+impl std::str::FromStr for Shading {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Shading, String> {
+        match s {
+            "carry" => Ok(Shading::Carry),
+            "join" => Ok(Shading::Join),
+            _ => Err(format!("unknown shading '{s}' (expected carry or join)")),
+        }
+    }
 }
 
 /// How the memory budget is spent. Whatever is left after the fixed parts
@@ -70,6 +99,8 @@ pub struct Budget {
     pub shared: u64,
     /// Bytes of one ray slot with its planned registrations.
     pub slot_bytes: u64,
+    /// Registrations planned per slot.
+    pub regs_per_slot: u64,
     /// Bytes of a shading set: the hits, their radix-sort copy and the
     /// rays they spawn (see [`Budget::shading_set_hits`]).
     pub shading_set: u64,
@@ -96,8 +127,6 @@ const IO_BYTES: u64 =
     5 * spill::IO_BUFFER as u64 + (spill::MERGE_FANIN * spill::MERGE_BUFFER) as u64 + (64 << 10);
 /// Fewest rays worth a pass.
 const MIN_SLOTS: u64 = 64;
-/// Registrations planned per ray in memory.
-const REGS_PER_SLOT: u64 = 4;
 /// Databases smaller than this are cheap to scan...
 const CHEAP_SCAN_BYTES: u64 = 256 << 20;
 /// ... so that rounds keep at most this many rays in memory at once, which
@@ -108,16 +137,22 @@ const CACHE_SLOTS: u64 = 1 << 17;
 impl Budget {
     /// Splits `total` bytes for a render of `corners` pixel corners with
     /// `cells` voxels, or explains the smallest budget that would do.
+    /// `store` says how many registrations a ray slot plans for, and how
+    /// far the last ray a shard admits may overrun its share; `threads`
+    /// is the number of shards.
     pub fn plan<R: Real>(
         total: u64,
         corners: u64,
         cells: u64,
         scan_buffers: u64,
+        store: &StorePlan,
+        threads: usize,
     ) -> Result<Budget, Error> {
         let frame = corners * 24;
         let io = IO_BYTES + scan_buffers;
-        let fixed = frame + cells + io;
-        let slot_bytes = slot_bytes::<R>() as u64 + REGS_PER_SLOT * REGISTRATION_BYTES as u64;
+        let overrun = threads.max(1) as u64 * store.overrun() * REGISTRATION_BYTES as u64;
+        let fixed = frame + cells + io + overrun;
+        let slot_bytes = slot_bytes::<R>() as u64 + store.planned() * REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
         let min_shared = ((MIN_SLOTS * slot_bytes) as f64 / (1.0 - RESIDENT_RESULTS)).ceil() as u64;
@@ -143,6 +178,7 @@ impl Budget {
             io_buffers: io,
             shared,
             slot_bytes,
+            regs_per_slot: store.planned(),
             shading_set: (shared as f64 * SET_SHARE) as u64,
             next_ray_sort_records: part(NEXT_SHARE, 2 * std::mem::size_of::<RayRec>()),
         })
@@ -177,13 +213,14 @@ impl Budget {
 
     /// Whether `n` results may be held in memory, placed by ray id.
     pub fn results_resident(&self, n: u64) -> bool {
-        n * std::mem::size_of::<ResultRec>() as u64
+        n * std::mem::size_of::<records::Outcome>() as u64
             <= (self.shared as f64 * RESIDENT_RESULTS) as u64
     }
 
     /// Records the result sorter holds when results spill.
     pub fn result_sort_records(&self) -> u64 {
-        ((self.shared as f64 * RESIDENT_RESULTS) as u64 / std::mem::size_of::<ResultRec>() as u64)
+        ((self.shared as f64 * RESIDENT_RESULTS) as u64
+            / std::mem::size_of::<records::Outcome>() as u64)
             .max(16)
     }
 
@@ -308,6 +345,8 @@ fn render_in<R: Real>(
         camera: Camera::new(&db.scene().view, opts.width, opts.height)?,
         sampling: opts.sampling(),
     };
+    // Marking the voxels counts objects.
+    progress.set_unit("objects");
     let mut tr = Tracer::<R>::new(db, opts, bf, opts.frame_slots(), progress)?;
     let mut frame = Frame::with_sampling(opts.width, opts.height, eye.sampling);
     let mut counts = RayCounts {
@@ -324,10 +363,16 @@ fn render_in<R: Real>(
             break;
         }
         tr.stats.rays_per_round.push(n);
+        // Each round counts its own rays against its own total (a new
+        // count: the done count starts again at zero), and names itself in
+        // the passes' messages. The whole render's rays are not known in
+        // advance: each round holds the rays the previous one spawned.
+        progress.set_unit("rays");
         progress.set_total(n);
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
+        let in_round = Prefixed::new(progress, format!("round {round}: "));
         let resident = matches!(rays, RoundRays::Held(HeldRays::Memory(_)));
-        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, progress)?;
+        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, &in_round)?;
 
         progress.set_message(&format!("round {round}: shading"));
         let (next, count, _) = tr.shade(
@@ -379,12 +424,20 @@ mod tests {
 
     #[test]
     fn too_small_a_budget_names_the_minimum() {
-        let e = Budget::plan::<f64>(1 << 20, 513 * 513, 1000, 1 << 17)
+        let specs = [GridSpec::new(
+            &crate::scene::Aabb {
+                min: [0.0; 3],
+                max: [1.0; 3],
+            },
+            [10, 10, 10],
+        )];
+        let store = StorePlan::new(StoreNumber::Adaptive, &specs);
+        let e = Budget::plan::<f64>(1 << 20, 513 * 513, 1000, 1 << 17, &store, 2)
             .unwrap_err()
             .to_string();
         assert!(e.contains("needs at least"), "{e}");
-        assert!(Budget::plan::<f64>(64 << 20, 513 * 513, 1000, 1 << 17).is_ok());
+        assert!(Budget::plan::<f64>(64 << 20, 513 * 513, 1000, 1 << 17, &store, 2).is_ok());
         // A small image fits in a few hundred kilobytes.
-        assert!(Budget::plan::<f64>(600 << 10, 33 * 33, 20_000, 1 << 17).is_ok());
+        assert!(Budget::plan::<f64>(600 << 10, 33 * 33, 20_000, 1 << 17, &store, 2).is_ok());
     }
 }

@@ -74,6 +74,37 @@ pub struct ResultRec {
     pub t: f64,
 }
 
+/// A ray's result as the tracer keeps it: the [`ResultRec`] and, when the
+/// surface was worked out where the hit was found (see
+/// [`super::Shading::Carry`]), the surface's normals and material, so that
+/// shading needs no second pass over the objects. Stripped to the
+/// `ResultRec` where results travel (the cluster), where shading joins.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Outcome {
+    pub res: ResultRec,
+    /// Geometric and shading normals at the hit, as the primitive's
+    /// `surface` gives them (unit, not turned toward the ray).
+    pub ng: [f64; 3],
+    pub ns: [f64; 3],
+    pub material: u32,
+    /// 1 when `ng`, `ns` and `material` are set.
+    pub has_surface: u32,
+}
+
+impl Outcome {
+    /// A result with no surface carried.
+    pub fn bare(res: ResultRec) -> Outcome {
+        Outcome {
+            res,
+            ng: [0.0; 3],
+            ns: [0.0; 3],
+            material: 0,
+            has_surface: 0,
+        }
+    }
+}
+
 /// A ray and its hit, as the shading join sorts them (by object).
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]

@@ -1,28 +1,31 @@
 //! One pass's registrations of rays in voxels: for each registered voxel,
-//! the rays stored there. Sized by the registrations, not by the grid, so a
-//! fine grid costs one flag byte per voxel and no more.
+//! the rays stored there, as one flat array (count, prefix sum, fill).
+//! Sized by the registrations, not by the grid, so a fine grid costs one
+//! flag byte per voxel and no more.
 //!
-//! Each registration is one probe of an open-addressing table (voxel to its
-//! list) and one entry in a flat array linking the voxel's rays. The order
-//! of rays within a voxel does not matter: each ray's state is its own, and
-//! it meets the objects in file order whatever order it sits in.
+//! Registration appends (voxel, slot) pairs; [`RegMap::finish`] groups the
+//! slots by voxel, keeping registration order within a voxel (so rays in a
+//! voxel lie in slot order, close together in memory when neighbouring
+//! rays are neighbouring slots). The scan then reads each voxel's rays as
+//! one contiguous run instead of chasing a linked list.
 
 #[derive(Default)]
 pub struct RegMap {
-    /// Dense mode: the head of each voxel's list, indexed by voxel (used
-    /// when the grid is small enough to afford four bytes per voxel; nearby
-    /// voxels then sit nearby in memory).
+    /// Dense mode: the index into `voxels` of each voxel, or `EMPTY` (used
+    /// when the grid is small enough to afford four bytes per voxel).
     dense: Vec<u32>,
     /// Otherwise an open-addressing table: index into `voxels`, or `EMPTY`.
     table: Vec<u32>,
     mask: usize,
-    /// Registered voxels in order of first registration, and the head of
-    /// each one's list in `links`.
+    /// Registered voxels in order of first registration.
     voxels: Vec<u32>,
-    heads: Vec<u32>,
-    /// Per registration: the ray's slot and the next registration of the
-    /// same voxel.
-    links: Vec<(u32, u32)>,
+    /// Registrations per voxel while filling; after `finish`, the start of
+    /// each voxel's run in `slots` (one more entry than `voxels`).
+    starts: Vec<u32>,
+    /// Registrations in the order they came: voxel index and ray slot.
+    pending: Vec<(u32, u32)>,
+    /// After `finish`: the slots, grouped by voxel.
+    slots: Vec<u32>,
 }
 
 const EMPTY: u32 = u32::MAX;
@@ -38,8 +41,9 @@ impl RegMap {
         4 * (self.dense.capacity()
             + self.table.capacity()
             + self.voxels.capacity()
-            + self.heads.capacity())
-            + 8 * self.links.capacity()
+            + self.starts.capacity()
+            + self.slots.capacity())
+            + 8 * self.pending.capacity()
     }
 
     /// Empties the map, sized for about `expected` registrations; with
@@ -54,62 +58,67 @@ impl RegMap {
                 }
             }
             self.table = Vec::new();
-            self.voxels.clear();
-            self.heads.clear();
-            self.links.clear();
-            return;
-        }
-        self.dense = Vec::new();
-        let size = (expected * 2).next_power_of_two().max(64);
-        if self.table.len() < size {
-            self.table = vec![EMPTY; size];
-            self.mask = size - 1;
         } else {
-            // Only the used entries need resetting.
-            for &v in &self.voxels {
-                let mut h = hash(v) & self.mask;
-                while self.table[h] != EMPTY {
-                    self.table[h] = EMPTY;
-                    h = (h + 1) & self.mask;
+            self.dense = Vec::new();
+            let size = (expected * 2).next_power_of_two().max(64);
+            if self.table.len() < size {
+                self.table = vec![EMPTY; size];
+                self.mask = size - 1;
+            } else {
+                // Only the used entries need resetting.
+                for &v in &self.voxels {
+                    let mut h = hash(v) & self.mask;
+                    while self.table[h] != EMPTY {
+                        self.table[h] = EMPTY;
+                        h = (h + 1) & self.mask;
+                    }
                 }
             }
         }
         self.voxels.clear();
-        self.heads.clear();
-        self.links.clear();
+        self.starts.clear();
+        self.pending.clear();
+        self.slots.clear();
     }
 
-    /// Stores `slot` in `voxel`.
+    /// The index of `voxel` in `voxels`, adding it if new.
     #[inline]
-    pub fn insert(&mut self, voxel: u32, slot: u32) {
+    fn index_of(&mut self, voxel: u32) -> u32 {
         if !self.dense.is_empty() {
-            let h = &mut self.dense[voxel as usize];
-            if *h == EMPTY {
+            let e = &mut self.dense[voxel as usize];
+            if *e == EMPTY {
+                *e = self.voxels.len() as u32;
                 self.voxels.push(voxel);
+                self.starts.push(0);
             }
-            self.links.push((slot, *h));
-            *h = (self.links.len() - 1) as u32;
-            return;
+            return *e;
         }
         if self.voxels.len() * 2 >= self.table.len() {
             self.grow();
         }
         let mut h = hash(voxel) & self.mask;
-        let at = loop {
+        loop {
             let e = self.table[h];
             if e == EMPTY {
-                self.table[h] = self.voxels.len() as u32;
+                let i = self.voxels.len() as u32;
+                self.table[h] = i;
                 self.voxels.push(voxel);
-                self.heads.push(EMPTY);
-                break self.voxels.len() - 1;
+                self.starts.push(0);
+                return i;
             }
             if self.voxels[e as usize] == voxel {
-                break e as usize;
+                return e;
             }
             h = (h + 1) & self.mask;
-        };
-        self.links.push((slot, self.heads[at]));
-        self.heads[at] = (self.links.len() - 1) as u32;
+        }
+    }
+
+    /// Stores `slot` in `voxel`.
+    #[inline]
+    pub fn insert(&mut self, voxel: u32, slot: u32) {
+        let i = self.index_of(voxel);
+        self.starts[i as usize] += 1;
+        self.pending.push((i, slot));
     }
 
     fn grow(&mut self) {
@@ -125,13 +134,44 @@ impl RegMap {
         }
     }
 
+    /// Groups the registrations by voxel; call once, after the last
+    /// `insert` and before the first `slots_in`.
+    pub fn finish(&mut self) {
+        // Exclusive prefix sum of the counts, then one more entry.
+        let mut acc = 0u32;
+        for c in self.starts.iter_mut() {
+            let k = *c;
+            *c = acc;
+            acc += k;
+        }
+        self.starts.push(acc);
+        self.slots.clear();
+        self.slots.resize(acc as usize, 0);
+        // Fill in registration order, each voxel's start serving as its
+        // cursor, so each run keeps that order.
+        for &(i, slot) in &self.pending {
+            let at = &mut self.starts[i as usize];
+            self.slots[*at as usize] = slot;
+            *at += 1;
+        }
+        // The fill advanced every start to the next voxel's start: shift
+        // back by one.
+        for i in (1..self.starts.len() - 1).rev() {
+            self.starts[i] = self.starts[i - 1];
+        }
+        if self.starts.len() > 1 {
+            self.starts[0] = 0;
+        }
+        self.pending.clear();
+    }
+
     pub fn is_empty(&self) -> bool {
-        self.links.is_empty()
+        self.slots.is_empty() && self.pending.is_empty()
     }
 
     /// Registrations in the map.
     pub fn len(&self) -> usize {
-        self.links.len()
+        self.slots.len() + self.pending.len()
     }
 
     /// The registered voxels.
@@ -145,49 +185,29 @@ impl RegMap {
         !self.dense.is_empty()
     }
 
-    /// The first registration in `voxel`, if any (follow with `link`).
+    /// The slots registered in `voxel` (after `finish`), in registration
+    /// order.
     #[inline]
-    pub fn first(&self, voxel: u32) -> Option<u32> {
-        if !self.dense.is_empty() {
-            let h = self.dense[voxel as usize];
-            return (h != EMPTY).then_some(h);
+    pub fn slots_in(&self, voxel: u32) -> &[u32] {
+        let i = if !self.dense.is_empty() {
+            self.dense[voxel as usize]
+        } else {
+            let mut h = hash(voxel) & self.mask;
+            loop {
+                let e = self.table[h];
+                if e == EMPTY || self.voxels[e as usize] == voxel {
+                    break e;
+                }
+                h = (h + 1) & self.mask;
+            }
+        };
+        if i == EMPTY {
+            return &[];
         }
-        let mut h = hash(voxel) & self.mask;
-        loop {
-            let e = self.table[h];
-            if e == EMPTY {
-                return None;
-            }
-            if self.voxels[e as usize] == voxel {
-                return Some(self.heads[e as usize]);
-            }
-            h = (h + 1) & self.mask;
-        }
-    }
-
-    /// The slot of registration `r`, and the next registration of its voxel.
-    #[inline(always)]
-    pub fn link(&self, r: u32) -> (u32, u32) {
-        self.links[r as usize]
-    }
-
-    /// Iterates the slots registered in `voxel`.
-    #[cfg(test)]
-    pub fn slots(&self, voxel: u32) -> impl Iterator<Item = u32> + '_ {
-        let mut r = self.first(voxel).unwrap_or(EMPTY);
-        std::iter::from_fn(move || {
-            if r == EMPTY {
-                return None;
-            }
-            let (s, n) = self.links[r as usize];
-            r = n;
-            Some(s)
-        })
+        let i = i as usize;
+        &self.slots[self.starts[i] as usize..self.starts[i + 1] as usize]
     }
 }
-
-/// End of a voxel's list.
-pub const END: u32 = EMPTY;
 
 #[cfg(test)]
 mod tests {
@@ -198,23 +218,30 @@ mod tests {
         let mut m = RegMap::default();
         for round in 0..6 {
             m.clear(4, if round % 2 == 0 { 0 } else { 64 });
-            for (v, s) in [(9u32, 0u32), (2, 1), (7, 1), (7, 3)] {
+            for (v, s) in [(9u32, 0u32), (2, 1), (7, 1), (7, 3), (9, 5)] {
                 m.insert(v + round, s);
             }
-            let mut got: Vec<u32> = m.slots(7 + round).collect();
-            got.sort();
-            assert_eq!(got, vec![1, 3]);
-            assert_eq!(m.slots(2 + round).collect::<Vec<_>>(), vec![1]);
-            assert_eq!(m.slots(8 + round).count(), 0);
+            m.finish();
+            assert_eq!(m.slots_in(7 + round), &[1, 3]);
+            assert_eq!(m.slots_in(9 + round), &[0, 5]);
+            assert_eq!(m.slots_in(2 + round), &[1]);
+            assert!(m.slots_in(8 + round).is_empty());
             assert_eq!(m.voxels(), &[9 + round, 2 + round, 7 + round]);
             assert_eq!(m.is_dense(), round % 2 == 1);
-            assert_eq!(m.len(), 4);
+            assert_eq!(m.len(), 5);
         }
-        // Growing keeps everything.
+        // Growing keeps everything; runs keep registration order.
         m.clear(1, 0);
         for v in 0..1000 {
-            m.insert(v, v);
+            m.insert(v % 300, v);
         }
-        assert!((0..1000).all(|v| m.slots(v).collect::<Vec<_>>() == vec![v]));
+        m.finish();
+        for v in 0..300 {
+            let want: Vec<u32> = (0..1000).filter(|s| s % 300 == v).collect();
+            assert_eq!(m.slots_in(v), &want[..]);
+        }
+        m.clear(1, 0);
+        m.finish();
+        assert!(m.is_empty() && m.slots_in(3).is_empty());
     }
 }

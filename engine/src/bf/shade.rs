@@ -5,9 +5,9 @@
 //! the objects, where they are shaded. The rays they spawn go to an
 //! external sort that puts the next round in a fixed order.
 
-use super::records::{HitRec, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+use super::records::{HitRec, Outcome, RayKind, RayRec, SPAWN_SLOTS};
 use crate::error::Error;
-use crate::intersect::RayQ;
+use crate::intersect::{RayQ, Surface};
 use crate::math::Vec3;
 use crate::render::{RayCounts, ShadeScene, Spawn, shade, to_fixed};
 use crate::scene::Material;
@@ -28,6 +28,8 @@ pub struct ShadeSetup<'a> {
     pub db: &'a Database,
     /// The hit set's memory, reused from round to round.
     pub set: &'a mut Vec<HitRec>,
+    /// Hits with their surfaces, waiting to be shaded in order.
+    pub carried: &'a mut Vec<Carried>,
     /// Per-chunk outputs of the parallel shading, reused.
     pub outputs: &'a mut Vec<(Vec<RayRec>, RayCounts)>,
     pub radix: &'a mut crate::spill::RadixScratch,
@@ -53,7 +55,7 @@ pub fn shade_round(
     pool: &rayon::ThreadPool,
     first: u64,
     rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
-    results: &mut dyn FnMut() -> Result<Option<ResultRec>, Error>,
+    results: &mut dyn FnMut() -> Result<Option<Outcome>, Error>,
     contribute: &mut dyn FnMut(u32, [i64; 3]),
     next: &mut NextRays,
     counts: &mut RayCounts,
@@ -61,10 +63,13 @@ pub fn shade_round(
     let mut st = ShadeStats::default();
     let mut set = std::mem::take(setup.set);
     set.clear();
+    let mut carried = std::mem::take(setup.carried);
+    carried.clear();
     for (id, ray) in (first..).zip(rays) {
         let ray = ray?;
-        let res = results()?
+        let out = results()?
             .ok_or_else(|| Error::Invalid(format!("no intersection result for ray {id}")))?;
+        let res = out.res;
         if res.ray != id {
             return Err(Error::Invalid(format!(
                 "intersection results out of order: ray {id} got the result of ray {}",
@@ -82,25 +87,95 @@ pub fn shade_round(
                 counts.eye_hit_rays += 1;
             }
             st.hits += 1;
-            set.push(HitRec {
-                ray,
-                id,
-                t: res.t,
-                prim: res.prim,
-            });
-            if set.len() >= setup.set_cap.max(1) {
-                shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+            if out.has_surface != 0 {
+                // The surface came with the result: shade now, in ray
+                // order, so the spawned rays come out in key order.
+                carried.push(Carried { ray, id, out });
+                if carried.len() >= setup.set_cap.max(1) {
+                    shade_carried(setup, pool, &mut carried, next, counts)?;
+                }
+            } else {
+                set.push(HitRec {
+                    ray,
+                    id,
+                    t: res.t,
+                    prim: res.prim,
+                });
+                if set.len() >= setup.set_cap.max(1) {
+                    shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+                }
             }
         }
     }
     if results()?.is_some() {
         return Err(Error::Invalid("more intersection results than rays".into()));
     }
+    if !carried.is_empty() {
+        shade_carried(setup, pool, &mut carried, next, counts)?;
+    }
     if !set.is_empty() {
         shade_set(setup, pool, &mut set, next, counts, &mut st)?;
     }
     *setup.set = set;
+    *setup.carried = carried;
     Ok(st)
+}
+
+/// A hit whose surface came with its result.
+#[derive(Clone, Copy, Debug)]
+pub struct Carried {
+    ray: RayRec,
+    id: u64,
+    out: Outcome,
+}
+
+/// Shades hits whose surfaces came with them, in parallel chunks whose
+/// outputs are appended in order: the spawned rays stay in key order.
+fn shade_carried(
+    setup: &mut ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    carried: &mut Vec<Carried>,
+    next: &mut NextRays,
+    counts: &mut RayCounts,
+) -> Result<(), Error> {
+    let (materials, shade_scene) = (setup.materials, setup.shade);
+    let chunks = pool.current_num_threads().max(1) * 4;
+    let chunk = carried.len().div_ceil(chunks).max(64);
+    let n_chunks = carried.len().div_ceil(chunk);
+    if setup.outputs.len() < n_chunks {
+        setup.outputs.resize_with(n_chunks, Default::default);
+    }
+    let outputs = &mut setup.outputs[..n_chunks];
+    pool.install(|| {
+        carried
+            .par_chunks(chunk)
+            .zip(outputs.par_iter_mut())
+            .for_each(|(hits, (out, c))| {
+                out.clear();
+                *c = RayCounts::default();
+                for h in hits {
+                    let r = &h.ray;
+                    let (o, d) = (Vec3::from_array(r.o), Vec3::from_array(r.d));
+                    // The point as a primitive's `surface` computes it.
+                    let p = RayQ::from_vec3(o, d).at(h.out.res.t).into();
+                    let surf = Surface {
+                        p,
+                        ng: Vec3::from_array(h.out.ng),
+                        ns: Vec3::from_array(h.out.ns),
+                    };
+                    let mat = &materials[h.out.material as usize];
+                    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
+                }
+            })
+    });
+    for (rays, c) in setup.outputs[..n_chunks].iter() {
+        *counts += *c;
+        for r in rays {
+            next.push(*r)?;
+        }
+    }
+    carried.clear();
+    Ok(())
 }
 
 /// Sorts a set of hits by object and shades it in one scan of the objects.
@@ -165,7 +240,7 @@ fn shade_set(
     Ok(())
 }
 
-/// Shades one hit with the shared shading code, writing the rays it spawns.
+/// Shades one hit found by the join: the surface from the object.
 fn shade_hit(
     materials: &[Material],
     shade_scene: &ShadeScene,
@@ -179,15 +254,30 @@ fn shade_hit(
     let d = Vec3::from_array(r.d);
     let surf = obj.shape.surface(&RayQ::from_vec3(o, d), h.t);
     let mat = &materials[obj.material as usize];
+    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
+}
+
+/// Shades ray `id` of the round, `r`, at surface `surf` of material `mat`
+/// with the shared shading code, writing the rays it spawns.
+fn shade_surface(
+    shade_scene: &ShadeScene,
+    r: &RayRec,
+    id: u64,
+    surf: &Surface,
+    mat: &Material,
+    out: &mut Vec<RayRec>,
+    c: &mut RayCounts,
+) {
+    let d = Vec3::from_array(r.d);
     let lights = shade_scene.lights.len() as u64;
-    let base = h.id * SPAWN_SLOTS;
+    let base = id * SPAWN_SLOTS;
     let p = surf.p.to_array();
     shade(
         shade_scene,
         d,
         r.depth,
         r.payload[0],
-        &surf,
+        surf,
         mat,
         &mut |s| match s {
             Spawn::Shadow {

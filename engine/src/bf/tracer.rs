@@ -10,10 +10,10 @@
 //! a ray's spawn keys only on its id in the round.
 
 use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
-use super::records::{RayKind, RayRec, ResultRec};
+use super::records::{Outcome, RayKind, RayRec, ResultRec};
 use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
 use super::voxels::VoxelGrids;
-use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, REGS_PER_SLOT};
+use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS};
 use crate::error::Error;
 use crate::hit::PrimId;
 use crate::math::Real;
@@ -40,31 +40,37 @@ pub fn eye_ray(eye: &EyeRays, i: u64) -> RayRec {
     }
 }
 
-fn result_key(r: &ResultRec) -> u64 {
-    r.ray
+fn result_key(r: &Outcome) -> u64 {
+    r.res.ray
 }
 
 /// A slot of the in-memory results not yet written.
-const UNSET: ResultRec = ResultRec {
-    ray: u64::MAX,
-    prim: PrimId::NONE,
-    t: 0.0,
+const UNSET: Outcome = Outcome {
+    res: ResultRec {
+        ray: u64::MAX,
+        prim: PrimId::NONE,
+        t: 0.0,
+    },
+    ng: [0.0; 3],
+    ns: [0.0; 3],
+    material: 0,
+    has_surface: 0,
 };
 
-type ResultSorter = ExternalSorter<ResultRec, u64, fn(&ResultRec) -> u64>;
+type ResultSorter = ExternalSorter<Outcome, u64, fn(&Outcome) -> u64>;
 
 /// Results of a run of rays, brought into ray order: placed by id in memory
 /// when they fit, else sorted externally.
 enum Results {
-    Dense { first: u64, v: Vec<ResultRec> },
+    Dense { first: u64, v: Vec<Outcome> },
     Sort(ResultSorter),
 }
 
 impl Results {
-    fn put(&mut self, r: ResultRec) -> Result<(), Error> {
+    fn put(&mut self, r: Outcome) -> Result<(), Error> {
         match self {
             Results::Dense { first, v } => {
-                v[(r.ray - *first) as usize] = r;
+                v[(r.res.ray - *first) as usize] = r;
                 Ok(())
             }
             Results::Sort(s) => s.push(r),
@@ -75,21 +81,28 @@ impl Results {
 /// Rays in key order, as [`Tracer::shade`] returns the ones it spawned.
 pub type SortedRays = Sorted<RayRec, u64, fn(&RayRec) -> u64>;
 
-/// Results in ray order: as [`Tracer::intersect`] returns them, or read
-/// from a file of results already in order.
+/// Results in ray order: as [`Tracer::intersect`] returns them (with the
+/// surfaces it carried, if any), or read from a file of results already in
+/// order.
 pub enum ResultReader {
-    Dense(std::vec::IntoIter<ResultRec>),
-    Sorted(Sorted<ResultRec, u64, fn(&ResultRec) -> u64>),
+    Dense(std::vec::IntoIter<Outcome>),
+    Sorted(Sorted<Outcome, u64, fn(&Outcome) -> u64>),
     File(RecordReader<ResultRec>),
 }
 
 impl ResultReader {
-    pub fn next_result(&mut self) -> Result<Option<ResultRec>, Error> {
+    /// The next result, with its carried surface if there is one.
+    pub fn next_outcome(&mut self) -> Result<Option<Outcome>, Error> {
         match self {
             ResultReader::Dense(it) => Ok(it.next()),
             ResultReader::Sorted(s) => s.next(),
-            ResultReader::File(r) => r.next(),
+            ResultReader::File(r) => Ok(r.next()?.map(Outcome::bare)),
         }
+    }
+
+    /// The next result, as it travels between processes.
+    pub fn next_result(&mut self) -> Result<Option<ResultRec>, Error> {
+        Ok(self.next_outcome()?.map(|o| o.res))
     }
 }
 
@@ -103,13 +116,15 @@ pub struct Tracer<'db, R: Real> {
     pub threads: usize,
     pub spill: SpillDir,
     pub eps: f64,
+    shading: super::Shading,
     shade_scene: ShadeScene,
     slots: Slots<R>,
     // Buffers reused from call to call: allocating them afresh costs page
     // faults every round.
-    dense_buf: Vec<ResultRec>,
+    dense_buf: Vec<Outcome>,
     spare_rays: Vec<RayRec>,
     set_buf: Vec<super::records::HitRec>,
+    carried_buf: Vec<super::shade::Carried>,
     shade_outputs: Vec<(Vec<RayRec>, RayCounts)>,
     radix: crate::spill::RadixScratch,
     /// Accumulated over every call.
@@ -137,17 +152,20 @@ impl<'db, R: Real> Tracer<'db, R> {
             return Err(Error::Invalid("too many grids".into()));
         }
         let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-        let budget = Budget::plan::<R>(
-            bf.memory,
-            frame_corners,
-            cells,
-            db.scan_buffer_bytes() as u64,
-        )?;
         let threads = if opts.threads == 0 {
             crate::sys::cpus()
         } else {
             opts.threads
         };
+        let store = StorePlan::new(bf.store, &specs);
+        let budget = Budget::plan::<R>(
+            bf.memory,
+            frame_corners,
+            cells,
+            db.scan_buffer_bytes() as u64,
+            &store,
+            threads,
+        )?;
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
@@ -160,7 +178,6 @@ impl<'db, R: Real> Tracer<'db, R> {
         progress.set_message("preprocess: marking voxels");
         let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
         let preprocess_seconds = t0.elapsed().as_secs_f64();
-        let store = StorePlan::new(bf.store, &grids);
         let stats = BfStats {
             memory_budget_bytes: bf.memory,
             db_scans: 1,
@@ -181,11 +198,13 @@ impl<'db, R: Real> Tracer<'db, R> {
             threads,
             spill,
             eps,
+            shading: bf.shading,
             shade_scene,
             slots: Slots::new(threads),
             dense_buf: Vec::new(),
             spare_rays: Vec::new(),
             set_buf: Vec::new(),
+            carried_buf: Vec::new(),
             shade_outputs: Vec::new(),
             radix: Default::default(),
             stats,
@@ -225,7 +244,7 @@ impl<'db, R: Real> Tracer<'db, R> {
                 &self.spill,
                 "results",
                 budget.result_sort_records() as usize,
-                result_key as fn(&ResultRec) -> u64,
+                result_key as fn(&Outcome) -> u64,
             ))
         };
         let mut slots_n = budget.slots(rays_resident, resident);
@@ -239,13 +258,14 @@ impl<'db, R: Real> Tracer<'db, R> {
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
-            registrations: (slots_n * REGS_PER_SLOT) as usize,
+            registrations: (slots_n * budget.regs_per_slot) as usize,
             dense_cells: budget.dense_cells(self.threads),
+            carry: self.shading == super::Shading::Carry,
             eps: self.eps,
         };
         let ist = {
-            let mut emit = |mut r: ResultRec| {
-                r.ray += first;
+            let mut emit = |mut r: Outcome| {
+                r.res.ray += first;
                 results.put(r)
             };
             intersect_rays::<R>(
@@ -286,7 +306,7 @@ impl<'db, R: Real> Tracer<'db, R> {
     /// Hands a dense result buffer back for reuse.
     pub fn recycle(&mut self, results: ResultReader) {
         if let ResultReader::Dense(it) = results {
-            let mut v: Vec<ResultRec> = it.collect();
+            let mut v: Vec<Outcome> = it.collect();
             v.clear();
             if v.capacity() > self.dense_buf.capacity() {
                 self.dense_buf = v;
@@ -325,13 +345,14 @@ impl<'db, R: Real> Tracer<'db, R> {
         let mut setup = ShadeSetup {
             db: self.db,
             set: &mut self.set_buf,
+            carried: &mut self.carried_buf,
             outputs: &mut self.shade_outputs,
             radix: &mut self.radix,
             materials: &self.db.scene().materials,
             shade: &self.shade_scene,
             set_cap: self.budget.shading_set_hits(self.shade_scene.lights.len()),
         };
-        let mut next_result = || results.next_result();
+        let mut next_result = || results.next_outcome();
         let sst = shade_round(
             &mut setup,
             &self.pool,
@@ -347,6 +368,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         // The hit set and its outputs are the shading phase's; the next
         // intersection gets their share back (unless they are small).
         let held = self.set_buf.capacity() * std::mem::size_of::<super::records::HitRec>()
+            + self.carried_buf.capacity() * std::mem::size_of::<super::shade::Carried>()
             + self
                 .shade_outputs
                 .iter()
@@ -355,6 +377,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             + self.radix.bytes();
         if held as u64 > self.budget.idle_allowance() {
             self.set_buf = Vec::new();
+            self.carried_buf = Vec::new();
             self.shade_outputs = Vec::new();
             self.radix = Default::default();
         }

@@ -1,7 +1,11 @@
 use super::sampling::Sampling;
 use crate::error::Error;
+use crate::error::IoContext;
 use crate::fsutil::{persist, temp_beside};
-use std::io::BufWriter;
+use image::codecs::openexr::OpenExrEncoder;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder};
+use std::io::Write;
 use std::path::Path;
 
 /// One in the frame buffer's fixed point: colours are summed as integers
@@ -60,18 +64,19 @@ impl Frame {
         }
     }
 
-    /// 8-bit RGB: each pixel the average of its four corners (or of its
-    /// samples), clamped to [0, 1], scaled to 255 and rounded; no gamma.
-    pub fn to_rgb8(&self) -> Vec<u8> {
+    /// Each pixel's linear colour: the mean of its four corners (or of its
+    /// samples), unclamped, in f64. Every encoding derives from this one
+    /// computation, so the 8-bit and the float images of a frame agree.
+    pub fn to_rgb_f64(&self) -> Vec<[f64; 3]> {
         let (w, h) = (self.width as usize, self.height as usize);
-        let mut out = Vec::with_capacity(w * h * 3);
+        let mut out = Vec::with_capacity(w * h);
         // Each slot is clamped to a sane range first, so that a sum of
         // four fits in an i64.
         let v = |j: usize, k: usize| self.slots[j][k].clamp(-(1 << 60), 1 << 60);
         let spp = self.sampling.per_slot() as f64;
         for y in 0..h {
             for x in 0..w {
-                for k in 0..3 {
+                out.push(std::array::from_fn(|k| {
                     let mean = match self.sampling {
                         Sampling::Corners => {
                             let i = y * (w + 1) + x;
@@ -83,76 +88,136 @@ impl Frame {
                         }
                         Sampling::Jittered { .. } => v(y * w + x, k) as f64 / spp,
                     };
-                    let c = (mean * (1.0 / FIXED_ONE)).clamp(0.0, 1.0);
-                    out.push((c * 255.0 + 0.5) as u8);
-                }
-            }
-        }
-        out
-    }
-
-    /// The image in linear floating point (mean per pixel, unclamped),
-    /// for error measurements.
-    pub fn to_rgb_f64(&self) -> Vec<[f64; 3]> {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let mut out = Vec::with_capacity(w * h);
-        let spp = self.sampling.per_slot() as f64;
-        for y in 0..h {
-            for x in 0..w {
-                out.push(std::array::from_fn(|k| match self.sampling {
-                    Sampling::Corners => {
-                        let i = y * (w + 1) + x;
-                        [i, i + 1, i + w + 1, i + w + 2]
-                            .iter()
-                            .map(|&j| self.slots[j][k] as f64)
-                            .sum::<f64>()
-                            / (4.0 * FIXED_ONE)
-                    }
-                    Sampling::Jittered { .. } => {
-                        self.slots[y * w + x][k] as f64 / (spp * FIXED_ONE)
-                    }
+                    mean * (1.0 / FIXED_ONE)
                 }));
             }
         }
         out
     }
 
-    /// The image as PNG bytes.
-    pub fn png_bytes(&self) -> Result<Vec<u8>, Error> {
-        let mut v = Vec::new();
-        encode_png(&mut v, self.width, self.height, &self.to_rgb8())
-            .map_err(|e| Error::Invalid(format!("cannot encode the image: {e}")))?;
-        Ok(v)
+    /// 8-bit RGB: each pixel the average of its four corners (or of its
+    /// samples), clamped to [0, 1], scaled to 255 and rounded; no gamma.
+    pub fn to_rgb8(&self) -> Vec<u8> {
+        self.to_rgb_f64()
+            .iter()
+            .flatten()
+            .map(|&c| to_u8(c))
+            .collect()
     }
 
-    /// Writes a PNG, atomically.
-    pub fn write_png(&self, path: &Path) -> Result<(), Error> {
-        write_png(path, self.width, self.height, &self.to_rgb8())
+    /// Linear 32-bit float RGB, unclamped: each pixel's mean as in
+    /// [`Frame::to_rgb8`] before clamping, rounded to f32. Where rounding
+    /// to f32 would carry a value across an 8-bit rounding boundary (a
+    /// value within an f32 rounding step of (k + 0.5) / 255), it is moved
+    /// one step back to the side the f64 mean is on, so that every value
+    /// here, clamped, scaled and rounded, is exactly the 8-bit image's.
+    pub fn to_rgb_f32(&self) -> Vec<[f32; 3]> {
+        self.to_rgb_f64()
+            .iter()
+            .map(|p| p.map(to_f32_matching_u8))
+            .collect()
+    }
+
+    /// The image encoded as `format`.
+    pub fn encode(&self, format: ImageFormat) -> Result<Vec<u8>, Error> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let (w, h) = (self.width, self.height);
+        let r = match format {
+            ImageFormat::Png => {
+                PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Adaptive)
+                    .write_image(&self.to_rgb8(), w, h, ExtendedColorType::Rgb8)
+            }
+            ImageFormat::Exr => OpenExrEncoder::new(&mut out).write_image(
+                bytemuck::cast_slice(&self.to_rgb_f32()),
+                w,
+                h,
+                ExtendedColorType::Rgb32F,
+            ),
+        };
+        r.map_err(|e| Error::Invalid(format!("cannot encode the image as {format}: {e}")))?;
+        Ok(out.into_inner())
+    }
+
+    /// Writes the image to `path`, atomically, in the format its extension
+    /// names.
+    pub fn write(&self, path: &Path) -> Result<(), Error> {
+        let bytes = self.encode(ImageFormat::from_path(path)?)?;
+        let mut tmp = temp_beside(path)?;
+        tmp.write_all(&bytes).at(path)?;
+        persist(tmp, path)
     }
 }
 
-/// Writes 8-bit RGB pixels as a PNG, atomically.
-pub fn write_png(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), Error> {
-    let tmp = temp_beside(path)?;
-    encode_png(BufWriter::new(tmp.as_file()), width, height, rgb)
-        .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
-    persist(tmp, path)
+/// A pixel value in [0, 1] as 8 bits: clamped, scaled, rounded.
+#[inline]
+fn to_u8(c: f64) -> u8 {
+    (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-/// Encodes 8-bit RGB pixels as a PNG into `out`.
-pub fn encode_png(
-    out: impl std::io::Write,
-    width: u32,
-    height: u32,
-    rgb: &[u8],
-) -> Result<(), png::EncodingError> {
-    let mut enc = png::Encoder::new(out, width, height);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.set_compression(png::Compression::Fast);
-    let mut w = enc.write_header()?;
-    w.write_image_data(rgb)?;
-    w.finish()
+/// `c` as the nearest f32, unless that lands on the other side of an 8-bit
+/// rounding boundary than `c` (see [`Frame::to_rgb_f32`]): then the next
+/// f32 towards `c`, which is on `c`'s side (the boundary lies between `c`
+/// and its nearest f32, so within half a step of `c`).
+fn to_f32_matching_u8(c: f64) -> f32 {
+    let v = c as f32;
+    if to_u8(v as f64) == to_u8(c) {
+        return v;
+    }
+    let toward = if (v as f64) < c {
+        f32::from_bits(if v >= 0.0 {
+            v.to_bits() + 1
+        } else {
+            v.to_bits() - 1
+        })
+    } else {
+        f32::from_bits(if v > 0.0 {
+            v.to_bits() - 1
+        } else {
+            v.to_bits() + 1
+        })
+    };
+    debug_assert_eq!(to_u8(toward as f64), to_u8(c));
+    toward
+}
+
+/// Image file formats, chosen by the output file's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// 8-bit RGB, clamped to [0, 1]; no gamma.
+    Png,
+    /// OpenEXR, linear 32-bit float RGB, unclamped: for compositing.
+    Exr,
+}
+
+impl ImageFormat {
+    /// The extensions this writes, for messages.
+    pub const SUPPORTED: &'static str = ".png (8-bit) or .exr (OpenEXR, 32-bit float)";
+
+    /// The format an output path's extension names (case-insensitive).
+    pub fn from_path(path: &Path) -> Result<ImageFormat, Error> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("png") => Ok(ImageFormat::Png),
+            Some("exr") => Ok(ImageFormat::Exr),
+            _ => Err(Error::Invalid(format!(
+                "{}: cannot tell the image format from the extension: the output must end in {}",
+                path.display(),
+                ImageFormat::SUPPORTED
+            ))),
+        }
+    }
+}
+
+impl std::fmt::Display for ImageFormat {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            ImageFormat::Png => "PNG",
+            ImageFormat::Exr => "OpenEXR",
+        })
+    }
 }
 
 #[cfg(test)]
@@ -186,5 +251,75 @@ mod tests {
             b.add(0, to_fixed(*c));
         }
         assert_eq!(a.slots, b.slots);
+    }
+
+    #[test]
+    fn float_image_is_the_mean_unclamped() {
+        let mut f = Frame::new(2, 1);
+        for c in [0, 1, 3, 4] {
+            f.add(c, to_fixed([1.0, 0.5, 0.0]));
+        }
+        f.add(2, to_fixed([6.0, 0.0, 0.0]));
+        let px = f.to_rgb_f32();
+        assert_eq!(px[0], [1.0, 0.5, 0.0]);
+        // (1 + 6 + 1 + 0) / 4 = 2: above 1, kept.
+        assert_eq!(px[1], [2.0, 0.25, 0.0]);
+        assert_eq!(f.to_rgb8(), [255, 128, 0, 255, 64, 0]);
+    }
+
+    #[test]
+    fn float_values_round_to_the_8_bit_values() {
+        // Values on both sides of, and very near, every 8-bit rounding
+        // boundary: a plain cast to f32 crosses some of them.
+        let mut crossed = 0;
+        for k in 0..255 {
+            let b = (k as f64 + 0.5) / 255.0;
+            for i in -64i64..=64 {
+                let c = b + i as f64 * 1e-10;
+                let v = to_f32_matching_u8(c);
+                assert_eq!(to_u8(v as f64), to_u8(c), "{c}");
+                assert!((v as f64 - c).abs() <= c * 2e-7, "{c} -> {v}");
+                crossed += (to_u8(c as f32 as f64) != to_u8(c)) as u32;
+            }
+        }
+        assert!(crossed > 0, "no boundary case was exercised");
+        assert_eq!(to_f32_matching_u8(-0.25), -0.25);
+        assert_eq!(to_f32_matching_u8(3.5), 3.5);
+    }
+
+    #[test]
+    fn format_follows_the_extension() {
+        for (p, f) in [
+            ("a.png", ImageFormat::Png),
+            ("dir/b.PNG", ImageFormat::Png),
+            ("c.exr", ImageFormat::Exr),
+            ("d.Exr", ImageFormat::Exr),
+        ] {
+            assert_eq!(ImageFormat::from_path(Path::new(p)).unwrap(), f, "{p}");
+        }
+        for p in ["a.jpg", "b", "c.png.tmp", ".exr"] {
+            let e = ImageFormat::from_path(Path::new(p))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(".png") && e.contains(".exr") && e.contains(p),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn encodings_decode_to_the_frame() {
+        let mut f = Frame::new(3, 2);
+        for (i, s) in f.slots.iter_mut().enumerate() {
+            *s = to_fixed([i as f32 * 0.3, 0.1, 1.0 - i as f32 * 0.1]);
+        }
+        let png = image::load_from_memory(&f.encode(ImageFormat::Png).unwrap()).unwrap();
+        assert_eq!(png.color(), image::ColorType::Rgb8);
+        assert_eq!(png.into_rgb8().into_raw(), f.to_rgb8());
+        let exr = image::load_from_memory(&f.encode(ImageFormat::Exr).unwrap()).unwrap();
+        assert_eq!(exr.color(), image::ColorType::Rgb32F);
+        let want: Vec<f32> = f.to_rgb_f32().concat();
+        assert_eq!(exr.into_rgb32f().into_raw(), want);
     }
 }

@@ -24,5 +24,5 @@ mod writer;
 
 pub use format::{Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
 pub(crate) use reader::decode_record;
-pub use reader::{Block, Database, DbStats, ObjectRef, Scan};
+pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
 pub use writer::{DbWriter, WriteSummary};

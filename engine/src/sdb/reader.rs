@@ -520,6 +520,25 @@ impl<'a> Block<'a> {
         }
     }
 
+    /// Each object's place in the block and its bounding box, without
+    /// decoding its geometry: what a scan needs to decide whether to look
+    /// closer. [`Block::object_at`] decodes one.
+    pub fn boxes(&self) -> BoxIter<'a> {
+        BoxIter {
+            words: self.words,
+            pos: 0,
+            index: self.first_object as u32,
+            left: self.object_count,
+        }
+    }
+
+    /// The object whose record starts at word `at` (as [`Block::boxes`]
+    /// gives it).
+    #[inline(always)]
+    pub fn object_at(&self, at: u32, index: u32) -> Option<ObjectRef<'a>> {
+        decode_record(self.words.get(at as usize..)?, index).map(|(o, _)| o)
+    }
+
     /// The block's records, as words (see the module documentation).
     pub fn words(&self) -> &'a [u32] {
         self.words
@@ -528,6 +547,49 @@ impl<'a> Block<'a> {
     /// Uncompressed payload bytes of this block.
     pub fn raw_bytes(&self) -> usize {
         self.words.len() * 4
+    }
+}
+
+/// An object's record position in its block, index and bounding box.
+#[derive(Clone, Copy, Debug)]
+pub struct BoxRef {
+    pub at: u32,
+    pub index: u32,
+    pub bbox: Aabb,
+}
+
+pub struct BoxIter<'a> {
+    words: &'a [u32],
+    pos: usize,
+    index: u32,
+    left: u32,
+}
+
+impl Iterator for BoxIter<'_> {
+    type Item = BoxRef;
+
+    #[inline]
+    fn next(&mut self) -> Option<BoxRef> {
+        if self.left == 0 {
+            return None;
+        }
+        // Records were validated when the block was read.
+        let w = self.words.get(self.pos..self.pos + RECORD_HEADER_WORDS)?;
+        let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
+        let len = RECORD_HEADER_WORDS + kind.payload_words(w[0] >> 8)?;
+        let f = |i: usize| f32::from_bits(w[i]);
+        let r = BoxRef {
+            at: self.pos as u32,
+            index: self.index,
+            bbox: Aabb {
+                min: [f(2), f(3), f(4)],
+                max: [f(5), f(6), f(7)],
+            },
+        };
+        self.pos += len;
+        self.index = self.index.wrapping_add(1);
+        self.left -= 1;
+        Some(r)
     }
 }
 
@@ -559,10 +621,11 @@ impl<'a> Iterator for ObjectIter<'a> {
 /// `id`; returns it and its length in words.
 #[inline(always)]
 pub(crate) fn decode_record(w: &[u32], index: u32) -> Option<(ObjectRef<'_>, usize)> {
-    let kind = ShapeKind::from_u8((w[0] & 0xff) as u8)?;
-    let count = w[0] >> 8;
+    let head = *w.first()?;
+    let kind = ShapeKind::from_u8((head & 0xff) as u8)?;
+    let count = head >> 8;
     let len = RECORD_HEADER_WORDS + kind.payload_words(count)?;
-    let f: &[f32] = bytemuck::cast_slice(&w[2..len]);
+    let f: &[f32] = bytemuck::cast_slice(w.get(2..len)?);
     let bbox = Aabb {
         min: [f[0], f[1], f[2]],
         max: [f[3], f[4], f[5]],

@@ -86,7 +86,10 @@ mod tests {
         assert_eq!(map["cone"], 1);
         // In kind order.
         let text = serde_json::to_string(&c).unwrap();
-        assert!(text.starts_with(r#"{"sphere":4,"polygon":0,"patch":0,"cone":1"#), "{text}");
+        assert!(
+            text.starts_with(r#"{"sphere":4,"polygon":0,"patch":0,"cone":1"#),
+            "{text}"
+        );
         let mut d = KindCounts::default();
         d.add_named(c.named()).unwrap();
         assert_eq!(c, d);

@@ -8,6 +8,7 @@ use anyhow::{Context, bail};
 use sray_coordinator::server::{Security, serve};
 use sray_coordinator::state::{Config, Shared};
 use sray_engine::progress::Progress;
+use sray_engine::render::ImageFormat;
 use sray_proto::auth::Token;
 use sray_proto::net::Target;
 use sray_proto::v1;
@@ -32,6 +33,7 @@ pub async fn render(
     db: &Path,
     params: v1::RenderParams,
     shard_rays: u64,
+    format: ImageFormat,
     progress: &dyn Progress,
 ) -> anyhow::Result<JobResult> {
     if plan.workers == 0 || plan.workers > 256 {
@@ -120,7 +122,7 @@ pub async fn render(
         token: sec.token.clone(),
         ca: None,
     };
-    let job = client::render(&target, db, params, shard_rays, progress);
+    let job = client::render(&target, db, params, shard_rays, format, progress);
     let all_exited = async {
         for c in children.iter_mut() {
             let _ = c.wait().await;
