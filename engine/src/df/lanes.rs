@@ -10,13 +10,22 @@ use crate::scene::Aabb;
 use crate::shapes::{Kind, Shape, SphereKind};
 
 /// Eye rays go in packets of PACKET_SIDE x PACKET_SIDE pixel corners.
-pub const PACKET_SIDE: usize = 4;
+pub const PACKET_SIDE: usize = 8;
 
 /// Most rays in a packet.
 pub const LANES: usize = PACKET_SIDE * PACKET_SIDE;
 
 /// A set of lanes, one bit each.
 pub type Mask = u64;
+
+/// How many lanes from the first a loop over the lanes `m` must cover: a
+/// power of two from 8 up, so that lane-parallel loops over a few rays
+/// stay short and still vectorise.
+#[inline(always)]
+pub fn width(m: Mask) -> usize {
+    let top = (Mask::BITS - m.leading_zeros()) as usize;
+    top.next_power_of_two().clamp(8, LANES)
+}
 
 /// Iterates over the lanes of a mask, lowest first.
 #[inline(always)]
@@ -87,7 +96,7 @@ impl<R: Copy> Rays<R> {
     /// what is computed over all lanes (bounds, spans) is the packet's.
     #[inline]
     pub fn pad(&mut self) {
-        for i in self.n.max(1)..LANES {
+        for i in self.n.max(1)..width(self.all()) {
             for a in 0..3 {
                 self.o[a][i] = self.o[a][0];
                 self.d[a][i] = self.d[a][0];

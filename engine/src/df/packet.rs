@@ -15,7 +15,7 @@
 //! about what one ray's walk costs per voxel, shared by the whole packet.
 
 use super::DfScene;
-use super::lanes::{LaneTests, Rays};
+use super::lanes::{LaneTests, Rays, width};
 use super::trace::Scratch;
 use crate::grid::GridSpec;
 use crate::hit::{Hit, PrimId};
@@ -52,7 +52,7 @@ impl LineBounds {
     ) -> LineBounds {
         let (ou, ok) = (&rays.o[u], &rays.o[k]);
         let mut a = [0.0; LANES];
-        for i in 0..LANES {
+        for i in 0..width(m) {
             a[i] = ou[i] + s[i] * (c_ref - ok[i]);
         }
         let (a_lo, a_hi) = span(&a, m);
@@ -145,12 +145,13 @@ fn on(m: Mask, i: usize) -> bool {
 #[inline(always)]
 fn span(x: &[f64; LANES], m: Mask) -> (f64, f64) {
     let f = x[m.trailing_zeros() as usize & (LANES - 1)];
+    let n = width(m);
     let mut lo = [0.0; LANES];
-    for i in 0..LANES {
+    for i in 0..n {
         lo[i] = if on(m, i) { x[i] } else { f };
     }
     let mut hi = lo;
-    let mut w = LANES / 2;
+    let mut w = n / 2;
     while w > 0 {
         for i in 0..w {
             lo[i] = min(lo[i], lo[i + w]);
@@ -189,6 +190,8 @@ pub struct Plan {
     /// Each lane's slopes du/dk and dv/dk, for culling lanes.
     su: [f64; LANES],
     sv: [f64; LANES],
+    /// Lanes the loops over the packet cover (see [`width`]).
+    w: usize,
     /// Whether the lines pass close enough to one point (at the reference
     /// plane) for culling lanes to pay.
     apex: bool,
@@ -218,7 +221,8 @@ impl Plan {
         let mut ends = [[0.0; LANES]; 2];
         let mut su = [0.0; LANES];
         let mut sv = [0.0; LANES];
-        for i in 0..LANES {
+        let w = width(m);
+        for i in 0..w {
             same &= !on(m, i) || if up { dk[i] > 0.0 } else { dk[i] < 0.0 };
             let (a, b) = (ok[i] + dk[i] * rays.t_min[i], ok[i] + dk[i] * rays.t_max[i]);
             ends[0][i] = min(a, b);
@@ -246,10 +250,12 @@ impl Plan {
             bv,
             su,
             sv,
-            apex: bu.a_hi - bu.a_lo < 0.25 * cell[u] && bv.a_hi - bv.a_lo < 0.25 * cell[v],
+            w,
+            apex: bu.a_hi - bu.a_lo < s.tune.apex * cell[u]
+                && bv.a_hi - bv.a_lo < s.tune.apex * cell[v],
             slack: s.slack,
         };
-        plan.worth_it(&g.spec, m).then_some(plan)
+        plan.worth_it(&g.spec, m, s.tune.worth).then_some(plan)
     }
 
     /// The lanes whose lines may pass through box `b`: for lines through
@@ -283,11 +289,15 @@ impl Plan {
         };
         let (ulo, uhi) = range(b.min[self.u] as f64, b.max[self.u] as f64, &self.bu);
         let (vlo, vhi) = range(b.min[self.v] as f64, b.max[self.v] as f64, &self.bv);
-        let mut m = 0;
-        for i in 0..LANES {
+        // Lane-parallel, with no short cuts, so that it vectorises.
+        let mut inside = [false; LANES];
+        for i in 0..self.w {
             let (su, sv) = (self.su[i], self.sv[i]);
-            let inside = su >= ulo && su <= uhi && sv >= vlo && sv <= vhi;
-            m |= (inside as Mask) << i;
+            inside[i] = (su >= ulo) & (su <= uhi) & (sv >= vlo) & (sv <= vhi);
+        }
+        let mut m = 0;
+        for i in 0..self.w {
+            m |= (inside[i] as Mask) << i;
         }
         m
     }
@@ -295,7 +305,7 @@ impl Plan {
     /// Whether walking together pays in grid `g`: roughly how many voxels
     /// the packet covers per slab (halfway through the grid), against how
     /// many its rays would visit per slab walked one by one.
-    fn worth_it(&self, g: &GridSpec, m: Mask) -> bool {
+    fn worth_it(&self, g: &GridSpec, m: Mask, worth: f64) -> bool {
         let (ka, ua, va) = (
             Axis::of(g, self.k),
             Axis::of(g, self.u),
@@ -314,11 +324,11 @@ impl Plan {
         let wv = (vhi - vlo) * va.inv_cell + 1.0;
         let (fu, fv) = (ka.cell * ua.inv_cell, ka.cell * va.inv_cell);
         let mut single = 0.0;
-        for i in 0..LANES {
+        for i in 0..self.w {
             let visits = 1.0 + self.su[i].abs() * fu + self.sv[i].abs() * fv;
             single += if on(m, i) { visits } else { 0.0 };
         }
-        wu * wv <= single
+        wu * wv <= worth * single
     }
 }
 
@@ -358,7 +368,7 @@ impl Slab {
     fn meets(&self, b: &Aabb) -> bool {
         let mut ok = true;
         for i in 0..3 {
-            ok &= (b.max[i] as f64) >= self.lo[i] && (b.min[i] as f64) <= self.hi[i];
+            ok &= ((b.max[i] as f64) >= self.lo[i]) & ((b.min[i] as f64) <= self.hi[i]);
         }
         ok
     }
@@ -487,7 +497,7 @@ impl<'p> SlabWalk<'p> {
         let k = self.plan.k;
         let (ok, ik) = (&rays.o[k], &rays.inv[k]);
         let mut out = 0;
-        for i in 0..LANES {
+        for i in 0..self.plan.w {
             let t_far = (c_far - ok[i]) * ik[i];
             out |= ((limit[i] < t_far) as Mask) << i;
         }
@@ -505,7 +515,7 @@ impl<'p> SlabWalk<'p> {
         } else {
             f64::NEG_INFINITY
         };
-        for i in 0..LANES {
+        for i in 0..self.plan.w {
             let at = ok[i] + dk[i] * limit[i];
             let on = on(m, i) && limit[i] < f64::INFINITY;
             c = if !on {
@@ -642,21 +652,21 @@ pub fn nearest<R: Real>(
 }
 
 /// Clears from `*m` the lanes of a packet of shadow rays walking as `plan`
-/// says that something blocks. `cached` is tried first; `last` is set to a
-/// blocker found.
+/// says that something blocks. `tested` (the shadow cache's blocker, if
+/// any) has been tried on these lanes already and is skipped; `last` is
+/// set to a blocker found.
 pub fn occluded<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &Rays<R>,
     m: &mut Mask,
     plan: &Plan,
-    cached: u32,
+    tested: u32,
     last: &mut u32,
 ) {
     let stamp = sc.next_stamp();
-    if cached != super::trace::NO_OBJECT {
-        sc.mail[cached as usize] = stamp;
-        LaneTests::new(s, cached).blocks(rays, m, &mut sc.tests);
+    if tested != super::trace::NO_OBJECT {
+        sc.mail[tested as usize] = stamp;
     }
     for g in s.grids.iter().rev() {
         if *m == 0 {

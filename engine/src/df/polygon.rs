@@ -206,7 +206,11 @@ mod tests {
             let o = V3::new(
                 rng.next() * 6.0 - 3.0,
                 rng.next() * 6.0 - 3.0,
-                if i % 11 == 0 { 0.5 } else { rng.next() * 6.0 - 3.0 },
+                if i % 11 == 0 {
+                    0.5
+                } else {
+                    rng.next() * 6.0 - 3.0
+                },
             );
             let d = target - o;
             if d == V3::zero() {

@@ -70,19 +70,14 @@ fn test_nearest<R: Real>(
     *m = stamp;
     let shape = &s.shapes[id as usize];
     sc.tests.add(shape.kind());
-    if let Some(t) = shape.intersect(
-        s.prep(id),
-        &s.bboxes[id as usize],
-        q,
-        rmin,
-        best.upper[lane],
-    ) {
+    if let Some(t) = s.intersect(id, q, rmin, best.upper[lane]) {
         best.offer(lane, t, id);
     }
 }
 
 /// Whether anything lies between `t_min` and `t_max` along the ray; tries
 /// the cached blocker of `slot` first and stops at the first blocker.
+/// `tested` (or `NO_OBJECT`) is an object already tried for this ray.
 #[inline]
 pub fn occluded<R: Real>(
     s: &DfScene,
@@ -94,8 +89,12 @@ pub fn occluded<R: Real>(
     inv: Vec3,
     t_min: f64,
     t_max: f64,
+    tested: u32,
 ) -> bool {
     let stamp = sc.next_stamp();
+    if tested != NO_OBJECT {
+        sc.mail[tested as usize] = stamp;
+    }
     let (rmin, rmax) = (R::from_f64(t_min), R::from_f64(t_max));
     let cached = sc.shadow_cache[slot];
     if cached != NO_OBJECT && blocks(s, sc, stamp, q, rmin, rmax, cached) {

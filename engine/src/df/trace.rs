@@ -6,7 +6,7 @@
 //! the order in which a slot's contributions arrive does not matter.
 
 use super::DfScene;
-use super::lanes::{LANES, Mask, PACKET_SIDE, Rays, lanes};
+use super::lanes::{LANES, LaneTests, Mask, PACKET_SIDE, Rays, lanes};
 use super::packet::{self, Hits, Plan};
 use super::single;
 use crate::error::Error;
@@ -14,8 +14,7 @@ use crate::intersect::RayQ;
 use crate::math::{Real, Vec3};
 use crate::progress::Progress;
 use crate::render::{
-    EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade,
-    to_fixed,
+    EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
 };
 use rayon::prelude::*;
 
@@ -215,7 +214,7 @@ fn trace_band<R: Real>(
 ) {
     let spp = eye.sampling.per_slot() as usize;
     // Blocks of side x side slots, of at most LANES rays when they fit.
-    let mut side = PACKET_SIDE;
+    let mut side = s.tune.eye_side;
     while side > 1 && side * side * spp > LANES {
         side /= 2;
     }
@@ -424,14 +423,15 @@ fn nearest_all<R: Real>(
 ) {
     let all = rays.all();
     let mut rest = all;
-    if rays.n as u32 >= MIN_PACKET {
+    let min_packet = s.tune.min_packet;
+    if rays.n as u32 >= min_packet && (reference.is_some() || s.tune.spawn_packets) {
         let whole = reference.unwrap_or_else(|| mean_origin(rays, all));
         if let Some(plan) = Plan::new(s, rays, all, whole) {
             packet::nearest(s, sc, rays, all, &plan, best);
             return;
         }
-        for m in octants(rays) {
-            if m != all && m.count_ones() >= MIN_PACKET {
+        for m in octants(rays, all) {
+            if m != all && m.count_ones() >= min_packet {
                 let at = reference.unwrap_or_else(|| mean_origin(rays, m));
                 if let Some(plan) = Plan::new(s, rays, m, at) {
                     packet::nearest(s, sc, rays, m, &plan, best);
@@ -455,14 +455,11 @@ fn nearest_all<R: Real>(
     }
 }
 
-/// Fewest rays worth walking as a packet.
-const MIN_PACKET: u32 = 3;
-
-/// The lanes of each octant of directions: a packet that is not coherent
-/// as a whole may be in parts.
-fn octants<R>(rays: &Rays<R>) -> [Mask; 8] {
+/// The lanes of `m` in each octant of directions: a packet that is not
+/// coherent as a whole may be in parts.
+fn octants<R>(rays: &Rays<R>, m: Mask) -> [Mask; 8] {
     let mut octants = [0 as Mask; 8];
-    for i in 0..rays.n {
+    for i in lanes(m) {
         let o = (rays.d[0][i] < 0.0) as usize
             | ((rays.d[1][i] < 0.0) as usize) << 1
             | ((rays.d[2][i] < 0.0) as usize) << 2;
@@ -472,7 +469,10 @@ fn octants<R>(rays: &Rays<R>) -> [Mask; 8] {
 }
 
 /// The lanes of a packet of shadow rays toward the light at `light` that
-/// nothing blocks; `slot` is their shadow cache slot.
+/// nothing blocks; `slot` is their shadow cache slot. The cached blocker
+/// is tried on every lane first; if it blocks most of them the cache is
+/// doing the work, and the rest go one by one (each updating the cache as
+/// it finds a blocker), else they walk together where they can.
 fn occluded_all<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
@@ -481,12 +481,19 @@ fn occluded_all<R: Real>(
     light: Vec3,
 ) -> Mask {
     let all = rays.all();
-    let mut lit = all;
-    let mut rest = all;
-    if rays.n as u32 >= MIN_PACKET {
-        let split = octants(rays).into_iter().filter(|&m| m != all);
-        for m in std::iter::once(all).chain(split) {
-            if m.count_ones() < MIN_PACKET {
+    let cached = sc.shadow_cache[slot];
+    let mut open = all;
+    if cached != NO_OBJECT {
+        LaneTests::new(s, cached).blocks(rays, &mut open, &mut sc.tests);
+    }
+    let mut lit = open;
+    let mut rest = open;
+    let min_packet = s.tune.min_packet;
+    let cache_works = 2 * open.count_ones() < all.count_ones();
+    if open.count_ones() >= min_packet && s.tune.shadow_packets && !cache_works {
+        let split = octants(rays, open).into_iter().filter(|&m| m != open);
+        for m in std::iter::once(open).chain(split) {
+            if m.count_ones() < min_packet {
                 continue;
             }
             let Some(plan) = Plan::new(s, rays, m, light) else {
@@ -494,7 +501,6 @@ fn occluded_all<R: Real>(
             };
             let mut unblocked = m;
             let mut last = NO_OBJECT;
-            let cached = sc.shadow_cache[slot];
             packet::occluded(s, sc, rays, &mut unblocked, &plan, cached, &mut last);
             if last != NO_OBJECT {
                 sc.shadow_cache[slot] = last;
@@ -517,6 +523,7 @@ fn occluded_all<R: Real>(
             rays.inv(i),
             rays.t_min[i],
             rays.t_max[i],
+            cached,
         ) {
             lit &= !(1 << i);
         }
