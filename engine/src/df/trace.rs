@@ -356,8 +356,8 @@ fn trace_packet<R: Real>(
     // lanes' next ones.
     let max_depth = s.shade.max_depth as usize;
     let mut next = [0u32; LANES];
-    for i in 1..rays.n {
-        next[i] = ends[i - 1];
+    if rays.n > 1 {
+        next[1..rays.n].copy_from_slice(&ends[..rays.n - 1]);
     }
     let mut member = [0u32; LANES];
     loop {
