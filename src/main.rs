@@ -11,5 +11,6 @@ static ALLOC: sray_engine::paging::PagingAlloc = sray_engine::paging::PagingAllo
 
 fn main() -> std::process::ExitCode {
     sray_engine::sys::report_file_size_limit_as_error();
+    sray_engine::sys::return_freed_memory_to_the_system();
     cli::main()
 }

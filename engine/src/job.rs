@@ -86,13 +86,14 @@ pub fn prepare(
 }
 
 /// Picks the tracer: as asked, or for `auto` depth-first when the scene
-/// fits in the budget (the paper's Fig. 1). Returns the mode and why.
-pub fn choose_mode(mode: Mode, db: &Database, memory: u64) -> (Mode, String) {
+/// and the frame (`frame_slots` slots) fit in the budget (the paper's
+/// Fig. 1). Returns the mode and why.
+pub fn choose_mode(mode: Mode, db: &Database, frame_slots: u64, memory: u64) -> (Mode, String) {
     match mode {
         Mode::Df => (Mode::Df, "requested with --mode df".into()),
         Mode::Bf => (Mode::Bf, "requested with --mode bf".into()),
         Mode::Auto => {
-            let need = df::estimate_bytes(db);
+            let need = df::estimate_bytes(db) + Frame::memory_bytes(frame_slots);
             if need <= memory {
                 (
                     Mode::Df,
@@ -122,7 +123,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
     req.options.validate()?;
     let memory = req.memory.unwrap_or_else(crate::sys::default_memory_budget);
     let scene = prepare(&req.scene, req.tmp_dir.as_deref(), stages)?;
-    let (mode, reason) = choose_mode(req.mode, &scene.db, memory);
+    let (mode, reason) = choose_mode(req.mode, &scene.db, req.options.frame_slots(), memory);
     let progress = stages.stage("rendering");
     let (frame, mut stats) = match mode {
         Mode::Bf => {

@@ -73,3 +73,27 @@ pub fn report_file_size_limit_as_error() {
 
 #[cfg(not(unix))]
 pub fn report_file_size_limit_as_error() {}
+
+/// Makes freed memory go back to the system, so that the process's
+/// resident size follows what the memory budget accounts for. glibc serves
+/// allocations above a threshold with their own mappings, unmapped when
+/// freed, but by default raises that threshold to the size of any such
+/// block freed (up to 32 MiB): after the first phase gives its buffers
+/// back, the next phase's buffers come from the heap, which keeps freed
+/// memory, and the resident size outgrows the budget by the heap's
+/// fragments. A fixed threshold (which turns the raising off) and a
+/// heap trimmed past 1 MiB keep it honest.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+pub fn return_freed_memory_to_the_system() {
+    // SAFETY: mallopt(3) takes two integers and changes glibc's allocator
+    // parameters under the allocator's own lock; it is called before any
+    // thread of ours starts, and both values are within glibc's ranges
+    // (M_MMAP_THRESHOLD at most HEAP_MAX / 2, M_TRIM_THRESHOLD any).
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 256 << 10);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 1 << 20);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+pub fn return_freed_memory_to_the_system() {}

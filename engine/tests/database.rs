@@ -250,3 +250,42 @@ fn unfinished_writer_leaves_no_file() {
         "temporary file left behind"
     );
 }
+
+/// Checksums and records are checked by the first full scan only; a file
+/// changed after it was opened (so no longer the file that was checked) is
+/// refused by the next scan instead of being trusted, and `scan_checked`
+/// checks every block again.
+#[test]
+fn later_scans_trust_only_the_file_that_was_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    for c in [Compression::None, Compression::Zstd(3)] {
+        let path = small_db(dir.path(), c);
+        let db = Database::open(&path).unwrap();
+        for _ in 0..3 {
+            let mut scan = db.scan().unwrap();
+            let mut n = 0;
+            while let Some(b) = scan.next_block().unwrap() {
+                n += b.objects().count() as u64;
+            }
+            assert_eq!(n, db.object_count());
+        }
+        // Flip a byte inside the first block, after the checks were done.
+        let mut bytes = std::fs::read(&path).unwrap();
+        bytes[600] ^= 0x40;
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::fs::write(&path, &bytes).unwrap();
+        let err = match db.scan() {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("a changed file was scanned ({c:?})"),
+        };
+        assert!(err.contains("changed on disk"), "{err}");
+        // Reopened, the file is checked again and the flipped byte found.
+        let checked = |db: &Database| -> Result<(), Error> {
+            let mut scan = db.scan_checked()?;
+            while scan.next_block()?.is_some() {}
+            Ok(())
+        };
+        let failed = Database::open(&path).and_then(|db| checked(&db)).is_err();
+        assert!(failed, "the flipped byte went unnoticed ({c:?})");
+    }
+}

@@ -41,10 +41,28 @@ impl Outputs {
     /// Writes the image file's bytes and the statistics, then moves both
     /// into place. Unwritten temporary files are removed when dropped.
     pub fn write(self, image_file: &[u8], stats: &impl serde::Serialize) -> anyhow::Result<()> {
-        let (image_path, mut image) = self.image;
-        image
-            .write_all(image_file)
-            .map_err(|e| sray_engine::Error::io(&image_path, e))?;
+        self.write_with(
+            |out| {
+                out.write_all(image_file)?;
+                Ok(())
+            },
+            stats,
+        )
+    }
+
+    /// As [`Outputs::write`], the image written by `image` into the
+    /// (buffered) temporary file: an image need not be in memory whole.
+    pub fn write_with(
+        self,
+        image: impl FnOnce(&mut dyn Write) -> anyhow::Result<()>,
+        stats: &impl serde::Serialize,
+    ) -> anyhow::Result<()> {
+        let (image_path, tmp) = self.image;
+        let mut buffered = std::io::BufWriter::with_capacity(1 << 20, tmp);
+        image(&mut buffered).map_err(|e| e.context(format!("writing {}", image_path.display())))?;
+        let image = buffered
+            .into_inner()
+            .map_err(|e| sray_engine::Error::io(&image_path, e.into_error()))?;
         let stats = match self.stats {
             Some((p, mut tmp)) => {
                 let mut text = serde_json::to_vec_pretty(stats)?;

@@ -157,8 +157,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         return run_cluster(&a, &req, outputs);
     }
     let result = render(&req, &BarStages)?;
-    let image = result.frame.encode(outputs.format())?;
-    outputs.write(&image, &result.stats)?;
+    let format = outputs.format();
+    outputs.write_with(
+        |out| Ok(result.frame.write_image(format, out)?),
+        &result.stats,
+    )?;
     summary::print(&serde_json::to_value(&result.stats)?, &a.output, a.quiet);
     Ok(())
 }

@@ -25,7 +25,7 @@ pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
     let bar = Bar::bytes("verify");
     bar.0.set_length(db.file_bytes());
     let start = Instant::now();
-    let mut scan = db.scan()?;
+    let mut scan = db.scan_checked()?;
     let mut objects = 0u64;
     let mut raw = 0u64;
     while let Some(block) = scan.next_block()? {

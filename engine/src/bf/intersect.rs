@@ -375,6 +375,23 @@ impl<R: Real> Slots<R> {
     }
 }
 
+/// Whether the ray meets no grid's box within its extent: nothing can
+/// be found along it.
+fn misses_every_grid(r: &RayRec, grids: &VoxelGrids, eps: f64) -> bool {
+    let o = Vec3::from_array(r.o);
+    let d = Vec3::from_array(r.d);
+    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    let t_min = if r.kind == super::records::RayKind::Eye as u8 {
+        0.0
+    } else {
+        eps
+    };
+    grids
+        .grids
+        .iter()
+        .all(|g| g.spec.clip(o, d, inv, t_min, r.t_max).is_none())
+}
+
 /// Puts a ray into a slot.
 fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
     let o = Vec3::from_array(r.o);
@@ -437,28 +454,52 @@ pub fn intersect_rays<R: Real>(
     let mut exhausted = false;
     let mut finished: u64 = 0;
     let mut active: u64 = 0;
+    // Rays that left at once and are not yet counted in the progress.
+    let mut sky: u64 = 0;
     loop {
-        // Fill empty slots, in slot order.
+        // Fill empty slots, in slot order. A ray that meets no grid's box
+        // (the sky around a model) is a miss at once and takes no slot.
         if !exhausted {
             'fill: for sh in shards.iter_mut() {
                 for i in 0..sh.hot.len() {
                     if sh.hot[i].active {
                         continue;
                     }
-                    match rays.next() {
-                        Some(r) => {
-                            load(sh, i, next_id, &r?, setup.eps);
-                            next_id += 1;
-                            active += 1;
-                        }
-                        None => {
-                            exhausted = true;
-                            break 'fill;
+                    loop {
+                        match rays.next() {
+                            Some(r) => {
+                                let r = r?;
+                                let id = next_id;
+                                next_id += 1;
+                                if misses_every_grid(&r, setup.grids, setup.eps) {
+                                    finished += 1;
+                                    // Counted in batches: a progress update
+                                    // costs more than such a ray.
+                                    sky += 1;
+                                    if sky == 1 << 16 {
+                                        progress.inc(std::mem::take(&mut sky));
+                                    }
+                                    emit(Outcome::bare(ResultRec {
+                                        ray: id,
+                                        prim: PrimId::NONE,
+                                        t: f64::INFINITY,
+                                    }))?;
+                                    continue;
+                                }
+                                load(sh, i, id, &r, setup.eps);
+                                active += 1;
+                                break;
+                            }
+                            None => {
+                                exhausted = true;
+                                break 'fill;
+                            }
                         }
                     }
                 }
             }
         }
+        progress.inc(std::mem::take(&mut sky));
         if active == 0 {
             break;
         }

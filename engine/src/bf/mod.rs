@@ -24,8 +24,9 @@ mod shade;
 mod tracer;
 mod voxels;
 
+pub use crate::render::Contribution;
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
-pub use records::{Contribution, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+pub use records::{RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};
@@ -38,7 +39,7 @@ use crate::render::{
     Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
 };
 use crate::sdb::Database;
-use crate::spill;
+use crate::spill::{self, SpillDir};
 use crate::units::fmt_bytes;
 use intersect::{REGISTRATION_BYTES, slot_bytes};
 use serde::Serialize;
@@ -125,6 +126,12 @@ const IDLE_SHARE: f64 = 0.05;
 /// allocations; the database's block buffers come on top.
 const IO_BYTES: u64 =
     5 * spill::IO_BUFFER as u64 + (spill::MERGE_FANIN * spill::MERGE_BUFFER) as u64 + (64 << 10);
+/// Kept free of every planned buffer, for what no plan counts: the
+/// allocator's slack and fragments, small allocations, the rounding of
+/// buffer sizes. A sixteenth of the budget, at most 4 MiB.
+fn slack(total: u64) -> u64 {
+    (total / 16).min(4 << 20)
+}
 /// Fewest rays worth a pass.
 const MIN_SLOTS: u64 = 64;
 /// Databases smaller than this are cheap to scan...
@@ -142,16 +149,15 @@ impl Budget {
     /// is the number of shards.
     pub fn plan<R: Real>(
         total: u64,
-        corners: u64,
+        frame: u64,
         cells: u64,
         scan_buffers: u64,
         store: &StorePlan,
         threads: usize,
     ) -> Result<Budget, Error> {
-        let frame = corners * 24;
         let io = IO_BYTES + scan_buffers;
         let overrun = threads.max(1) as u64 * store.overrun() * REGISTRATION_BYTES as u64;
-        let fixed = frame + cells + io + overrun;
+        let fixed = frame + cells + io + overrun + slack(total);
         let slot_bytes = slot_bytes::<R>() as u64 + store.planned() * REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
@@ -160,13 +166,15 @@ impl Budget {
         if total < minimum {
             return Err(Error::Invalid(format!(
                 "a memory budget of {} is too small for this render; it needs at least {} \
-                 (frame buffer {}, voxel flags {}, I/O buffers {}, {MIN_SLOTS} rays {})",
+                 (frame buffer {}, voxel flags {}, I/O buffers {}, {MIN_SLOTS} rays {}, \
+                 allocator slack {})",
                 fmt_bytes(total),
                 fmt_bytes(minimum),
                 fmt_bytes(frame),
                 fmt_bytes(cells),
                 fmt_bytes(io),
                 fmt_bytes(min_shared),
+                fmt_bytes(slack(total)),
             )));
         }
         let shared = total - fixed;
@@ -220,7 +228,7 @@ impl Budget {
     /// Records the result sorter holds when results spill.
     pub fn result_sort_records(&self) -> u64 {
         ((self.shared as f64 * RESIDENT_RESULTS) as u64
-            / std::mem::size_of::<records::Outcome>() as u64)
+            / (std::mem::size_of::<records::Outcome>() + spill::RADIX_BYTES_PER_RECORD) as u64)
             .max(16)
     }
 
@@ -295,6 +303,54 @@ pub struct BfOutput {
     pub stats: RenderStats,
 }
 
+/// Where a breadth-first render keeps its frame: in memory when the frame
+/// takes at most a quarter of the budget, else on disk as contributions,
+/// sorted by slot and summed when the image is written, so that the
+/// memory bound holds for any image size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FramePlan {
+    Memory,
+    /// Contributions spill, at most this many in memory at a time.
+    Spilled {
+        records: usize,
+    },
+}
+
+/// Bytes a spilled frame's sorter takes per contribution it holds: the
+/// record, the radix sort's keys and indices, and the permuted copy.
+const SPILLED_FRAME_RECORD_BYTES: u64 = 96;
+
+impl FramePlan {
+    pub fn new(slots: u64, memory: u64) -> FramePlan {
+        if Frame::memory_bytes(slots) <= memory / 4 {
+            FramePlan::Memory
+        } else {
+            let share = (memory / 16).min(64 << 20);
+            FramePlan::Spilled {
+                records: (share / SPILLED_FRAME_RECORD_BYTES).max(1024) as usize,
+            }
+        }
+    }
+
+    /// Bytes the frame holds in memory.
+    pub fn bytes(&self, slots: u64) -> u64 {
+        match *self {
+            FramePlan::Memory => Frame::memory_bytes(slots),
+            FramePlan::Spilled { records } => records as u64 * SPILLED_FRAME_RECORD_BYTES,
+        }
+    }
+
+    /// An empty frame of this kind.
+    pub fn frame(&self, opts: &RenderOptions, spill: &SpillDir) -> Frame {
+        match *self {
+            FramePlan::Memory => Frame::with_sampling(opts.width, opts.height, opts.sampling()),
+            FramePlan::Spilled { records } => {
+                Frame::spilled(opts.width, opts.height, opts.sampling(), spill, records)
+            }
+        }
+    }
+}
+
 /// Grid specifications for the breadth-first tracer: as the depth-first
 /// tracer's, but no finer than the memory budget allows.
 pub fn plan_grids(
@@ -303,7 +359,8 @@ pub fn plan_grids(
     memory: u64,
 ) -> (Vec<GridSpec>, crate::grid::Partition) {
     let plan = plan_groups(db.sizes(), opts.multiple_grids);
-    let frame = opts.frame_slots() * 24;
+    let slots = opts.frame_slots();
+    let frame = FramePlan::new(slots, memory).bytes(slots);
     let cap = (memory.saturating_sub(frame) / 8).clamp(1, MAX_CELLS);
     let mut specs = Vec::new();
     for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
@@ -348,7 +405,7 @@ fn render_in<R: Real>(
     // Marking the voxels counts objects.
     progress.set_unit("objects");
     let mut tr = Tracer::<R>::new(db, opts, bf, opts.frame_slots(), progress)?;
-    let mut frame = Frame::with_sampling(opts.width, opts.height, eye.sampling);
+    let mut frame = FramePlan::new(opts.frame_slots(), bf.memory).frame(opts, &tr.spill);
     let mut counts = RayCounts {
         eye_rays: eye.count(),
         ..Default::default()
@@ -432,12 +489,12 @@ mod tests {
             [10, 10, 10],
         )];
         let store = StorePlan::new(StoreNumber::Adaptive, &specs);
-        let e = Budget::plan::<f64>(1 << 20, 513 * 513, 1000, 1 << 17, &store, 2)
+        let e = Budget::plan::<f64>(1 << 20, 513 * 513 * 24, 1000, 1 << 17, &store, 2)
             .unwrap_err()
             .to_string();
         assert!(e.contains("needs at least"), "{e}");
-        assert!(Budget::plan::<f64>(64 << 20, 513 * 513, 1000, 1 << 17, &store, 2).is_ok());
+        assert!(Budget::plan::<f64>(64 << 20, 513 * 513 * 24, 1000, 1 << 17, &store, 2).is_ok());
         // A small image fits in a few hundred kilobytes.
-        assert!(Budget::plan::<f64>(600 << 10, 33 * 33, 20_000, 1 << 17, &store, 2).is_ok());
+        assert!(Budget::plan::<f64>(600 << 10, 33 * 33 * 24, 20_000, 1 << 17, &store, 2).is_ok());
     }
 }

@@ -114,13 +114,3 @@ pub struct HitRec {
     pub t: f64,
     pub prim: PrimId,
 }
-
-/// Colour added to a pixel corner (fixed point), as cluster workers return
-/// it from shading.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
-#[repr(C)]
-pub struct Contribution {
-    pub corner: u32,
-    pub _pad: u32,
-    pub rgb: [i64; 3],
-}

@@ -44,23 +44,21 @@ fn result_key(r: &Outcome) -> u64 {
     r.res.ray
 }
 
-/// A slot of the in-memory results not yet written.
-const UNSET: Outcome = Outcome {
-    res: ResultRec {
-        ray: u64::MAX,
+/// The result of ray `ray` when it hit nothing (or, a shadow ray, was not
+/// blocked): what the tracer reports for it, without storing it.
+fn miss(ray: u64) -> Outcome {
+    Outcome::bare(ResultRec {
+        ray,
         prim: PrimId::NONE,
-        t: 0.0,
-    },
-    ng: [0.0; 3],
-    ns: [0.0; 3],
-    material: 0,
-    has_surface: 0,
-};
+        t: f64::INFINITY,
+    })
+}
 
 type ResultSorter = ExternalSorter<Outcome, u64, fn(&Outcome) -> u64>;
 
 /// Results of a run of rays, brought into ray order: placed by id in memory
-/// when they fit, else sorted externally.
+/// when they fit, else sorted externally. Only hits (and blocked shadow
+/// rays) are stored: a missing result is a miss.
 enum Results {
     Dense { first: u64, v: Vec<Outcome> },
     Sort(ResultSorter),
@@ -81,12 +79,21 @@ impl Results {
 /// Rays in key order, as [`Tracer::shade`] returns the ones it spawned.
 pub type SortedRays = Sorted<RayRec, u64, fn(&RayRec) -> u64>;
 
-/// Results in ray order: as [`Tracer::intersect`] returns them (with the
-/// surfaces it carried, if any), or read from a file of results already in
-/// order.
+/// Stored hits read back in ray order.
+pub type SortedOutcomes = Sorted<Outcome, u64, fn(&Outcome) -> u64>;
+
+/// Results in ray order, one per ray: as [`Tracer::intersect`] returns
+/// them (with the surfaces it carried, if any), or read from a file of
+/// results already in order.
 pub enum ResultReader {
     Dense(std::vec::IntoIter<Outcome>),
-    Sorted(Sorted<Outcome, u64, fn(&Outcome) -> u64>),
+    /// The stored hits in ray order, misses filled in between.
+    Sparse {
+        hits: Box<SortedOutcomes>,
+        pending: Option<Outcome>,
+        next: u64,
+        end: u64,
+    },
     File(RecordReader<ResultRec>),
 }
 
@@ -95,7 +102,29 @@ impl ResultReader {
     pub fn next_outcome(&mut self) -> Result<Option<Outcome>, Error> {
         match self {
             ResultReader::Dense(it) => Ok(it.next()),
-            ResultReader::Sorted(s) => s.next(),
+            ResultReader::Sparse {
+                hits,
+                pending,
+                next,
+                end,
+            } => {
+                if *next == *end {
+                    return Ok(None);
+                }
+                if pending.is_none() {
+                    *pending = hits.next()?;
+                }
+                let id = *next;
+                *next += 1;
+                match *pending {
+                    Some(h) if h.res.ray == id => Ok(pending.take()),
+                    Some(h) if h.res.ray < id => Err(Error::Invalid(format!(
+                        "intersection results out of order: ray {} after ray {id}",
+                        h.res.ray
+                    ))),
+                    _ => Ok(Some(miss(id))),
+                }
+            }
             ResultReader::File(r) => Ok(r.next()?.map(Outcome::bare)),
         }
     }
@@ -160,7 +189,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         let store = StorePlan::new(bf.store, &specs);
         let budget = Budget::plan::<R>(
             bf.memory,
-            frame_corners,
+            super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
             db.scan_buffer_bytes() as u64,
             &store,
@@ -237,7 +266,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         let mut results = if resident {
             let mut v = std::mem::take(&mut self.dense_buf);
             v.clear();
-            v.resize(n as usize, UNSET);
+            v.extend((first..first + n).map(miss));
             Results::Dense { first, v }
         } else {
             Results::Sort(ExternalSorter::new(
@@ -265,6 +294,9 @@ impl<'db, R: Real> Tracer<'db, R> {
         };
         let ist = {
             let mut emit = |mut r: Outcome| {
+                if r.res.prim.is_none() {
+                    return Ok(()); // a miss: reported without being stored
+                }
                 r.res.ray += first;
                 results.put(r)
             };
@@ -297,7 +329,12 @@ impl<'db, R: Real> Tracer<'db, R> {
         }
         let reader = match results {
             Results::Dense { v, .. } => ResultReader::Dense(v.into_iter()),
-            Results::Sort(s) => ResultReader::Sorted(s.finish()?),
+            Results::Sort(s) => ResultReader::Sparse {
+                hits: Box::new(s.finish()?),
+                pending: None,
+                next: first,
+                end: first + n,
+            },
         };
         self.intersect_seconds += ti.elapsed().as_secs_f64();
         Ok((reader, ist))

@@ -1,12 +1,36 @@
+//! The frame buffer: colour summed per frame slot in fixed point, in
+//! memory, or, when the image is too large for the memory budget, as
+//! contributions spilled to disk and summed at the end, slot by slot in
+//! order, while the image is written row by row (the paper's way: colour
+//! contributions are written out and sorted).
+
 use super::sampling::Sampling;
 use crate::error::Error;
 use crate::error::IoContext;
 use crate::fsutil::{persist, temp_beside};
+use crate::spill::{ExternalSorter, SpillDir};
+use bytemuck::{Pod, Zeroable};
 use image::codecs::openexr::OpenExrEncoder;
-use image::codecs::png::{CompressionType, FilterType, PngEncoder};
 use image::{ExtendedColorType, ImageEncoder};
 use std::io::Write;
 use std::path::Path;
+
+/// Colour added to a frame slot (fixed point): what a render spills when
+/// its frame does not fit in memory, and what cluster workers return from
+/// shading.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Contribution {
+    pub corner: u32,
+    pub _pad: u32,
+    pub rgb: [i64; 3],
+}
+
+type ContributionSorter = ExternalSorter<Contribution, u32, fn(&Contribution) -> u32>;
+
+fn contribution_slot(c: &Contribution) -> u32 {
+    c.corner
+}
 
 /// One in the frame buffer's fixed point: colours are summed as integers
 /// in units of 2^-32, so a pixel is the same whatever order its
@@ -26,14 +50,21 @@ pub fn to_fixed(c: [f32; 3]) -> [i64; 3] {
 
 /// Accumulated colour per frame slot: each pixel corner (corner sampling)
 /// or each pixel (jittered sampling); see [`Sampling`].
-#[derive(Clone, Debug)]
 pub struct Frame {
     pub width: u32,
     pub height: u32,
     pub sampling: Sampling,
     /// Row-major: (width + 1) x (height + 1) corners, or width x height
-    /// pixels.
+    /// pixels. Empty when the frame is spilled.
     pub slots: Vec<[i64; 3]>,
+    /// The contributions, when the frame lives on disk.
+    spilled: Option<Box<Spilled>>,
+}
+
+struct Spilled {
+    sorter: ContributionSorter,
+    /// The first failure to spill, reported when the image is written.
+    error: Option<Error>,
 }
 
 impl Frame {
@@ -48,7 +79,45 @@ impl Frame {
             height,
             sampling,
             slots: vec![[0; 3]; sampling.slots(width, height) as usize],
+            spilled: None,
         }
+    }
+
+    /// A frame kept on disk: contributions go to `spill`, at most
+    /// `mem_records` of them in memory at a time, and are summed when the
+    /// image is written (see [`Frame::write_image`]).
+    pub fn spilled(
+        width: u32,
+        height: u32,
+        sampling: Sampling,
+        spill: &SpillDir,
+        mem_records: usize,
+    ) -> Frame {
+        Frame {
+            width,
+            height,
+            sampling,
+            slots: Vec::new(),
+            spilled: Some(Box::new(Spilled {
+                sorter: ExternalSorter::new(
+                    spill,
+                    "frame",
+                    mem_records,
+                    contribution_slot as fn(&Contribution) -> u32,
+                ),
+                error: None,
+            })),
+        }
+    }
+
+    /// Bytes a frame of `slots` slots takes in memory.
+    pub fn memory_bytes(slots: u64) -> u64 {
+        slots * std::mem::size_of::<[i64; 3]>() as u64
+    }
+
+    /// Whether the frame lives on disk.
+    pub fn is_spilled(&self) -> bool {
+        self.spilled.is_some()
     }
 
     /// Slots per row.
@@ -58,6 +127,20 @@ impl Frame {
 
     #[inline]
     pub fn add(&mut self, slot: u32, c: [i64; 3]) {
+        if let Some(sp) = &mut self.spilled {
+            // Adding nothing changes nothing: black misses cost no I/O.
+            if c != [0; 3]
+                && sp.error.is_none()
+                && let Err(e) = sp.sorter.push(Contribution {
+                    corner: slot,
+                    _pad: 0,
+                    rgb: c,
+                })
+            {
+                sp.error = Some(e);
+            }
+            return;
+        }
         let s = &mut self.slots[slot as usize];
         for k in 0..3 {
             s[k] = s[k].saturating_add(c[k]);
@@ -118,23 +201,62 @@ impl Frame {
             .collect()
     }
 
-    /// The image encoded as `format`.
+    /// Writes the image as `format` to `out`, row by row where it can: a
+    /// spilled frame is summed slot by slot in order as rows are written,
+    /// so no more than two rows of slots are ever in memory. OpenEXR needs
+    /// the whole image in memory, so a spilled frame refuses it.
+    pub fn write_image(self, format: ImageFormat, out: &mut dyn Write) -> Result<(), Error> {
+        let (w, h) = (self.width, self.height);
+        match (format, self.spilled.is_some()) {
+            (ImageFormat::Exr, true) => Err(Error::Invalid(format!(
+                "a {w}x{h} OpenEXR image must be held whole in memory ({}), more than this render's budget allows; write .png, or give a larger --memory",
+                crate::units::fmt_bytes(w as u64 * h as u64 * 12)
+            ))),
+            (ImageFormat::Exr, false) => out
+                .write_all(&self.encode(format)?)
+                .map_err(|e| Error::Invalid(format!("cannot write the image: {e}"))),
+            (ImageFormat::Png, false) => self.write_png(out),
+            (ImageFormat::Png, true) => {
+                let mut rows = PixelRows::new(self)?;
+                let mut row = vec![[0.0f64; 3]; w as usize];
+                write_png(w, h, out, |bytes| {
+                    rows.next_row(&mut row)?;
+                    for (b, c) in bytes.iter_mut().zip(row.iter().flatten()) {
+                        *b = to_u8(*c);
+                    }
+                    Ok(())
+                })
+            }
+        }
+    }
+
+    /// Writes a frame held in memory as PNG, with the same encoder as a
+    /// spilled frame's, so that an image does not depend on the budget
+    /// down to its bytes.
+    fn write_png(&self, out: &mut dyn Write) -> Result<(), Error> {
+        let rgb = self.to_rgb8();
+        let mut rows = rgb.chunks_exact(3 * self.width as usize);
+        write_png(self.width, self.height, out, |bytes| {
+            bytes.copy_from_slice(rows.next().expect("one row per image row"));
+            Ok(())
+        })
+    }
+
+    /// The image encoded as `format` (a frame in memory).
     pub fn encode(&self, format: ImageFormat) -> Result<Vec<u8>, Error> {
         let mut out = std::io::Cursor::new(Vec::new());
         let (w, h) = (self.width, self.height);
-        let r = match format {
-            ImageFormat::Png => {
-                PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Adaptive)
-                    .write_image(&self.to_rgb8(), w, h, ExtendedColorType::Rgb8)
-            }
-            ImageFormat::Exr => OpenExrEncoder::new(&mut out).write_image(
-                bytemuck::cast_slice(&self.to_rgb_f32()),
-                w,
-                h,
-                ExtendedColorType::Rgb32F,
-            ),
-        };
-        r.map_err(|e| Error::Invalid(format!("cannot encode the image as {format}: {e}")))?;
+        match format {
+            ImageFormat::Png => self.write_png(&mut out)?,
+            ImageFormat::Exr => OpenExrEncoder::new(&mut out)
+                .write_image(
+                    bytemuck::cast_slice(&self.to_rgb_f32()),
+                    w,
+                    h,
+                    ExtendedColorType::Rgb32F,
+                )
+                .map_err(|e| Error::Invalid(format!("cannot encode the image as {format}: {e}")))?,
+        }
         Ok(out.into_inner())
     }
 
@@ -145,6 +267,136 @@ impl Frame {
         let mut tmp = temp_beside(path)?;
         tmp.write_all(&bytes).at(path)?;
         persist(tmp, path)
+    }
+}
+
+/// Writes an 8-bit RGB PNG of `w` x `h` pixels, row by row: `row` fills
+/// each row's bytes in turn, top to bottom.
+fn write_png(
+    w: u32,
+    h: u32,
+    out: &mut dyn Write,
+    mut row: impl FnMut(&mut [u8]) -> Result<(), Error>,
+) -> Result<(), Error> {
+    let err =
+        |e: png::EncodingError| Error::Invalid(format!("cannot encode the image as PNG: {e}"));
+    let mut enc = png::Encoder::new(out, w, h);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.set_compression(png::Compression::Fast);
+    let mut writer = enc.write_header().map_err(err)?;
+    let mut stream = writer.stream_writer().map_err(err)?;
+    let mut bytes = vec![0u8; 3 * w as usize];
+    for _ in 0..h {
+        row(&mut bytes)?;
+        stream
+            .write_all(&bytes)
+            .map_err(|e| Error::Invalid(format!("cannot write the image: {e}")))?;
+    }
+    stream.finish().map_err(err)
+}
+
+/// A spilled frame's pixels, a row at a time: contributions in slot order
+/// summed into at most two rows of slots (a pixel row needs two rows of
+/// corners).
+struct PixelRows {
+    width: usize,
+    height: usize,
+    sampling: Sampling,
+    contributions: crate::spill::Sorted<Contribution, u32, fn(&Contribution) -> u32>,
+    /// The next contribution not yet summed.
+    pending: Option<Contribution>,
+    /// Slot rows `y` and `y + 1` (corners), or row `y` (pixels).
+    upper: Vec<[i64; 3]>,
+    lower: Vec<[i64; 3]>,
+    y: usize,
+}
+
+impl PixelRows {
+    fn new(frame: Frame) -> Result<PixelRows, Error> {
+        let sp = frame.spilled.expect("a spilled frame");
+        if let Some(e) = sp.error {
+            return Err(e);
+        }
+        let (slots_per_row, _) = frame.sampling.slot_grid(frame.width, frame.height);
+        let mut rows = PixelRows {
+            width: frame.width as usize,
+            height: frame.height as usize,
+            sampling: frame.sampling,
+            contributions: sp.sorter.finish()?,
+            pending: None,
+            upper: vec![[0; 3]; slots_per_row as usize],
+            lower: vec![[0; 3]; slots_per_row as usize],
+            y: 0,
+        };
+        rows.pending = rows.contributions.next()?;
+        rows.fill(0, true)?;
+        if rows.sampling == Sampling::Corners {
+            rows.fill(1, false)?;
+        }
+        Ok(rows)
+    }
+
+    /// Sums slot row `row` into the upper (or lower) buffer.
+    fn fill(&mut self, row: usize, upper: bool) -> Result<(), Error> {
+        let n = self.upper.len();
+        let buf = if upper {
+            &mut self.upper
+        } else {
+            &mut self.lower
+        };
+        buf.fill([0; 3]);
+        let (lo, hi) = ((row * n) as u64, ((row + 1) * n) as u64);
+        while let Some(c) = self.pending {
+            let slot = c.corner as u64;
+            if slot >= hi {
+                break;
+            }
+            if slot >= lo {
+                let s = &mut buf[(slot - lo) as usize];
+                for k in 0..3 {
+                    s[k] = s[k].saturating_add(c.rgb[k]);
+                }
+            }
+            self.pending = self.contributions.next()?;
+        }
+        Ok(())
+    }
+
+    /// The next row of pixel means (as [`Frame::to_rgb_f64`] computes
+    /// them), or false after the last.
+    fn next_row(&mut self, out: &mut [[f64; 3]]) -> Result<bool, Error> {
+        if self.y == self.height {
+            return Ok(false);
+        }
+        let v = |s: &[i64; 3], k: usize| s[k].clamp(-(1 << 60), 1 << 60);
+        let spp = self.sampling.per_slot() as f64;
+        for (x, px) in out.iter_mut().enumerate().take(self.width) {
+            *px = std::array::from_fn(|k| {
+                let mean = match self.sampling {
+                    Sampling::Corners => {
+                        let sum: i64 = v(&self.upper[x], k)
+                            + v(&self.upper[x + 1], k)
+                            + v(&self.lower[x], k)
+                            + v(&self.lower[x + 1], k);
+                        sum as f64 * (1.0 / 4.0)
+                    }
+                    Sampling::Jittered { .. } => v(&self.upper[x], k) as f64 / spp,
+                };
+                mean * (1.0 / FIXED_ONE)
+            });
+        }
+        self.y += 1;
+        if self.y < self.height {
+            match self.sampling {
+                Sampling::Corners => {
+                    std::mem::swap(&mut self.upper, &mut self.lower);
+                    self.fill(self.y + 1, false)?;
+                }
+                Sampling::Jittered { .. } => self.fill(self.y, true)?,
+            }
+        }
+        Ok(true)
     }
 }
 

@@ -11,7 +11,7 @@ mod shade;
 mod stats;
 
 pub use camera::Camera;
-pub use frame::{FIXED_ONE, Frame, ImageFormat, to_fixed};
+pub use frame::{Contribution, FIXED_ONE, Frame, ImageFormat, to_fixed};
 pub use options::{GridRes, Mode, Precision, RenderOptions};
 pub use sampling::{EyeRays, MAX_SAMPLES, Sampling};
 pub use shade::{ShadeScene, Spawn, shade};

@@ -9,6 +9,9 @@ use crate::shapes::{KINDS, KindCounts, Shape, ShapeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::SystemTime;
 
 /// Checksums are verified always, except when fuzzing (`cargo fuzz` builds
 /// with `--cfg fuzzing`): there a mutated byte would almost always stop at
@@ -31,6 +34,12 @@ pub struct Database {
     raw_bytes: u64,
     file_bytes: u64,
     largest_block: usize,
+    /// The file as it was opened: a scan refuses a file changed since.
+    stamp: (u64, Option<SystemTime>),
+    /// Set once a scan has checked every block's checksum and records:
+    /// later scans of the unchanged file skip those checks (they cost a
+    /// third of a pass over a large mesh). Shared by clones.
+    verified: Arc<AtomicBool>,
 }
 
 /// Counters of one scan.
@@ -43,7 +52,9 @@ pub struct DbStats {
 impl Database {
     pub fn open(path: &Path) -> Result<Database, Error> {
         let mut f = File::open(path).at(path)?;
-        let file_bytes = f.metadata().at(path)?.len();
+        let meta = f.metadata().at(path)?;
+        let file_bytes = meta.len();
+        let stamp = (file_bytes, meta.modified().ok());
         let err = |location: &str, message: String| Error::Database {
             file: path.to_path_buf(),
             location: location.into(),
@@ -147,6 +158,8 @@ impl Database {
             raw_bytes: h.raw_bytes,
             file_bytes,
             largest_block: h.block_raw_max as usize,
+            stamp,
+            verified: Arc::new(AtomicBool::new(false)),
         })
     }
 
@@ -202,9 +215,31 @@ impl Database {
             }
     }
 
-    /// Starts a sequential scan of the objects.
+    /// Starts a sequential scan of the objects. The first scan checks
+    /// every block's checksum and records; later scans of the same,
+    /// unchanged file trust them.
     pub fn scan(&self) -> Result<Scan<'_>, Error> {
+        self.start_scan(!self.verified.load(Ordering::Acquire))
+    }
+
+    /// Starts a scan that checks every block, however often the file has
+    /// been read (`sray verify`).
+    pub fn scan_checked(&self) -> Result<Scan<'_>, Error> {
+        self.start_scan(true)
+    }
+
+    fn start_scan(&self, verify: bool) -> Result<Scan<'_>, Error> {
         let mut file = File::open(&self.path).at(&self.path)?;
+        let meta = file.metadata().at(&self.path)?;
+        if (meta.len(), meta.modified().ok()) != self.stamp {
+            return Err(Error::Database {
+                file: self.path.clone(),
+                location: "file".into(),
+                message: "the database changed on disk while it was in use; \
+                          start the render again"
+                    .into(),
+            });
+        }
         file.seek(SeekFrom::Start(HEADER_BYTES as u64))
             .at(&self.path)?;
         let decompressor = match self.compression {
@@ -221,6 +256,7 @@ impl Database {
             next_object: 0,
             offset: HEADER_BYTES as u64,
             stats: DbStats::default(),
+            verify,
         })
     }
 }
@@ -325,6 +361,8 @@ pub struct Scan<'d> {
     next_object: u64,
     offset: u64,
     stats: DbStats,
+    /// Whether this scan checks checksums and records.
+    verify: bool,
 }
 
 /// One decoded, validated block.
@@ -383,6 +421,9 @@ impl Scan<'_> {
                     self.next_object, self.offset, self.db.object_count, self.db.tables_offset
                 )));
             }
+            if self.verify {
+                self.db.verified.store(true, Ordering::Release);
+            }
             return Ok(None);
         }
         if self.offset + BLOCK_HEADER_BYTES as u64 > self.db.tables_offset {
@@ -417,7 +458,8 @@ impl Scan<'_> {
         if compressed {
             self.stored.resize(stored_len, 0);
             self.read_exact_or_err(false, stored_len)?;
-            if VERIFY_CHECKSUMS && h.compute_crc(&self.stored[..stored_len]) != h.crc {
+            if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&self.stored[..stored_len]) != h.crc
+            {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
             let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
@@ -436,7 +478,7 @@ impl Scan<'_> {
             }
             self.read_exact_or_err(true, raw_len)?;
             let bytes: &[u8] = bytemuck::cast_slice(&self.words[..]);
-            if VERIFY_CHECKSUMS && h.compute_crc(&bytes[..raw_len]) != h.crc {
+            if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&bytes[..raw_len]) != h.crc {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
         }
@@ -444,8 +486,10 @@ impl Scan<'_> {
             return Err(self.err("block is out of sequence"));
         }
         self.words.truncate(raw_len / 4);
-        validate_records(&self.words, h.object_count, self.db.scene.materials.len())
-            .map_err(|m| self.err(m))?;
+        if self.verify {
+            validate_records(&self.words, h.object_count, self.db.scene.materials.len())
+                .map_err(|m| self.err(m))?;
+        }
         self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
         self.stats.blocks_read += 1;
         self.offset = end;

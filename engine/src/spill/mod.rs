@@ -17,6 +17,11 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering as AtomicOrdering};
 
+/// Bytes the radix sort of an [`ExternalSorter`]'s buffer needs per record
+/// besides the record (keys and indices, twice): what a sorter holding `n`
+/// records takes is `n * (size_of::<T>() + RADIX_BYTES_PER_RECORD)`.
+pub const RADIX_BYTES_PER_RECORD: usize = 24;
+
 /// Buffer size of record readers and writers.
 pub const IO_BUFFER: usize = 32 << 10;
 /// Buffer size of each run's reader while merging, and the most runs merged

@@ -8,6 +8,7 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::marker::PhantomData;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::Ordering as AtomicOrdering;
 
 /// Appends records to a file.
@@ -59,6 +60,7 @@ impl<T: Pod> RecordWriter<T> {
         Ok(RecordFile {
             path,
             count: self.count,
+            _dir: self.spill.dir.clone(),
             _t: PhantomData,
         })
     }
@@ -79,6 +81,9 @@ impl<T: Pod> Drop for RecordWriter<T> {
 pub struct RecordFile<T: Pod> {
     path: PathBuf,
     count: u64,
+    /// Keeps the spill directory (removed with its last handle) alive as
+    /// long as a file in it is.
+    _dir: Arc<tempfile::TempDir>,
     _t: PhantomData<T>,
 }
 
