@@ -1,0 +1,237 @@
+//! The rays of a packet, one array per coordinate, and the tests of one
+//! candidate against several of them.
+
+use super::DfScene;
+use super::packet::Hits;
+use crate::intersect::{RayQ, triangle};
+use crate::math::{Real, V3, Vec3, Vec3Ext};
+use crate::render::KindCounts;
+use crate::scene::Aabb;
+use crate::shapes::{Kind, Shape, SphereKind};
+
+/// Eye rays go in packets of PACKET_SIDE x PACKET_SIDE pixel corners.
+pub const PACKET_SIDE: usize = 8;
+
+/// Most rays in a packet.
+pub const LANES: usize = PACKET_SIDE * PACKET_SIDE;
+
+/// A set of lanes, one bit each.
+pub type Mask = u64;
+
+/// How many lanes from the first a loop over the lanes `m` must cover: a
+/// power of two from 8 up, so that lane-parallel loops over a few rays
+/// stay short and still vectorise.
+#[inline(always)]
+pub fn width(m: Mask) -> usize {
+    let top = (Mask::BITS - m.leading_zeros()) as usize;
+    top.next_power_of_two().clamp(8, LANES)
+}
+
+/// Iterates over the lanes of a mask, lowest first.
+#[inline(always)]
+pub fn lanes(mut m: Mask) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            i
+        })
+    })
+}
+
+/// The rays of a packet: origin, direction and 1/d, one array per axis;
+/// the segment each may hit in; and each ray prepared for the tests.
+pub struct Rays<R> {
+    pub n: usize,
+    pub o: [[f64; LANES]; 3],
+    pub d: [[f64; LANES]; 3],
+    pub inv: [[f64; LANES]; 3],
+    pub t_min: [f64; LANES],
+    /// Shadow rays: the distance to the light. Other rays: infinity.
+    pub t_max: [f64; LANES],
+    /// The same in the precision of the tests.
+    pub rmin: [R; LANES],
+    pub rmax: [R; LANES],
+    pub q: [RayQ<R>; LANES],
+}
+
+impl<R: Real> Rays<R> {
+    pub fn new() -> Self {
+        let q = RayQ::new(V3::zero(), V3::splat(R::ONE));
+        Rays {
+            n: 0,
+            o: [[0.0; LANES]; 3],
+            d: [[0.0; LANES]; 3],
+            inv: [[0.0; LANES]; 3],
+            t_min: [0.0; LANES],
+            t_max: [f64::INFINITY; LANES],
+            rmin: [R::ZERO; LANES],
+            rmax: [R::INFINITY; LANES],
+            q: [q; LANES],
+        }
+    }
+
+    /// Appends a ray; returns its lane.
+    #[inline]
+    pub fn push(&mut self, o: Vec3, d: Vec3, t_min: f64, t_max: f64) -> usize {
+        let i = self.n;
+        let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+        for a in 0..3 {
+            self.o[a][i] = o[a];
+            self.d[a][i] = d[a];
+            self.inv[a][i] = inv[a];
+        }
+        self.t_min[i] = t_min;
+        self.t_max[i] = t_max;
+        self.rmin[i] = R::from_f64(t_min);
+        self.rmax[i] = R::from_f64(t_max);
+        self.q[i] = RayQ::with_inverse(o.cast(), d.cast(), inv.cast());
+        self.n += 1;
+        i
+    }
+}
+
+impl<R: Copy> Rays<R> {
+    /// Fills the lanes past the last ray with copies of the first, so that
+    /// what is computed over all lanes (bounds, spans) is the packet's.
+    #[inline]
+    pub fn pad(&mut self) {
+        for i in self.n.max(1)..width(self.all()) {
+            for a in 0..3 {
+                self.o[a][i] = self.o[a][0];
+                self.d[a][i] = self.d[a][0];
+                self.inv[a][i] = self.inv[a][0];
+            }
+            self.t_min[i] = self.t_min[0];
+            self.t_max[i] = self.t_max[0];
+        }
+    }
+}
+
+impl<R> Rays<R> {
+    /// Every lane in use.
+    #[inline]
+    pub fn all(&self) -> Mask {
+        if self.n >= Mask::BITS as usize {
+            Mask::MAX
+        } else {
+            (1 << self.n) - 1
+        }
+    }
+
+    #[inline(always)]
+    pub fn o(&self, i: usize) -> Vec3 {
+        Vec3::new(self.o[0][i], self.o[1][i], self.o[2][i])
+    }
+
+    #[inline(always)]
+    pub fn d(&self, i: usize) -> Vec3 {
+        Vec3::new(self.d[0][i], self.d[1][i], self.d[2][i])
+    }
+
+    #[inline(always)]
+    pub fn inv(&self, i: usize) -> Vec3 {
+        Vec3::new(self.inv[0][i], self.inv[1][i], self.inv[2][i])
+    }
+}
+
+/// One candidate, ready to be tested against the lanes of a packet: each
+/// lane's test is exactly the scalar test of the candidate's kind.
+pub struct LaneTests<'a, 't> {
+    s: &'a DfScene<'t>,
+    shape: &'a Shape<'t>,
+    bbox: &'a Aabb,
+    id: u32,
+}
+
+impl<'a, 't> LaneTests<'a, 't> {
+    #[inline(always)]
+    pub fn new(s: &'a DfScene<'t>, id: u32) -> Self {
+        LaneTests {
+            s,
+            shape: &s.shapes[id as usize],
+            bbox: &s.bboxes[id as usize],
+            id,
+        }
+    }
+
+    /// Offers each lane of `m` its hit on the candidate, if any; returns
+    /// the lanes whose best hit it became.
+    #[inline(always)]
+    pub fn nearest<R: Real>(
+        &self,
+        rays: &Rays<R>,
+        m: Mask,
+        best: &mut Hits<R>,
+        tests: &mut KindCounts,
+    ) -> Mask {
+        tests.add_n(self.shape.kind(), m.count_ones() as u64);
+        let id = self.id;
+        let mut won: Mask = 0;
+        match self.shape {
+            Shape::Sphere(sp) => {
+                for i in lanes(m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
+                    if let Some(t) = SphereKind::intersect(sp, None, self.bbox, q, lo, hi) {
+                        won |= (best.offer(i, t, id) as Mask) << i;
+                    }
+                }
+            }
+            Shape::Polygon(p) if p.vertices.len() == 3 => {
+                let (a, b, c) = (p.vertices[0], p.vertices[1], p.vertices[2]);
+                for i in lanes(m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
+                    if let Some(t) = triangle::intersect(a, b, c, q, lo, hi) {
+                        won |= (best.offer(i, t, id) as Mask) << i;
+                    }
+                }
+            }
+            _ => {
+                for i in lanes(m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
+                    if let Some(t) = self.s.intersect(id, q, lo, hi) {
+                        won |= (best.offer(i, t, id) as Mask) << i;
+                    }
+                }
+            }
+        }
+        won
+    }
+
+    /// Clears from `*m` the lanes the candidate blocks (a hit anywhere in
+    /// their segments); whether it blocked any.
+    #[inline(always)]
+    pub fn blocks<R: Real>(&self, rays: &Rays<R>, m: &mut Mask, tests: &mut KindCounts) -> bool {
+        tests.add_n(self.shape.kind(), m.count_ones() as u64);
+        let mut hit: Mask = 0;
+        match self.shape {
+            Shape::Sphere(sp) => {
+                for i in lanes(*m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
+                    if SphereKind::intersect(sp, None, self.bbox, q, lo, hi).is_some() {
+                        hit |= 1 << i;
+                    }
+                }
+            }
+            Shape::Polygon(p) if p.vertices.len() == 3 => {
+                let (a, b, c) = (p.vertices[0], p.vertices[1], p.vertices[2]);
+                for i in lanes(*m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
+                    if triangle::intersect(a, b, c, q, lo, hi).is_some() {
+                        hit |= 1 << i;
+                    }
+                }
+            }
+            _ => {
+                for i in lanes(*m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
+                    if self.s.intersect(self.id, q, lo, hi).is_some() {
+                        hit |= 1 << i;
+                    }
+                }
+            }
+        }
+        *m &= !hit;
+        hit != 0
+    }
+}
