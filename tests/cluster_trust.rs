@@ -393,6 +393,8 @@ fn sigterm_stops_promptly_and_the_client_rides_the_restart() {
     registered(&coord, "w0");
     let mut c = client(d, &render_args("spd:balls:2", &url, "token", "c.png", "48"));
     coord.wait_for(&["task assigned"], 60.0);
+    // The client is watching (the job's log reaches it by the watch).
+    c.wait_for(&["sray: job: job submitted"], 60.0);
     let t0 = Instant::now();
     sigterm(&coord);
     // "Within a few seconds" (it takes well under one when the machine is
