@@ -98,22 +98,30 @@ impl SceneFormat for Nff {
     }
 }
 
-/// PLY: starts with the line `ply`.
-pub struct Ply;
+/// The signature of a mesh reader: it streams the mesh into the sink
+/// within `opts`' memory and reports what it found.
+type MeshReader =
+    fn(&Path, &mut dyn SceneSink, &dyn Progress, &MeshOptions) -> Result<MeshSummary, Error>;
 
-impl SceneFormat for Ply {
+/// A mesh file format: everything that tells one from another is data
+/// (name, extensions, signature test, reader); what they share as scene
+/// formats is written once, in the `SceneFormat` impl below.
+pub struct MeshFormat {
+    name: &'static str,
+    extensions: &'static [&'static str],
+    sniff: fn(&[u8]) -> Sniff,
+    read: MeshReader,
+}
+
+impl SceneFormat for MeshFormat {
     fn name(&self) -> &'static str {
-        "ply"
+        self.name
     }
     fn extensions(&self) -> &'static [&'static str] {
-        &["ply"]
+        self.extensions
     }
     fn sniff(&self, head: &[u8]) -> Sniff {
-        if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
-            Sniff::Yes
-        } else {
-            Sniff::No
-        }
+        (self.sniff)(head)
     }
     fn read(
         &self,
@@ -122,111 +130,95 @@ impl SceneFormat for Ply {
         progress: &dyn Progress,
         opts: &MeshOptions,
     ) -> Result<ReadSummary, Error> {
-        let m = crate::mesh::ply::read_ply(path, sink, progress, opts)?;
+        let m = (self.read)(path, sink, progress, opts)?;
         Ok(ReadSummary { mesh: Some(m) })
     }
     fn is_mesh(&self) -> bool {
         true
+    }
+}
+
+/// PLY: starts with the line `ply`.
+pub static PLY: MeshFormat = MeshFormat {
+    name: "ply",
+    extensions: &["ply"],
+    sniff: sniff_ply,
+    read: crate::mesh::ply::read_ply,
+};
+
+fn sniff_ply(head: &[u8]) -> Sniff {
+    if head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n") {
+        Sniff::Yes
+    } else {
+        Sniff::No
     }
 }
 
 /// Wavefront OBJ: text whose statements (`v x y z`, `vn`, `vt`, `mtllib`,
 /// `usemtl`, `f a/b/c`) no NFF file has.
-pub struct Obj;
+pub static OBJ: MeshFormat = MeshFormat {
+    name: "obj",
+    extensions: &["obj"],
+    sniff: sniff_obj,
+    read: crate::mesh::obj::read_obj,
+};
 
-impl SceneFormat for Obj {
-    fn name(&self) -> &'static str {
-        "obj"
+fn sniff_obj(head: &[u8]) -> Sniff {
+    if head.contains(&0) {
+        return Sniff::No;
     }
-    fn extensions(&self) -> &'static [&'static str] {
-        &["obj"]
-    }
-    fn sniff(&self, head: &[u8]) -> Sniff {
-        if head.contains(&0) {
-            return Sniff::No;
-        }
-        let number = |t: &[u8]| {
-            std::str::from_utf8(t)
-                .ok()
-                .is_some_and(|s| s.parse::<f64>().is_ok())
-        };
-        for line in head.split(|&b| b == b'\n') {
-            let mut w = crate::mesh::text::words(line);
-            match w.next() {
-                Some(b"vn" | b"vt" | b"mtllib" | b"usemtl") => return Sniff::Yes,
-                Some(b"v") => {
-                    let rest: Vec<&[u8]> = w.collect();
-                    if rest.len() >= 3 && rest.iter().all(|t| number(t)) {
-                        return Sniff::Yes;
-                    }
+    let number = |t: &[u8]| {
+        std::str::from_utf8(t)
+            .ok()
+            .is_some_and(|s| s.parse::<f64>().is_ok())
+    };
+    for line in head.split(|&b| b == b'\n') {
+        let mut w = crate::mesh::text::words(line);
+        match w.next() {
+            Some(b"vn" | b"vt" | b"mtllib" | b"usemtl") => return Sniff::Yes,
+            Some(b"v") => {
+                let rest: Vec<&[u8]> = w.collect();
+                if rest.len() >= 3 && rest.iter().all(|t| number(t)) {
+                    return Sniff::Yes;
                 }
-                Some(b"f") if line.contains(&b'/') => return Sniff::Yes,
-                _ => {}
             }
+            Some(b"f") if line.contains(&b'/') => return Sniff::Yes,
+            _ => {}
         }
-        Sniff::Maybe
     }
-    fn read(
-        &self,
-        path: &Path,
-        sink: &mut dyn SceneSink,
-        progress: &dyn Progress,
-        opts: &MeshOptions,
-    ) -> Result<ReadSummary, Error> {
-        let m = crate::mesh::obj::read_obj(path, sink, progress, opts)?;
-        Ok(ReadSummary { mesh: Some(m) })
-    }
-    fn is_mesh(&self) -> bool {
-        true
-    }
+    Sniff::Maybe
 }
 
 /// OFF and its variants: the first word (after `#` comments) is `OFF`,
 /// `COFF`, `NOFF`, ...
-pub struct Off;
+pub static OFF: MeshFormat = MeshFormat {
+    name: "off",
+    extensions: &["off", "coff", "noff"],
+    sniff: sniff_off,
+    read: crate::mesh::off::read_off,
+};
 
-impl SceneFormat for Off {
-    fn name(&self) -> &'static str {
-        "off"
-    }
-    fn extensions(&self) -> &'static [&'static str] {
-        &["off", "coff", "noff"]
-    }
-    fn sniff(&self, head: &[u8]) -> Sniff {
-        for line in head.split(|&b| b == b'\n') {
-            let body = match line.iter().position(|&b| b == b'#') {
-                Some(i) => &line[..i],
-                None => line,
-            };
-            if let Some(w) = crate::mesh::text::words(body).next() {
-                let variant = w.len() <= 8
-                    && w.ends_with(b"OFF")
-                    && w[..w.len() - 3].iter().all(|c| b"STCN4n".contains(c));
-                return if variant { Sniff::Yes } else { Sniff::No };
-            }
+fn sniff_off(head: &[u8]) -> Sniff {
+    for line in head.split(|&b| b == b'\n') {
+        let body = match line.iter().position(|&b| b == b'#') {
+            Some(i) => &line[..i],
+            None => line,
+        };
+        if let Some(w) = crate::mesh::text::words(body).next() {
+            let variant = w.len() <= 8
+                && w.ends_with(b"OFF")
+                && w[..w.len() - 3].iter().all(|c| b"STCN4n".contains(c));
+            return if variant { Sniff::Yes } else { Sniff::No };
         }
-        Sniff::No
     }
-    fn read(
-        &self,
-        path: &Path,
-        sink: &mut dyn SceneSink,
-        progress: &dyn Progress,
-        opts: &MeshOptions,
-    ) -> Result<ReadSummary, Error> {
-        let m = crate::mesh::off::read_off(path, sink, progress, opts)?;
-        Ok(ReadSummary { mesh: Some(m) })
-    }
-    fn is_mesh(&self) -> bool {
-        true
-    }
+    Sniff::No
 }
 
 /// Every scene file format sray reads (object databases aside, which are
 /// rendered in place rather than read as a scene stream). NFF, which has
 /// no signature, comes first: of formats that only find a file plausible,
 /// the first wins.
-pub static FORMATS: &[&dyn SceneFormat] = &[&Nff, &Ply, &Obj, &Off];
+pub static FORMATS: &[&dyn SceneFormat] = &[&Nff, &PLY, &OBJ, &OFF];
 
 /// Where a scene comes from.
 #[derive(Clone)]
