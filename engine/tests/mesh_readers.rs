@@ -393,6 +393,23 @@ f 1 2 2 3\n";
     assert!(w[0].contains("skipped 3 of 6 faces as degenerate"), "{w:?}");
 }
 
+/// Found by the `ply` fuzzer: an element without properties takes no
+/// bytes, so its count (here 34.5 billion) must not drive a loop.
+#[test]
+fn a_ply_element_without_properties_costs_nothing_whatever_its_count() {
+    let mut ply = cube_ply_ascii();
+    let header_end = ply.windows(10).position(|w| w == b"end_header").unwrap();
+    let mut with = b"element nothing 34521931780\n".to_vec();
+    with.extend_from_slice(&ply[header_end..]);
+    ply.truncate(header_end);
+    ply.extend_from_slice(&with);
+    let start = std::time::Instant::now();
+    let (_, s, _) = read(Fmt::Ply, &ply);
+    assert_eq!(s.faces, 6);
+    // A loop over the count would take minutes; reading takes microseconds.
+    assert!(start.elapsed().as_secs() < 10, "{:?}", start.elapsed());
+}
+
 #[test]
 fn ply_triangle_strips() {
     let ply = b"ply\nformat ascii 1.0\nelement vertex 7\nproperty float x\nproperty float y\nproperty float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n\

@@ -808,6 +808,10 @@ fn read_body(
             "vertex" => read_vertices(el, d, b, &mut i),
             "face" => read_faces(el, d, b, nv, &mut corners, &mut i),
             "tristrips" => read_strips(el, d, b, nv, &mut i),
+            // An element without properties takes no bytes, whatever its
+            // count says: nothing to skip (and no loop of 10^10 turns
+            // over nothing).
+            _ if el.props.is_empty() => Ok(()),
             _ => (|| {
                 while i < el.count {
                     for p in &el.props {
