@@ -183,6 +183,7 @@ impl Job {
 pub async fn submit(shared: &Arc<Shared>, spec: v1::JobSpec) -> anyhow::Result<(String, String)> {
     let job = Job::check(shared, &spec).await?;
     let (entry, secret) = shared.jobs.create(&job.hash)?;
+    entry.set_params(job.params);
     let mut rec = Record::new(&entry, &spec);
     let dir = entry.dir.clone();
     let r = rec_save(&mut rec, &dir).await;
@@ -190,6 +191,10 @@ pub async fn submit(shared: &Arc<Shared>, spec: v1::JobSpec) -> anyhow::Result<(
         let _ = std::fs::remove_dir_all(&dir);
         return Err(e);
     }
+    shared
+        .counters
+        .jobs_submitted
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     entry.log(format!(
         "job submitted: {}x{}, {} samples, depth {}, scene {}",
         job.opts.width,
@@ -224,6 +229,7 @@ pub async fn resume_all(shared: &Arc<Shared>) {
         let r: anyhow::Result<()> = async {
             let spec = rec.spec()?;
             let job = Job::check(shared, &spec).await?;
+            entry.set_params(job.params);
             let slots = job.opts.frame_slots();
             let dir = entry.dir.clone();
             let spill = shared.spill.clone();
@@ -254,6 +260,17 @@ pub async fn resume_all(shared: &Arc<Shared>) {
 /// Runs a job to its end; the outcome is journaled and told to watchers.
 fn start(shared: Arc<Shared>, entry: Arc<JobEntry>, job: Job, rec: Record, resume: Option<Resume>) {
     let e2 = entry.clone();
+    entry.set_started();
+    tracing::info!(
+        job = %entry.id,
+        width = job.opts.width,
+        height = job.opts.height,
+        samples = job.opts.samples,
+        depth = job.opts.max_depth,
+        shard_rays = job.shard_rays,
+        resume_round = resume.as_ref().map_or(1, |r| r.round),
+        "job started"
+    );
     let h = tokio::spawn(async move {
         let t0 = Instant::now();
         let mut rec = rec;
@@ -270,18 +287,37 @@ fn start(shared: Arc<Shared>, entry: Arc<JobEntry>, job: Job, rec: Record, resum
                         .await;
                 match saved {
                     Ok(Ok(())) => {
-                        tracing::info!(job = %entry.id, seconds = t0.elapsed().as_secs_f64(), "job done");
+                        tracing::info!(job = %entry.id, seconds = t0.elapsed().as_secs_f64(), "job finished");
+                        shared
+                            .counters
+                            .jobs_done
+                            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         entry.set_state(JobState::Done);
                     }
                     Ok(Err(e)) => {
+                        tracing::warn!(job = %entry.id, error = %format!("{e:#}"), "job failed: cannot keep the image");
+                        shared
+                            .counters
+                            .jobs_failed
+                            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                         entry.set_state(JobState::Failed(format!("cannot keep the image: {e:#}")))
                     }
-                    Err(e) => entry.set_state(JobState::Failed(format!("internal: {e}"))),
+                    Err(e) => {
+                        shared
+                            .counters
+                            .jobs_failed
+                            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        entry.set_state(JobState::Failed(format!("internal: {e}")))
+                    }
                 }
             }
             Err(e) => {
                 let msg = format!("{e:#}");
-                tracing::warn!(job = %entry.id, error = %msg, "job failed");
+                tracing::warn!(job = %entry.id, error = %msg, seconds = t0.elapsed().as_secs_f64(), "job failed");
+                shared
+                    .counters
+                    .jobs_failed
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let _ = jobs::fail(&entry, &mut rec, &msg);
                 entry.set_state(JobState::Failed(msg));
             }
@@ -388,6 +424,8 @@ async fn drive(
             .collect();
         tot.shards_per_round.push(shards.len() as u64);
         let eye = rays.is_none();
+        let round_t0 = Instant::now();
+        tracing::info!(job = %entry.id, round, rays = n, shards = shards.len(), "round started");
 
         // Intersect every shard.
         let ts = Instant::now();
@@ -471,13 +509,38 @@ async fn drive(
         .await??;
         frame.slots = slots;
         *rec = r2;
-        tracing::info!(job = %entry.id, round, rays = n, "checkpoint written");
+        tracing::info!(
+            job = %entry.id,
+            round = round - 1,
+            seconds = round_t0.elapsed().as_secs_f64(),
+            next_rays = n,
+            "round done (checkpoint written)"
+        );
     }
     drop(arbiter);
 
     // The image, then the statistics.
     let format = job.format;
-    let image = tokio::task::spawn_blocking(move || frame.encode(format)).await??;
+    let (image, preview) = tokio::task::spawn_blocking(move || -> anyhow::Result<_> {
+        let image = frame.encode(format)?;
+        // The dashboard shows PNG previews.
+        let preview = match format {
+            ImageFormat::Png => None,
+            _ => Some(frame.encode(ImageFormat::Png)?),
+        };
+        Ok((image, preview))
+    })
+    .await??;
+    if let Some(p) = preview {
+        let dir = entry.dir.clone();
+        tokio::task::spawn_blocking(move || {
+            jobs::write_atomic(&dir, "preview.png", |w| {
+                use std::io::Write;
+                Ok(w.write_all(&p)?)
+            })
+        })
+        .await??;
+    }
     let stats = job_stats(
         shared,
         entry,
@@ -666,6 +729,7 @@ impl Stage<'_> {
                                 self.entry.set_progress(progress(&st));
                             } else {
                                 tot.mismatches += 1;
+                                shared.counters.mismatches.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                                 self.entry.log(format!(
                                     "verification mismatch: round {} {} shard {i} (rays {s}..{}): worker {} and worker {} disagree; the coordinator traces the sample itself to decide",
                                     self.round, self.name(), s + k, main_worker.name, worker.name
@@ -734,7 +798,9 @@ impl Stage<'_> {
                         st[i].verified = true;
                         self.entry.set_progress(progress(&st));
                     } else {
-                        tot.mismatches += u64::from(matches!(l.purpose, Purpose::Verify));
+                        let m = u64::from(matches!(l.purpose, Purpose::Verify));
+                        tot.mismatches += m;
+                        shared.counters.mismatches.fetch_add(m, std::sync::atomic::Ordering::Relaxed);
                         self.distrust(&main_worker, &format!("it returned wrong output for round {} {} shard {i} (rays {s}..{})", self.round, self.name(), s + k), tot);
                         // Every output of the stage from that worker is redone.
                         for j in 0..total {

@@ -48,6 +48,16 @@ pub struct JobView {
     pub log: Vec<String>,
     pub state: JobState,
     pub finished: Option<Instant>,
+    /// Its render settings (known once checked; for status and previews).
+    pub params: Option<v1::RenderParams>,
+    /// Unix seconds (0: not yet).
+    pub submitted_unix: u64,
+    pub started_unix: u64,
+    pub finished_unix: u64,
+    /// When its driver started (in this run), for the ETA.
+    pub started: Option<Instant>,
+    /// Shards done per round, for status.
+    pub rounds: Vec<v1::RoundStatus>,
 }
 
 pub struct JobEntry {
@@ -59,6 +69,8 @@ pub struct JobEntry {
     changed: tokio::sync::watch::Sender<u64>,
     pub cancelled: AtomicBool,
     pub driver: Mutex<Option<tokio::task::AbortHandle>>,
+    /// The last preview encoded: the checkpoint round it shows, and the PNG.
+    preview: Mutex<Option<(u32, Arc<Vec<u8>>)>>,
 }
 
 impl JobEntry {
@@ -75,8 +87,139 @@ impl JobEntry {
     }
 
     pub fn set_progress(&self, p: v1::JobProgress) {
-        self.view().progress = Some(p);
+        let mut v = self.view();
+        v.progress = Some(p);
+        let at = match v.rounds.iter().position(|r| r.round == p.round) {
+            Some(i) => i,
+            None => {
+                v.rounds.push(v1::RoundStatus {
+                    round: p.round,
+                    rays: p.rays,
+                    shards: p.shards_total,
+                    ..Default::default()
+                });
+                v.rounds.len() - 1
+            }
+        };
+        let r = &mut v.rounds[at];
+        if p.stage == v1::Stage::Shade as i32 {
+            r.intersect_done = r.shards;
+            r.shade_done = p.shards_done;
+        } else {
+            r.intersect_done = p.shards_done;
+        }
+        drop(v);
         self.touch();
+    }
+
+    /// The job's settings, once checked.
+    pub fn set_params(&self, p: v1::RenderParams) {
+        self.view().params = Some(p);
+    }
+
+    /// Its driver starts (or resumes).
+    pub fn set_started(&self) {
+        let mut v = self.view();
+        v.started = Some(Instant::now());
+        v.started_unix = unix_now();
+    }
+
+    /// What `sray status` and the dashboard show of the job.
+    pub fn status(&self) -> v1::JobStatus {
+        let v = self.view();
+        let p = v.params.unwrap_or_default();
+        let (state, error) = match &v.state {
+            JobState::Running => ("running", String::new()),
+            JobState::Done => ("done", String::new()),
+            JobState::Failed(e) => ("failed", e.clone()),
+        };
+        let (round, stage) = v.progress.map_or((0, 0), |p| (p.round, p.stage));
+        let percent = match &v.state {
+            JobState::Done => 100.0,
+            _ => match v.progress {
+                // Rounds are at most max_depth (the eye ray is depth 1);
+                // each round is half intersection, half shading.
+                Some(pr) if pr.shards_total > 0 => {
+                    let f = pr.shards_done as f64 / pr.shards_total as f64;
+                    let stage_f = if pr.stage == v1::Stage::Shade as i32 {
+                        0.5 + 0.5 * f
+                    } else {
+                        0.5 * f
+                    };
+                    let rounds = p.max_depth.max(pr.round).max(1) as f64;
+                    (100.0 * ((pr.round.max(1) - 1) as f64 + stage_f) / rounds).clamp(0.0, 99.9)
+                }
+                _ => 0.0,
+            },
+        };
+        let eta = match (&v.state, v.started) {
+            (JobState::Running, Some(t)) if percent > 0.0 => {
+                t.elapsed().as_secs_f64() * (100.0 - percent) / percent
+            }
+            (JobState::Running, _) => -1.0,
+            _ => 0.0,
+        };
+        v1::JobStatus {
+            id: self.id.clone(),
+            scene: self.scene.clone(),
+            width: p.width,
+            height: p.height,
+            samples: p.samples,
+            max_depth: p.max_depth,
+            state: state.into(),
+            error,
+            round,
+            stage,
+            progress_percent: percent,
+            eta_seconds: eta,
+            submitted_unix: v.submitted_unix,
+            started_unix: v.started_unix,
+            finished_unix: v.finished_unix,
+            rounds: v.rounds.clone(),
+            log: v.log.iter().rev().take(20).rev().cloned().collect(),
+        }
+    }
+
+    /// A PNG of the image as far as the coordinator has it: the finished
+    /// image, or the frame of the last checkpoint (black before the first
+    /// round ends). Encoded again only when a round has ended since.
+    pub fn preview_png(&self) -> anyhow::Result<Arc<Vec<u8>>> {
+        let (params, state) = {
+            let v = self.view();
+            (v.params, v.state.clone())
+        };
+        let params = params.context("the job's settings are not known yet")?;
+        if state == JobState::Done {
+            for name in ["preview.png", "image.bin"] {
+                if let Ok(b) = std::fs::read(self.dir.join(name))
+                    && b.starts_with(b"\x89PNG")
+                {
+                    return Ok(Arc::new(b));
+                }
+            }
+        }
+        let round = latest_frame(&self.dir).unwrap_or(0);
+        if let Some((r, png)) = &*self.preview.lock().unwrap_or_else(|p| p.into_inner())
+            && *r == round
+            && state == JobState::Running
+        {
+            return Ok(png.clone());
+        }
+        let (opts, _) = sray_worker::params::from_proto(&params, 0).map_err(anyhow::Error::msg)?;
+        let mut frame =
+            sray_engine::render::Frame::with_sampling(opts.width, opts.height, opts.sampling());
+        if round > 0 {
+            // Removed by the next checkpoint meanwhile: the black frame
+            // this once.
+            if let Ok(b) = std::fs::read(self.dir.join(format!("frame-{round}.bin")))
+                && b.len() == frame.slots.len() * 24
+            {
+                frame.slots = bytemuck::pod_collect_to_vec(&b);
+            }
+        }
+        let png = Arc::new(frame.encode(sray_engine::render::ImageFormat::Png)?);
+        *self.preview.lock().unwrap_or_else(|p| p.into_inner()) = Some((round, png.clone()));
+        Ok(png)
     }
 
     /// A line of the job's log: to its watchers, the coordinator's log,
@@ -95,6 +238,7 @@ impl JobEntry {
         let mut v = self.view();
         if s != JobState::Running {
             v.finished = Some(Instant::now());
+            v.finished_unix = unix_now();
         }
         v.state = s;
         drop(v);
@@ -171,10 +315,17 @@ impl Jobs {
                 log: Vec::new(),
                 finished: (state != JobState::Running).then(Instant::now),
                 state,
+                params: None,
+                submitted_unix: unix_now(),
+                started_unix: 0,
+                finished_unix: 0,
+                started: None,
+                rounds: Vec::new(),
             }),
             changed: tokio::sync::watch::channel(0).0,
             cancelled: AtomicBool::new(false),
             driver: Mutex::new(None),
+            preview: Mutex::new(None),
         });
         self.map().insert(id, e.clone());
         e
@@ -187,6 +338,12 @@ impl Jobs {
             return Err(JobRefusal::WrongSecret);
         }
         Ok(e)
+    }
+
+    /// The job `id`, without its secret: for the operator's views
+    /// (status, the dashboard), never for its image or to act on it.
+    pub fn find(&self, id: &str) -> Option<Arc<JobEntry>> {
+        self.map().get(id).cloned()
     }
 
     pub fn running(&self) -> Vec<Arc<JobEntry>> {
@@ -234,6 +391,8 @@ pub struct Record {
     pub totals: serde_json::Value,
     pub log: Vec<String>,
     pub finished_unix: u64,
+    #[serde(default)]
+    pub submitted_unix: u64,
 }
 
 fn unix_now() -> u64 {
@@ -275,6 +434,7 @@ impl Record {
             spec: sray_proto::ids::hex(&spec.encode_to_vec()),
             scene: e.scene.clone(),
             state: "running".into(),
+            submitted_unix: e.view().submitted_unix,
             ..Default::default()
         }
     }
@@ -331,6 +491,22 @@ pub fn checkpoint(
     rec.save(dir)?;
     remove_stale(dir, Some(next_round));
     Ok(())
+}
+
+/// The round of the newest checkpoint frame in `dir`.
+fn latest_frame(dir: &Path) -> Option<u32> {
+    std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .filter_map(|f| {
+            f.file_name()
+                .to_str()?
+                .strip_prefix("frame-")?
+                .strip_suffix(".bin")?
+                .parse::<u32>()
+                .ok()
+        })
+        .max()
 }
 
 /// Removes temporary files and the files of rounds other than `keep`.
@@ -488,6 +664,11 @@ pub fn load_all(jobs: &Jobs, retention: Duration) -> Vec<(Arc<JobEntry>, Record)
         {
             let mut v = e.view();
             v.log = rec.log.clone();
+            v.params = rec.spec().ok().and_then(|s| s.params);
+            v.submitted_unix = rec.submitted_unix;
+            if state != JobState::Running {
+                v.finished_unix = rec.finished_unix;
+            }
             if state != JobState::Running {
                 let age = Duration::from_secs(unix_now().saturating_sub(rec.finished_unix));
                 v.finished = Instant::now().checked_sub(age).or(Some(Instant::now()));

@@ -1,7 +1,12 @@
 //! Serving the coordinator: the gRPC service on a listener, with the token
 //! and role check, TLS when given a certificate (and client certificates
 //! when given a CA for them), the heartbeat monitor, and the journal's
-//! unfinished jobs resumed at start.
+//! unfinished jobs resumed at start. Beside it on the same port, without
+//! a token (probes and tools carry none, and neither reveals anything
+//! beyond the public `sray.proto`): standard gRPC health
+//! (`grpc.health.v1.Health`: `""` and `sray.v1.Coordinator` are SERVING
+//! until the coordinator stops) and server reflection (v1 and v1alpha).
+//! Optionally an HTTP listener for operators ([`crate::http`]).
 //!
 //! Stopping (SIGTERM, Ctrl-C): new work is refused, watchers and long
 //! polls end at once with "coordinator restarting", running jobs stop
@@ -64,6 +69,18 @@ pub async fn serve(
     sec: Security,
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
+    serve_with(shared, listener, None, sec, shutdown).await
+}
+
+/// As [`serve`], with the operators' HTTP listener (`--http-listen`) when
+/// given one.
+pub async fn serve_with(
+    shared: Arc<Shared>,
+    listener: TcpListener,
+    http: Option<TcpListener>,
+    sec: Security,
+    shutdown: impl std::future::Future<Output = ()>,
+) -> anyhow::Result<()> {
     // Record streams are megabytes: windows large enough that a stream is
     // not paced by window updates.
     let mut builder = Server::builder()
@@ -100,11 +117,32 @@ pub async fn serve(
             client: sec.client_token,
         },
     );
+    let (health, health_svc) = tonic_health::server::health_reporter();
+    health.set_serving::<CoordinatorServer<Service>>().await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(sray_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .context("gRPC reflection")?;
+    let reflection_alpha = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(sray_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1alpha()
+        .context("gRPC reflection")?;
+    let (http_stop_tx, http_stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let http_task = http.map(|l| {
+        tokio::spawn(crate::http::serve(shared.clone(), l, async {
+            let _ = http_stop_rx.await;
+        }))
+    });
     let mon = tokio::spawn(monitor(shared.clone()));
     crate::driver::resume_all(&shared).await;
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let server = builder
         .add_service(svc)
+        .add_service(health_svc)
+        .add_service(reflection)
+        .add_service(reflection_alpha)
         .serve_with_incoming_shutdown(incoming(listener), async {
             let _ = stop_rx.await;
         });
@@ -115,6 +153,10 @@ pub async fn serve(
             let t0 = std::time::Instant::now();
             tracing::info!("stopping: refusing new work; running jobs resume at the next start");
             shared.begin_stop();
+            health.set_not_serving::<CoordinatorServer<Service>>().await;
+            health
+                .set_service_status("", tonic_health::ServingStatus::NotServing)
+                .await;
             for e in shared.jobs.running() {
                 if let Some(h) = e.driver.lock().unwrap_or_else(|p| p.into_inner()).take() {
                     h.abort();
@@ -130,5 +172,10 @@ pub async fn serve(
         }
     };
     mon.abort();
+    let _ = http_stop_tx.send(());
+    if let Some(h) = http_task {
+        // Dashboards poll with keep-alive: do not wait for them long.
+        let _ = tokio::time::timeout(std::time::Duration::from_millis(500), h).await;
+    }
     r.context("the coordinator's server failed")
 }

@@ -77,6 +77,9 @@ impl Coordinator for Service {
         if self.shared.is_stopping() {
             return Err(Status::unavailable(RESTARTING));
         }
+        let address = req
+            .remote_addr()
+            .map_or_else(String::new, |a| a.to_string());
         let r = req.into_inner();
         if r.protocol_version != sray_proto::PROTOCOL_VERSION {
             return Err(Status::failed_precondition(format!(
@@ -96,10 +99,10 @@ impl Coordinator for Service {
                 floor >> 20
             )));
         }
-        let session = self
-            .shared
-            .register(name.clone(), r.threads, r.memory_bytes);
-        tracing::info!(worker = %name, threads = r.threads, memory = r.memory_bytes, "worker registered");
+        let (session, id) =
+            self.shared
+                .register(name.clone(), address.clone(), r.threads, r.memory_bytes);
+        tracing::info!(worker = %name, id = %id, address = %address, threads = r.threads, memory = r.memory_bytes, "worker registered");
         Ok(Response::new(v1::RegisterReply {
             session,
             run_id: self.shared.run_id.clone(),
@@ -130,6 +133,7 @@ impl Coordinator for Service {
         if let Some(t) = &task {
             tracing::debug!(
                 worker = %self.shared.worker_name(&session),
+                job = %t.job_id,
                 task = t.task_id,
                 attempt = t.attempt,
                 stage = t.stage,
@@ -416,6 +420,14 @@ impl Coordinator for Service {
             watch(shared, entry, tx).await;
         });
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    async fn status(
+        &self,
+        req: Request<v1::StatusRequest>,
+    ) -> Result<Response<v1::StatusReply>, Status> {
+        require(&req, Role::Client, "Status")?;
+        Ok(Response::new(crate::status::snapshot(&self.shared)))
     }
 
     async fn cancel_job(&self, req: Request<v1::JobRef>) -> Result<Response<v1::Empty>, Status> {

@@ -155,6 +155,28 @@ impl Traffic {
     }
 }
 
+/// Counters for `/metrics` and `sray status`: bumped once per job or
+/// task (never per ray), so they cost nothing on the hot paths.
+#[derive(Default, Debug)]
+pub struct Counters {
+    pub jobs_submitted: AtomicU64,
+    pub jobs_done: AtomicU64,
+    pub jobs_failed: AtomicU64,
+    /// Tasks completed (the winning attempt), by stage, and verification
+    /// samples among them.
+    pub tasks_intersect: AtomicU64,
+    pub tasks_shade: AtomicU64,
+    pub tasks_verification: AtomicU64,
+    /// Attempts a worker reported failed.
+    pub tasks_failed: AtomicU64,
+    /// Rays of completed tasks, by stage.
+    pub rays_intersected: AtomicU64,
+    pub rays_shaded: AtomicU64,
+    /// Verification samples that disagreed with the shard's output.
+    pub mismatches: AtomicU64,
+    pub workers_registered: AtomicU64,
+}
+
 /// A task's input, as `TaskInput` serves it, and the bounds its output
 /// must respect.
 #[derive(Default)]
@@ -241,6 +263,12 @@ impl TaskEntry {
 }
 
 pub struct Worker {
+    /// Public id for display (`w1`, `w2`, ...): never the session.
+    pub id: String,
+    /// Where its registration came from.
+    pub address: String,
+    pub tasks_done: u64,
+    pub failures: u64,
     pub name: String,
     pub threads: u32,
     pub memory: u64,
@@ -263,6 +291,9 @@ struct Inner {
     tasks: HashMap<u64, TaskEntry>,
     requeued: HashMap<String, u64>,
     backups: HashMap<String, u64>,
+    workers_ever: u64,
+    /// Tasks queued again (worker lost, failed, output redone), ever.
+    requeued_total: u64,
 }
 
 /// Everything the service, the drivers and the monitor share.
@@ -272,6 +303,7 @@ pub struct Shared {
     pub scenes: SceneStore,
     pub spill: SpillDir,
     pub traffic: Traffic,
+    pub counters: Counters,
     pub jobs: crate::jobs::Jobs,
     inner: Mutex<Inner>,
     task_ready: Notify,
@@ -306,6 +338,7 @@ impl Shared {
             scenes,
             spill,
             traffic: Traffic::default(),
+            counters: Counters::default(),
             jobs,
             inner: Mutex::new(Inner::default()),
             task_ready: Notify::new(),
@@ -333,13 +366,28 @@ impl Shared {
         self.stopping.load(Ordering::SeqCst)
     }
 
-    /// A new worker session.
-    pub fn register(&self, name: String, threads: u32, memory: u64) -> String {
+    /// A new worker session, and the worker's public id.
+    pub fn register(
+        &self,
+        name: String,
+        address: String,
+        threads: u32,
+        memory: u64,
+    ) -> (String, String) {
         let session = sray_proto::ids::new_session();
         let mut g = self.lock();
+        g.workers_ever += 1;
+        let id = format!("w{}", g.workers_ever);
+        self.counters
+            .workers_registered
+            .fetch_add(1, Ordering::Relaxed);
         g.workers.insert(
             session.clone(),
             Worker {
+                id: id.clone(),
+                address,
+                tasks_done: 0,
+                failures: 0,
                 name,
                 threads,
                 memory,
@@ -347,7 +395,73 @@ impl Shared {
                 running: HashSet::new(),
             },
         );
-        session
+        (session, id)
+    }
+
+    /// Every worker as `sray status` shows it, by id.
+    pub fn worker_status(&self) -> Vec<v1::WorkerStatus> {
+        let g = self.lock();
+        let now = Instant::now();
+        let mut out: Vec<(u64, v1::WorkerStatus)> = g
+            .workers
+            .iter()
+            .map(|(session, w)| {
+                let tag = WorkerTag {
+                    session: session.clone(),
+                    name: w.name.clone(),
+                };
+                let quarantined = Self::quarantined_now(&g, &tag, now);
+                let mut tasks: Vec<String> = w
+                    .running
+                    .iter()
+                    .filter_map(|(id, _)| g.tasks.get(id))
+                    .map(|t| describe_task(&t.task))
+                    .collect();
+                tasks.sort();
+                let state = if quarantined {
+                    "quarantined"
+                } else if tasks.is_empty() {
+                    "idle"
+                } else {
+                    "busy"
+                };
+                let n = w.id.trim_start_matches('w').parse().unwrap_or(u64::MAX);
+                (
+                    n,
+                    v1::WorkerStatus {
+                        id: w.id.clone(),
+                        name: w.name.clone(),
+                        address: w.address.clone(),
+                        state: state.into(),
+                        tasks,
+                        memory_bytes: w.memory,
+                        threads: w.threads,
+                        tasks_done: w.tasks_done,
+                        failures: w.failures,
+                        quarantined,
+                        last_seen_seconds: now.duration_since(w.last_beat).as_secs_f64(),
+                    },
+                )
+            })
+            .collect();
+        out.sort_by_key(|(n, _)| *n);
+        out.into_iter().map(|(_, w)| w).collect()
+    }
+
+    /// Tasks queued with no attempt live (waiting for a worker), tasks
+    /// running, and tasks queued again so far.
+    pub fn task_counts(&self) -> (u64, u64, u64) {
+        let g = self.lock();
+        let mut queued = 0;
+        let mut running = 0;
+        for t in g.tasks.values() {
+            match t.state {
+                TaskState::Queued => queued += 1,
+                TaskState::Running => running += 1,
+                TaskState::Done => {}
+            }
+        }
+        (queued, running, g.requeued_total)
     }
 
     /// The worker's name, for logs ("?" if unknown).
@@ -595,14 +709,39 @@ impl Shared {
         t.took = Some(a.since.elapsed());
         let worker = a.worker.clone();
         t.state = TaskState::Done;
+        let c = &self.counters;
+        let (task, rays) = if t.task.stage == v1::Stage::Intersect as i32 {
+            (&c.tasks_intersect, &c.rays_intersected)
+        } else {
+            (&c.tasks_shade, &c.rays_shaded)
+        };
+        task.fetch_add(1, Ordering::Relaxed);
+        rays.fetch_add(t.task.ray_count, Ordering::Relaxed);
+        if t.task.verification {
+            c.tasks_verification.fetch_add(1, Ordering::Relaxed);
+        }
+        tracing::debug!(
+            job = %t.task.job_id,
+            task = r.task_id,
+            attempt = r.attempt,
+            worker = %worker.name,
+            stage = t.task.stage,
+            round = t.task.round,
+            rays = t.task.ray_count,
+            seconds = t.took.map_or(0.0, |d| d.as_secs_f64()),
+            "task completed"
+        );
         let ev = TaskEvent::Done {
             task: r.task_id,
             shard: t.shard,
             output,
-            worker,
+            worker: worker.clone(),
         };
         let _ = t.events.send(ev);
         let attempts: Vec<u32> = t.live.keys().copied().collect();
+        if let Some(w) = g.workers.get_mut(&worker.session) {
+            w.tasks_done += 1;
+        }
         for a in attempts {
             Self::drop_attempt(&mut g, r.task_id, a);
         }
@@ -633,6 +772,10 @@ impl Shared {
         let max = self.cfg.max_attempts as usize;
         let worker = Self::drop_attempt(&mut g, r.task_id, r.attempt).expect("live");
         tracing::warn!(task = r.task_id, worker = %worker.name, error = %error, "task failed");
+        self.counters.tasks_failed.fetch_add(1, Ordering::Relaxed);
+        if let Some(w) = g.workers.get_mut(&worker.session) {
+            w.failures += 1;
+        }
         let t = g.tasks.get_mut(&r.task_id).expect("live");
         t.failures.push(format!("{}: {error}", worker.name));
         t.excluded.insert(worker.session.clone());
@@ -721,7 +864,9 @@ impl Shared {
         t.backup = false;
         t.queued_at = Instant::now();
         let job = t.task.job_id.clone();
+        tracing::info!(job = %job, task = id, round = t.task.round, stage = t.task.stage, "task requeued: its output is redone elsewhere");
         *g.requeued.entry(job).or_default() += 1;
+        g.requeued_total += 1;
         g.queue.push_front(id);
         drop(g);
         self.task_ready.notify_waiters();
@@ -841,6 +986,27 @@ impl Shared {
     }
 }
 
+/// A task in a line, for `sray status`: job, round, stage, rays.
+pub fn describe_task(t: &v1::Task) -> String {
+    let stage = match v1::Stage::try_from(t.stage) {
+        Ok(v1::Stage::Intersect) => "intersect",
+        Ok(v1::Stage::Shade) => "shade",
+        _ => "?",
+    };
+    format!(
+        "job {} round {} {stage} rays {}+{}{}",
+        t.job_id.get(..8).unwrap_or(&t.job_id),
+        t.round,
+        t.first_ray,
+        t.ray_count,
+        if t.verification {
+            " (verification)"
+        } else {
+            ""
+        }
+    )
+}
+
 /// Queues a task again if it is not done and no attempt of it is live.
 fn requeue_if_idle(g: &mut Inner, id: u64) {
     if let Some(t) = g.tasks.get_mut(&id)
@@ -851,7 +1017,9 @@ fn requeue_if_idle(g: &mut Inner, id: u64) {
         t.backup = false;
         t.queued_at = Instant::now();
         let job = t.task.job_id.clone();
+        tracing::info!(job = %job, task = id, round = t.task.round, stage = t.task.stage, "task requeued");
         *g.requeued.entry(job).or_default() += 1;
+        g.requeued_total += 1;
         // To the front: a re-queued task holds up its whole stage.
         g.queue.push_front(id);
     }

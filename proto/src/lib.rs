@@ -14,6 +14,11 @@ pub mod v1 {
     tonic::include_proto!("sray.v1");
 }
 
+/// The encoded `FileDescriptorSet` of `sray.proto`, for gRPC server
+/// reflection.
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/sray_descriptor.bin"));
+
 /// Bumped whenever the messages or their meaning change incompatibly.
 /// 3: random job ids with secrets, worker sessions, separate roles.
 pub const PROTOCOL_VERSION: u32 = 3;

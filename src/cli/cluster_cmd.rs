@@ -4,7 +4,7 @@
 
 use anyhow::Context;
 use clap::Args;
-use sray_coordinator::server::{Security, serve};
+use sray_coordinator::server::{Security, serve_with};
 use sray_coordinator::state::{Config, Limits, MIN_WORKER_MEMORY, Shared};
 use sray_proto::auth::Token;
 use std::path::PathBuf;
@@ -15,6 +15,11 @@ pub struct CoordinatorArgs {
     /// Address to listen on
     #[arg(long, default_value = "127.0.0.1:7878")]
     pub listen: String,
+    /// Also serve HTTP here for operators: /healthz, /metrics (Prometheus),
+    /// /api/status and a dashboard at /. No authentication: bind it to
+    /// loopback or a private network (off by default)
+    #[arg(long, value_name = "ADDR")]
+    pub http_listen: Option<String>,
     /// Where uploaded scenes and the jobs' journals are kept (one coordinator per directory)
     #[arg(long, default_value = "sray-data")]
     pub data_dir: PathBuf,
@@ -237,11 +242,30 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
             .await
             .with_context(|| format!("cannot listen on {}", a.listen))?;
         let addr = listener.local_addr()?;
+        let http = match &a.http_listen {
+            None => None,
+            Some(h) => {
+                let l = tokio::net::TcpListener::bind(h)
+                    .await
+                    .with_context(|| format!("cannot listen on {h} (--http-listen)"))?;
+                let ha = l.local_addr()?;
+                if !ha.ip().is_loopback() {
+                    tracing::warn!(
+                        address = %ha,
+                        "the HTTP listener has no authentication and shows job ids, progress and previews: keep it on a private network"
+                    );
+                }
+                tracing::info!(url = %format!("http://{ha}/"), "operators' HTTP listening");
+                // A line for scripts that start one on port 0.
+                eprintln!("sray coordinator http on http://{ha}/");
+                Some(l)
+            }
+        };
         let scheme = if sec.tls.is_some() { "https" } else { "http" };
         tracing::info!(url = %format!("{scheme}://{addr}"), data = %a.data_dir.display(), "coordinator listening");
         // A line for scripts that start a coordinator on port 0.
         eprintln!("sray coordinator listening on {scheme}://{addr}");
-        serve(shared, listener, sec, stop_signal()).await
+        serve_with(shared, listener, http, sec, stop_signal()).await
     });
     // Work still on blocking threads (a checkpoint being written is
     // crash-safe) does not hold the exit up.

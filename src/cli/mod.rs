@@ -45,6 +45,8 @@ enum Command {
     Worker(cluster_cmd::WorkerArgs),
     /// Get the image of a job submitted to a cluster (again, or after the client lost its connection)
     Fetch(cluster::fetch::FetchArgs),
+    /// Show a cluster's workers and jobs (a table, or JSON with --json)
+    Status(cluster::status::StatusArgs),
     /// Run the benchmarks (the paper's experiments, POV-Ray, speed against accuracy)
     Bench(sray_bench::BenchArgs),
 }
@@ -62,6 +64,7 @@ pub fn main() -> ExitCode {
         Command::Coordinator(a) => cluster_cmd::coordinator(a),
         Command::Worker(a) => cluster_cmd::worker(a),
         Command::Fetch(a) => cluster::fetch::run(a),
+        Command::Status(a) => cluster::status::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

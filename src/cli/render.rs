@@ -125,18 +125,8 @@ pub struct RenderArgs {
     /// Rays per shard on a cluster (default: the coordinator's, 65536)
     #[arg(long, allow_negative_numbers = true)]
     pub shard_rays: Option<u64>,
-    /// File holding the cluster's shared token
-    #[arg(long)]
-    pub token_file: Option<PathBuf>,
-    /// Certificate (PEM) to trust for an https coordinator
-    #[arg(long)]
-    pub tls_ca: Option<PathBuf>,
-    /// Client certificate (PEM) for a coordinator that requires one (--tls-client-ca); needs --tls-key
-    #[arg(long, requires = "tls_key")]
-    pub tls_cert: Option<PathBuf>,
-    /// The client certificate's private key (PEM)
-    #[arg(long, requires = "tls_cert")]
-    pub tls_key: Option<PathBuf>,
+    #[command(flatten)]
+    pub conn: super::cluster::conn::ClientConn,
     #[command(flatten)]
     pub setup: SetupArgs,
 }
@@ -253,17 +243,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
     let result = rt.block_on(async {
         match (&a.coordinator, a.local_workers) {
             (Some(url), _) => {
-                let target = sray_proto::net::Target {
-                    url: url.clone(),
-                    token: a
-                        .token_file
-                        .as_deref()
-                        .map(sray_proto::auth::Token::from_file)
-                        .transpose()
-                        .map_err(anyhow::Error::msg)?,
-                    ca: a.tls_ca.clone(),
-                    identity: a.tls_cert.clone().zip(a.tls_key.clone()),
-                };
+                let target = a.conn.target(url)?;
                 client::render(&target, &db, params, shard_rays, format, &bar).await
             }
             (None, Some(n)) => {

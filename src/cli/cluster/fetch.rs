@@ -25,18 +25,8 @@ pub struct FetchArgs {
     /// The coordinator (default: the one the job was submitted to, from its ticket)
     #[arg(long)]
     pub coordinator: Option<String>,
-    /// File holding the clients' token
-    #[arg(long)]
-    pub token_file: Option<PathBuf>,
-    /// Certificate (PEM) to trust for an https coordinator
-    #[arg(long)]
-    pub tls_ca: Option<PathBuf>,
-    /// Client certificate (PEM) for a coordinator that requires one; needs --tls-key
-    #[arg(long, requires = "tls_key")]
-    pub tls_cert: Option<PathBuf>,
-    /// The client certificate's private key (PEM)
-    #[arg(long, requires = "tls_cert")]
-    pub tls_key: Option<PathBuf>,
+    #[command(flatten)]
+    pub conn: super::conn::ClientConn,
 }
 
 pub fn run(a: FetchArgs) -> anyhow::Result<()> {
@@ -49,18 +39,15 @@ pub fn run(a: FetchArgs) -> anyhow::Result<()> {
     let target = sray_proto::net::Target {
         url,
         token: a
+            .conn
             .token_file
             .as_deref()
             .or(t.token_file.as_deref())
             .map(sray_proto::auth::Token::from_file)
             .transpose()
             .map_err(anyhow::Error::msg)?,
-        ca: a.tls_ca.clone().or(t.tls_ca.clone()),
-        identity: a
-            .tls_cert
-            .clone()
-            .zip(a.tls_key.clone())
-            .or(t.tls_identity.clone()),
+        ca: a.conn.tls_ca.clone().or(t.tls_ca.clone()),
+        identity: a.conn.identity().or(t.tls_identity.clone()),
     };
     let outputs = Outputs::open(&a.output, a.stats.as_deref())?;
     let format = outputs.format();

@@ -1,0 +1,388 @@
+//! Seeing what the cluster does: `sray status`, the coordinator's HTTP
+//! listener (`/healthz`, `/metrics`, `/api/status`, previews) and its
+//! dashboard driven in a real headless browser (Debian's chromium; the
+//! test says why and passes when no browser is installed, and CI
+//! installs one through .ci/run). Real processes on loopback, small
+//! images.
+
+mod common;
+
+use common::{Proc, fails, json, ok};
+use std::io::{Read, Write};
+use std::path::Path;
+
+/// A coordinator with the HTTP listener; returns it, its gRPC URL and
+/// its HTTP address.
+fn coordinator(dir: &Path) -> (Proc, String, String) {
+    std::fs::write(dir.join("token"), "observe-token-0123456789abcdef").unwrap();
+    let p = Proc::start(
+        dir,
+        &[
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--http-listen",
+            "127.0.0.1:0",
+            "--data-dir",
+            "data",
+            "--heartbeat-ms",
+            "200",
+            "--worker-timeout",
+            "2",
+            "--token-file",
+            "token",
+        ],
+        &[("RUST_LOG", "info,sray_coordinator=debug")],
+    );
+    let line = p.wait_for(&["listening on"], 30.0);
+    let url = line.rsplit(' ').next().unwrap().to_string();
+    let line = p.wait_for(&["sray coordinator http on"], 5.0);
+    let http = line
+        .rsplit(' ')
+        .next()
+        .unwrap()
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_string();
+    (p, url, http)
+}
+
+fn worker(dir: &Path, url: &str, name: &str) -> Proc {
+    Proc::start(
+        dir,
+        &[
+            "worker",
+            "--coordinator",
+            url,
+            "--token-file",
+            "token",
+            "--cache-dir",
+            &format!("cache-{name}"),
+            "--threads",
+            "1",
+            "--memory",
+            "64MiB",
+            "--name",
+            name,
+        ],
+        &[],
+    )
+}
+
+/// Renders 32x32 spd:balls:1 on the cluster; returns the job's id.
+fn render(dir: &Path, url: &str) -> String {
+    ok(
+        dir,
+        &[
+            "render",
+            "spd:balls:1",
+            "-o",
+            "out.png",
+            "--coordinator",
+            url,
+            "--token-file",
+            "token",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--shard-rays",
+            "256",
+            "--stats",
+            "stats.json",
+            "--quiet",
+        ],
+    );
+    let stats = json(&std::fs::read_to_string(dir.join("stats.json")).unwrap());
+    stats["job_id"]
+        .as_str()
+        .unwrap_or_else(|| panic!("no job id in the stats: {stats}"))
+        .to_string()
+}
+
+/// A plain HTTP/1.1 GET: the status code and the body.
+fn get(addr: &str, path: &str) -> (u16, Vec<u8>) {
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(std::time::Duration::from_secs(30)))
+        .unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let end = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("an HTTP header");
+    let head = String::from_utf8_lossy(&raw[..end]).to_string();
+    let code: u16 = head.split(' ').nth(1).unwrap().parse().unwrap();
+    let mut body = raw[end + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        let mut out = Vec::new();
+        let mut rest = &body[..];
+        loop {
+            let nl = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+            let n = usize::from_str_radix(std::str::from_utf8(&rest[..nl]).unwrap().trim(), 16)
+                .unwrap();
+            if n == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[nl + 2..nl + 2 + n]);
+            rest = &rest[nl + 2 + n + 2..];
+        }
+        body = out;
+    }
+    (code, body)
+}
+
+/// The value of the metric sample `name` (with its labels, as printed).
+fn metric(text: &str, name: &str) -> f64 {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' '))
+        .unwrap_or_else(|| panic!("no metric {name} in:\n{text}"))
+        .trim()
+        .parse()
+        .unwrap()
+}
+
+#[test]
+fn status_json_healthz_metrics_and_preview() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (coord, url, http) = coordinator(d);
+    let _w = worker(d, &url, "obs-w1");
+    coord.wait_for(&["worker registered", "worker=obs-w1 "], 30.0);
+
+    // Healthy as soon as it serves.
+    let (code, body) = get(&http, "/healthz");
+    assert_eq!(code, 200);
+    assert_eq!(String::from_utf8_lossy(&body).trim(), "ok");
+
+    let job = render(d, &url);
+    // The job's lifecycle is in the coordinator's log.
+    for what in [
+        "job submitted",
+        "job started",
+        "round started",
+        "round done",
+        "job finished",
+    ] {
+        coord.wait_for(&[what, &job], 10.0);
+    }
+    coord.wait_for(&["task assigned", &job], 10.0);
+    coord.wait_for(&["task completed", &job], 10.0);
+
+    // sray status --json: one object, workers and jobs.
+    let out = ok(
+        d,
+        &[
+            "status",
+            "--coordinator",
+            &url,
+            "--token-file",
+            "token",
+            "--json",
+        ],
+    );
+    let s = json(&out);
+    let workers = s["workers"].as_array().expect("workers");
+    let jobs = s["jobs"].as_array().expect("jobs");
+    assert_eq!(workers.len(), 1, "{s}");
+    let w = &workers[0];
+    assert_eq!(w["name"], "obs-w1");
+    assert_eq!(w["id"], "w1");
+    assert_eq!(w["threads"], 1);
+    assert_eq!(w["memory_bytes"], 64u64 << 20);
+    assert_eq!(w["quarantined"], false);
+    assert!(w["tasks_done"].as_u64().unwrap() >= 2, "{w}");
+    assert_eq!(w["failures"], 0);
+    assert!(
+        w["address"].as_str().unwrap().starts_with("127.0.0.1:"),
+        "{w}"
+    );
+    assert!(
+        ["idle", "busy"].contains(&w["state"].as_str().unwrap()),
+        "{w}"
+    );
+    assert!(w["tasks"].is_array());
+    assert_eq!(jobs.len(), 1, "{s}");
+    let j = &jobs[0];
+    assert_eq!(j["id"], job.as_str());
+    assert_eq!(j["state"], "done");
+    assert_eq!(
+        (j["width"].as_u64(), j["height"].as_u64()),
+        (Some(32), Some(32))
+    );
+    assert_eq!(j["progress_percent"], 100.0);
+    assert!(j["round"].as_u64().unwrap() >= 1);
+    assert!(!j["rounds"].as_array().unwrap().is_empty());
+    for t in ["submitted_unix", "started_unix", "finished_unix"] {
+        assert!(j[t].as_u64().unwrap() > 1_700_000_000, "{t}: {j}");
+    }
+    assert!(j["scene"].as_str().unwrap().len() == 64, "{j}");
+    // No secret anywhere.
+    assert!(!out.contains("secret"), "{out}");
+
+    // The table, for a terminal.
+    let table = ok(
+        d,
+        &["status", "--coordinator", &url, "--token-file", "token"],
+    );
+    assert!(
+        table.contains("WORKERS (1)") && table.contains("obs-w1"),
+        "{table}"
+    );
+    assert!(
+        table.contains("JOBS (1)") && table.contains(&job) && table.contains("32x32"),
+        "{table}"
+    );
+
+    // A client's token is needed.
+    let err = fails(d, &["status", "--coordinator", &url, "--json"]);
+    assert!(err.to_lowercase().contains("token"), "{err}");
+
+    // /api/status is the same JSON.
+    let (code, body) = get(&http, "/api/status");
+    assert_eq!(code, 200);
+    let api = json(&String::from_utf8(body).unwrap());
+    assert_eq!(api["jobs"][0]["id"], job.as_str());
+    assert_eq!(api["workers"][0]["name"], "obs-w1");
+
+    // /metrics: real names and values.
+    let (code, body) = get(&http, "/metrics");
+    assert_eq!(code, 200);
+    let m = String::from_utf8(body).unwrap();
+    assert_eq!(
+        metric(&m, "sray_jobs_finished_total{outcome=\"done\"}"),
+        1.0,
+        "{m}"
+    );
+    assert_eq!(
+        metric(&m, "sray_jobs_finished_total{outcome=\"failed\"}"),
+        0.0
+    );
+    assert_eq!(metric(&m, "sray_jobs_submitted_total"), 1.0);
+    assert_eq!(metric(&m, "sray_jobs{state=\"done\"}"), 1.0);
+    assert_eq!(metric(&m, "sray_jobs{state=\"running\"}"), 0.0);
+    let busy = metric(&m, "sray_workers{state=\"busy\"}");
+    let idle = metric(&m, "sray_workers{state=\"idle\"}");
+    assert_eq!(busy + idle, 1.0, "{m}");
+    assert_eq!(metric(&m, "sray_workers{state=\"quarantined\"}"), 0.0);
+    // Every eye ray (33 x 33 pixel corners) was intersected.
+    assert!(
+        metric(&m, "sray_rays_total{stage=\"intersect\"}") >= 33.0 * 33.0,
+        "{m}"
+    );
+    assert!(
+        metric(&m, "sray_rays_total{stage=\"shade\"}") >= 33.0 * 33.0,
+        "{m}"
+    );
+    assert!(metric(&m, "sray_tasks_completed_total{stage=\"intersect\"}") >= 1.0);
+    assert!(metric(&m, "sray_wire_bytes_total{direction=\"from_workers\"}") > 0.0);
+    assert!(metric(&m, "sray_wire_bytes_total{direction=\"to_workers\"}") > 0.0);
+    assert_eq!(metric(&m, "sray_verification_mismatches_total"), 0.0);
+    assert_eq!(metric(&m, "sray_queue_depth"), 0.0);
+    assert!(m.contains("# TYPE sray_rays counter"), "{m}");
+
+    // The preview of a finished job is its image.
+    let (code, png) = get(&http, &format!("/jobs/{job}/preview.png"));
+    assert_eq!(code, 200);
+    let img = image::load_from_memory(&png).expect("a PNG");
+    assert_eq!((img.width(), img.height()), (32, 32));
+    assert_eq!(png, std::fs::read(d.join("out.png")).unwrap());
+    // Bad ids are refused cleanly.
+    assert_eq!(get(&http, "/jobs/nope/preview.png").0, 400);
+    assert_eq!(
+        get(&http, &format!("/jobs/{}/preview.png", "0".repeat(32))).0,
+        404
+    );
+    assert_eq!(get(&http, "/nothing-here").0, 404);
+}
+
+/// A headless browser, if one is installed.
+fn browser() -> Option<String> {
+    [
+        "chromium",
+        "chromium-browser",
+        "google-chrome",
+        "google-chrome-stable",
+    ]
+    .into_iter()
+    .find(|b| {
+        std::process::Command::new(b)
+            .arg("--version")
+            .output()
+            .is_ok_and(|o| o.status.success())
+    })
+    .map(String::from)
+}
+
+/// The page's DOM after its scripts ran for a few (virtual) seconds.
+fn dump_dom(browser: &str, profile: &Path, url: &str) -> String {
+    let o = std::process::Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-dev-shm-usage",
+            "--no-first-run",
+            "--virtual-time-budget=4000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg("--dump-dom")
+        .arg(url)
+        .output()
+        .expect("run the browser");
+    assert!(
+        o.status.success(),
+        "{browser} failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).to_string()
+}
+
+#[test]
+fn dashboard_in_a_headless_browser() {
+    let Some(browser) = browser() else {
+        eprintln!(
+            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (coord, url, http) = coordinator(d);
+    let _w = worker(d, &url, "dash-w1");
+    coord.wait_for(&["worker registered", "worker=dash-w1 "], 30.0);
+
+    // While no job runs: the worker is shown.
+    let profile = d.join("profile");
+    let dom = dump_dom(&browser, &profile, &format!("http://{http}/"));
+    assert!(dom.contains("dash-w1"), "no worker in the page:\n{dom}");
+
+    let job = render(d, &url);
+    let dom = dump_dom(&browser, &profile, &format!("http://{http}/"));
+    assert!(dom.contains("dash-w1"), "no worker in the page:\n{dom}");
+    assert!(dom.contains(&job), "no job {job} in the page:\n{dom}");
+    assert!(
+        dom.contains("job-state done"),
+        "the job is not shown done:\n{dom}"
+    );
+    // The preview image is in the page, and loaded in the browser at the
+    // job's size.
+    let src = format!("/jobs/{job}/preview.png");
+    assert!(dom.contains(&src), "no preview <img> in the page:\n{dom}");
+    assert!(
+        dom.contains("data-loaded=\"32x32\""),
+        "the preview did not load in the browser:\n{dom}"
+    );
+    let (code, png) = get(&http, &src);
+    assert_eq!(code, 200);
+    let img = image::load_from_memory(&png).expect("a PNG");
+    assert_eq!((img.width(), img.height()), (32, 32));
+}
