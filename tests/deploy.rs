@@ -103,7 +103,7 @@ fn image_user() -> (i64, i64) {
     let user = last
         .lines()
         .filter_map(|l| l.strip_prefix("USER "))
-        .last()
+        .next_back()
         .expect("the run stage sets USER");
     let (u, g) = user
         .trim()
