@@ -275,24 +275,14 @@ impl Database {
         self.largest_block
     }
 
-    /// Memory a scan holds: buffers for one raw and one stored block, and
-    /// one more raw block for a scan that reads ahead.
+    /// Memory a scan holds: buffers for one raw and one stored block.
     pub fn scan_buffer_bytes(&self) -> usize {
-        let ahead = READ_AHEAD_BLOCKS * self.largest_block;
         self.largest_block
-            + ahead
             + if self.compression == Compression::None {
                 0
             } else {
                 max_stored(self.largest_block)
             }
-    }
-
-    /// Whether a scan decodes on a thread of its own, ahead of use: when
-    /// decoding costs something (decompression, or the first scan's
-    /// checks) and there is more than one block to overlap.
-    fn reads_ahead(&self, verify: bool) -> bool {
-        self.block_count > 1 && (verify || self.compression != Compression::None)
     }
 
     /// Starts a sequential scan of the objects. The first scan checks
@@ -326,27 +316,17 @@ impl Database {
             Compression::None => None,
             Compression::Zstd(_) => Some(zstd::bulk::Decompressor::new().at(&self.path)?),
         };
-        let reader = BlockReader {
-            db: self.clone(),
+        Ok(Scan {
+            db: self,
             file,
             decompressor,
+            words: Vec::with_capacity(self.largest_block / 4),
             stored: Vec::new(),
             next_index: 0,
             next_object: 0,
             offset: HEADER_BYTES as u64,
-            verify,
-        };
-        let source = if self.reads_ahead(verify) {
-            Source::Ahead(ReadAhead::start(reader)?)
-        } else {
-            Source::Here(Box::new(reader))
-        };
-        Ok(Scan {
-            source,
-            words: Vec::with_capacity(self.largest_block / 4),
             stats: DbStats::default(),
-            finished: false,
-            db: self,
+            verify,
         })
     }
 }
@@ -441,86 +421,18 @@ fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
 
 /// A front-to-back pass over the objects of a [`Database`].
 pub struct Scan<'d> {
-    source: Source,
-    /// The current block, as 4-byte words.
-    words: Vec<u32>,
-    stats: DbStats,
-    /// Whether the last block has been returned.
-    finished: bool,
     db: &'d Database,
-}
-
-/// Where a scan's blocks are decoded.
-enum Source {
-    /// On the scanning thread, as they are asked for.
-    Here(Box<BlockReader>),
-    /// On a thread of the scan's own, one block ahead.
-    Ahead(ReadAhead),
-}
-
-/// Blocks beyond the current one that a read-ahead scan holds: the one
-/// being decoded, which the thread hands over (a rendezvous) when the
-/// scan asks for it.
-const READ_AHEAD_BLOCKS: usize = 1;
-
-/// What a block reader found, besides the words it decoded.
-struct BlockMeta {
-    index: u64,
-    first_object: u64,
-    object_count: u32,
-    /// Bytes the block took in the file, header included.
-    file_bytes: u64,
-}
-
-type Decoded = Result<Option<(BlockMeta, Vec<u32>)>, Error>;
-
-/// A decoding thread and the two channels it is tied to: decoded blocks
-/// come back in file order, spent buffers go out for reuse.
-struct ReadAhead {
-    blocks: Option<std::sync::mpsc::Receiver<Decoded>>,
-    spare: std::sync::mpsc::Sender<Vec<u32>>,
-    thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl ReadAhead {
-    fn start(mut reader: BlockReader) -> Result<ReadAhead, Error> {
-        use std::sync::mpsc;
-        // A rendezvous: the thread holds at most the one block it decoded
-        // (READ_AHEAD_BLOCKS) until the scan takes it.
-        let (tx, blocks) = mpsc::sync_channel::<Decoded>(0);
-        let (spare, spare_rx) = mpsc::channel::<Vec<u32>>();
-        let path = reader.db.path.clone();
-        let thread = std::thread::Builder::new()
-            .name("sray-read-ahead".into())
-            .spawn(move || {
-                loop {
-                    let mut words = spare_rx.try_recv().unwrap_or_default();
-                    let r = reader.read(&mut words);
-                    let last = !matches!(r, Ok(Some(_)));
-                    // The scan was dropped (it stopped early): stop reading.
-                    if tx.send(r.map(|m| m.map(|m| (m, words)))).is_err() || last {
-                        break;
-                    }
-                }
-            })
-            .at(&path)?;
-        Ok(ReadAhead {
-            blocks: Some(blocks),
-            spare,
-            thread: Some(thread),
-        })
-    }
-}
-
-impl Drop for ReadAhead {
-    fn drop(&mut self) {
-        // Closing the channel first makes a thread blocked on sending a
-        // block give up; it then ends after at most the block in hand.
-        drop(self.blocks.take());
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
+    file: File,
+    decompressor: Option<zstd::bulk::Decompressor<'static>>,
+    /// The decoded block, as 4-byte words.
+    words: Vec<u32>,
+    stored: Vec<u8>,
+    next_index: u64,
+    next_object: u64,
+    offset: u64,
+    stats: DbStats,
+    /// Whether this scan checks checksums and records.
+    verify: bool,
 }
 
 /// One decoded, validated block.
@@ -546,66 +458,6 @@ impl Scan<'_> {
         self.stats
     }
 
-    /// The next block, or `None` after the last one.
-    pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
-        if self.finished {
-            return Ok(None);
-        }
-        let meta = match &mut self.source {
-            Source::Here(reader) => reader.read(&mut self.words)?,
-            Source::Ahead(ahead) => {
-                let received = ahead.blocks.as_ref().map(|b| b.recv());
-                match received {
-                    Some(Ok(Ok(Some((meta, words))))) => {
-                        let spent = std::mem::replace(&mut self.words, words);
-                        // The thread may have ended; then the buffer is freed.
-                        let _ = ahead.spare.send(spent);
-                        Some(meta)
-                    }
-                    Some(Ok(Ok(None))) => None,
-                    Some(Ok(Err(e))) => return Err(e),
-                    Some(Err(_)) | None => {
-                        return Err(Error::Database {
-                            file: self.db.path.clone(),
-                            location: format!("block {}", self.stats.blocks_read),
-                            message: "the read-ahead thread stopped unexpectedly".into(),
-                        });
-                    }
-                }
-            }
-        };
-        let Some(meta) = meta else {
-            self.finished = true;
-            return Ok(None);
-        };
-        self.stats.bytes_read += meta.file_bytes;
-        self.stats.blocks_read += 1;
-        Ok(Some(Block {
-            index: meta.index,
-            first_object: meta.first_object,
-            object_count: meta.object_count,
-            words: &self.words,
-        }))
-    }
-}
-
-/// Reads and decodes blocks in file order, checking each one's place in
-/// the sequence (and, on a checked scan, its checksum and records).
-struct BlockReader {
-    /// The database's facts; its own copy, so that a reader can move to
-    /// a read-ahead thread.
-    db: Database,
-    file: File,
-    decompressor: Option<zstd::bulk::Decompressor<'static>>,
-    stored: Vec<u8>,
-    next_index: u64,
-    next_object: u64,
-    offset: u64,
-    /// Whether this scan checks checksums and records.
-    verify: bool,
-}
-
-impl BlockReader {
     fn err(&self, message: impl Into<String>) -> Error {
         Error::Database {
             file: self.db.path.clone(),
@@ -614,13 +466,12 @@ impl BlockReader {
         }
     }
 
-    fn read_exact_or_err(&mut self, words: Option<&mut [u32]>, len: usize) -> Result<(), Error> {
-        let r = match words {
-            Some(words) => {
-                let bytes: &mut [u8] = bytemuck::cast_slice_mut(words);
-                self.file.read_exact(&mut bytes[..len])
-            }
-            None => self.file.read_exact(&mut self.stored[..len]),
+    fn read_exact_or_err(&mut self, buf_is_words: bool, len: usize) -> Result<(), Error> {
+        let r = if buf_is_words {
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
+            self.file.read_exact(&mut bytes[..len])
+        } else {
+            self.file.read_exact(&mut self.stored[..len])
         };
         r.map_err(|e| {
             if e.kind() == std::io::ErrorKind::UnexpectedEof {
@@ -631,9 +482,8 @@ impl BlockReader {
         })
     }
 
-    /// Decodes the next block into `words`, or finds that the last one
-    /// was read (and checks that the blocks held what the header says).
-    fn read(&mut self, words: &mut Vec<u32>) -> Result<Option<BlockMeta>, Error> {
+    /// The next block, or `None` after the last one.
+    pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
         if self.next_index == self.db.block_count {
             if self.next_object != self.db.object_count || self.offset != self.db.tables_offset {
                 return Err(self.err(format!(
@@ -673,16 +523,16 @@ impl BlockReader {
         if end > self.db.tables_offset {
             return Err(self.err("block runs into the tables: the block is corrupt"));
         }
-        words.resize(raw_len.div_ceil(4).max(1), 0);
+        self.words.resize(raw_len.div_ceil(4).max(1), 0);
         let compressed = self.decompressor.is_some();
         if compressed {
             self.stored.resize(stored_len, 0);
-            self.read_exact_or_err(None, stored_len)?;
+            self.read_exact_or_err(false, stored_len)?;
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&self.stored[..stored_len]) != h.crc
             {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
-            let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut words[..]);
+            let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
             let n = self
                 .decompressor
                 .as_mut()
@@ -696,8 +546,8 @@ impl BlockReader {
             if stored_len != raw_len {
                 return Err(self.err("stored and raw lengths differ in an uncompressed block"));
             }
-            self.read_exact_or_err(Some(&mut words[..]), raw_len)?;
-            let bytes: &[u8] = bytemuck::cast_slice(&words[..]);
+            self.read_exact_or_err(true, raw_len)?;
+            let bytes: &[u8] = bytemuck::cast_slice(&self.words[..]);
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&bytes[..raw_len]) != h.crc {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
@@ -705,11 +555,13 @@ impl BlockReader {
         if h.index as u64 != self.next_index || h.first_object != self.next_object {
             return Err(self.err("block is out of sequence"));
         }
-        words.truncate(raw_len / 4);
+        self.words.truncate(raw_len / 4);
         if self.verify {
-            validate_records(words, h.object_count, self.db.scene.materials.len())
+            validate_records(&self.words, h.object_count, self.db.scene.materials.len())
                 .map_err(|m| self.err(m))?;
         }
+        self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
+        self.stats.blocks_read += 1;
         self.offset = end;
         let index = self.next_index;
         self.next_index += 1;
@@ -718,11 +570,11 @@ impl BlockReader {
         if self.next_object > self.db.object_count {
             return Err(self.err("blocks hold more objects than the header says"));
         }
-        Ok(Some(BlockMeta {
+        Ok(Some(Block {
             index,
             first_object: first,
             object_count: h.object_count,
-            file_bytes: (BLOCK_HEADER_BYTES + stored_len) as u64,
+            words: &self.words,
         }))
     }
 }
