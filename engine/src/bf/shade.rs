@@ -139,7 +139,6 @@ fn shade_carried(
     counts: &mut RayCounts,
 ) -> Result<(), Error> {
     let (materials, shade_scene) = (setup.materials, setup.shade);
-    let spawn_max = shade_scene.lights.len() + 2;
     let chunks = pool.current_num_threads().max(1) * 4;
     let chunk = carried.len().div_ceil(chunks).max(64);
     let n_chunks = carried.len().div_ceil(chunk);
@@ -153,7 +152,6 @@ fn shade_carried(
             .zip(outputs.par_iter_mut())
             .for_each(|(hits, (out, c))| {
                 out.clear();
-                out.reserve(hits.len() * spawn_max);
                 *c = RayCounts::default();
                 for h in hits {
                     let r = &h.ray;
@@ -170,26 +168,13 @@ fn shade_carried(
                 }
             })
     });
-    append_outputs(&setup.outputs[..n_chunks], counts, next)?;
-    carried.clear();
-    Ok(())
-}
-
-/// Appends the chunks' spawned rays, in chunk order, to the next round's
-/// rays, and their counts to the round's.
-fn append_outputs(
-    outputs: &[(Vec<RayRec>, RayCounts)],
-    counts: &mut RayCounts,
-    next: &mut NextRays,
-) -> Result<(), Error> {
-    // Room for the whole batch at once: no step-by-step growth.
-    next.reserve(outputs.iter().map(|(rays, _)| rays.len()).sum());
-    for (rays, c) in outputs {
+    for (rays, c) in setup.outputs[..n_chunks].iter() {
         *counts += *c;
         for r in rays {
             next.push(*r)?;
         }
     }
+    carried.clear();
     Ok(())
 }
 
@@ -221,7 +206,6 @@ fn shade_set(
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
         let (materials, shade_scene) = (setup.materials, setup.shade);
-        let spawn_max = shade_scene.lights.len() + 2;
         let chunks = pool.current_num_threads().max(1) * 4;
         let chunk = (stop - at).div_ceil(chunks).max(64);
         let n_chunks = (stop - at).div_ceil(chunk);
@@ -235,7 +219,6 @@ fn shade_set(
                 .zip(outputs.par_iter_mut())
                 .for_each(|(hits, (out, c))| {
                     out.clear();
-                    out.reserve(hits.len() * spawn_max);
                     *c = RayCounts::default();
                     for h in hits {
                         let obj = &objs[(h.prim.0 - first) as usize];
@@ -243,7 +226,12 @@ fn shade_set(
                     }
                 })
         });
-        append_outputs(&setup.outputs[..n_chunks], counts, next)?;
+        for (rays, c) in setup.outputs[..n_chunks].iter() {
+            *counts += *c;
+            for r in rays {
+                next.push(*r)?;
+            }
+        }
         at = stop;
     }
     st.db_scans += 1;

@@ -77,16 +77,6 @@ impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
         Ok(())
     }
 
-    /// Makes room for `additional` more records at once (never past the
-    /// memory share), so that a batch of known size is pushed without the
-    /// buffer growing, copying and faulting in fresh pages step by step.
-    pub fn reserve(&mut self, additional: usize) {
-        let want = (self.buf.len() + additional).min(self.cap);
-        if want > self.buf.capacity() {
-            self.buf.reserve_exact(want - self.buf.len());
-        }
-    }
-
     fn spill_run(&mut self) -> Result<(), Error> {
         if !self.in_order {
             let key = &self.key;
