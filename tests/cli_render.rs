@@ -224,14 +224,38 @@ fn options_reach_the_renderer() {
     assert!(err.contains("--grids"), "{err}");
 }
 
-/// The breadth-first render stays within its memory budget plus the
-/// documented fixed overhead, in a scene with two grids, reflections and
+/// The breadth-first render stays within its memory budget over the
+/// process's fixed footprint, in a scene with two grids, reflections and
 /// spilling (before the phases gave their buffers back, 48 MiB peaked at
-/// 98 MiB here).
+/// 98 MiB here). The footprint (program, libraries, thread stacks, and at
+/// most 1 MiB of budget) is measured, not assumed: it grows with the
+/// binary (the cluster's HTTP and gRPC stacks took it from 9.1 to 9.8 MiB).
 #[test]
 fn breadth_first_peak_memory_stays_within_the_budget() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
+    ok(
+        d,
+        &[
+            "render",
+            "spd:balls:1",
+            "-o",
+            "f.png",
+            "--mode",
+            "bf",
+            "--memory",
+            "1MiB",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--stats",
+            "f.json",
+        ],
+    );
+    let f = json(&std::fs::read_to_string(d.join("f.json")).unwrap());
+    let fixed = f["peak_rss_bytes"].as_f64().unwrap() / (1 << 20) as f64;
+    assert!(fixed < 16.0, "the fixed footprint alone is {fixed:.1} MiB");
     for (budget, mib) in [("8MiB", 8.0), ("48MiB", 48.0)] {
         ok(
             d,
@@ -256,8 +280,9 @@ fn breadth_first_peak_memory_stays_within_the_budget() {
         let peak = s["peak_rss_bytes"].as_f64().unwrap() / (1 << 20) as f64;
         assert!(s["spill_bytes_written"].as_u64().unwrap() > 0, "{s}");
         assert!(
-            peak <= mib + 8.0,
-            "--memory {budget}: peak RSS {peak:.1} MiB is over the budget plus 8 MiB"
+            peak <= fixed + mib,
+            "--memory {budget}: peak RSS {peak:.1} MiB is over the budget plus the \
+             fixed footprint of {fixed:.1} MiB"
         );
     }
 }
