@@ -234,27 +234,33 @@ fn options_reach_the_renderer() {
 fn breadth_first_peak_memory_stays_within_the_budget() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    ok(
-        d,
-        &[
-            "render",
-            "spd:balls:1",
-            "-o",
-            "f.png",
-            "--mode",
-            "bf",
-            "--memory",
-            "1MiB",
-            "--width",
-            "16",
-            "--height",
-            "16",
-            "--stats",
-            "f.json",
-        ],
-    );
-    let f = json(&std::fs::read_to_string(d.join("f.json")).unwrap());
-    let fixed = f["peak_rss_bytes"].as_f64().unwrap() / (1 << 20) as f64;
+    // The largest of three runs: thread start-up makes it vary by a few
+    // hundred KiB from run to run.
+    let fixed = (0..3)
+        .map(|_| {
+            ok(
+                d,
+                &[
+                    "render",
+                    "spd:balls:1",
+                    "-o",
+                    "f.png",
+                    "--mode",
+                    "bf",
+                    "--memory",
+                    "1MiB",
+                    "--width",
+                    "16",
+                    "--height",
+                    "16",
+                    "--stats",
+                    "f.json",
+                ],
+            );
+            let f = json(&std::fs::read_to_string(d.join("f.json")).unwrap());
+            f["peak_rss_bytes"].as_f64().unwrap() / (1 << 20) as f64
+        })
+        .fold(0.0, f64::max);
     assert!(fixed < 16.0, "the fixed footprint alone is {fixed:.1} MiB");
     for (budget, mib) in [("8MiB", 8.0), ("48MiB", 48.0)] {
         ok(
