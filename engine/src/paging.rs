@@ -196,7 +196,9 @@ impl PagingAlloc {
 // address of a live mapping (they would overlap). So `dealloc`, given a
 // block and its layout, tells the two apart by that table (only blocks of
 // at least THRESHOLD bytes can be mappings) and returns each to where it
-// came from. The default `realloc` (alloc, copy, dealloc) keeps this.
+// came from. `realloc` passes to the system allocator only while paging
+// is off, when no mapping exists (see there); otherwise it is the default
+// alloc, copy, dealloc, which keeps all of the above.
 // Nothing here allocates, panics or unwinds, so the allocator never
 // re-enters itself.
 unsafe impl GlobalAlloc for PagingAlloc {
@@ -217,6 +219,37 @@ unsafe impl GlobalAlloc for PagingAlloc {
             // SAFETY: the caller's contract is passed on.
             None => unsafe { System.alloc_zeroed(layout) },
         }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if FD.load(Ordering::Acquire) < 0 {
+            // Paging is off, and it has always been: `FD` is set once and
+            // never cleared, and mappings are made only once it is set. So
+            // `ptr` is the system allocator's block for `layout`, and its
+            // own realloc may grow it in place or move its pages (mremap)
+            // instead of copying them into freshly faulted memory. Paging
+            // turned on meanwhile changes nothing for this block: its
+            // successor is a system block too, which `dealloc` tells from a
+            // mapping by the region table.
+            // SAFETY: the caller's contract for `realloc` is passed on, and
+            // the block is the system allocator's (above).
+            return unsafe { System.realloc(ptr, layout, new_size) };
+        }
+        // SAFETY: `new_size` and the layout's alignment make a valid layout
+        // (the caller's contract for `realloc`).
+        let new_layout = unsafe { Layout::from_size_align_unchecked(new_size, layout.align()) };
+        // SAFETY: `new_layout` has a non-zero size (the caller's contract).
+        let new = unsafe { self.alloc(new_layout) };
+        if !new.is_null() {
+            // SAFETY: both blocks are live and distinct, each at least
+            // min(old, new size) long; then the old block, which the caller
+            // gives up, returns to where it came from.
+            unsafe {
+                std::ptr::copy_nonoverlapping(ptr, new, layout.size().min(new_size));
+                self.dealloc(ptr, layout);
+            }
+        }
+        new
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {

@@ -91,7 +91,7 @@ pub fn shade_round(
                 // The surface came with the result: shade now, in ray
                 // order, so the spawned rays come out in key order.
                 carried.push(Carried { ray, id, out });
-                if carried.len() >= setup.set_cap.max(1) {
+                if carried.len() >= setup.set_cap.clamp(1, CARRY_BATCH) {
                     shade_carried(setup, pool, &mut carried, next, counts)?;
                 }
             } else {
@@ -120,6 +120,12 @@ pub fn shade_round(
     *setup.carried = carried;
     Ok(st)
 }
+
+/// Most hits shaded together when their surfaces came with them. Such a
+/// batch needs no pass over the objects, so nothing is gained by making it
+/// as large as the budget allows; a small one stays in cache and spares
+/// the page faults of a buffer the size of the round.
+const CARRY_BATCH: usize = 1 << 14;
 
 /// A hit whose surface came with its result.
 #[derive(Clone, Copy, Debug)]
