@@ -14,6 +14,11 @@ use std::path::Path;
 /// A coordinator with the HTTP listener; returns it, its gRPC URL and
 /// its HTTP address.
 fn coordinator(dir: &Path) -> (Proc, String, String) {
+    coordinator_with_timeout(dir, "2")
+}
+
+/// The same, declaring a silent worker lost after `worker_timeout` seconds.
+fn coordinator_with_timeout(dir: &Path, worker_timeout: &str) -> (Proc, String, String) {
     std::fs::write(dir.join("token"), "observe-token-0123456789abcdef").unwrap();
     let p = Proc::start(
         dir,
@@ -28,7 +33,7 @@ fn coordinator(dir: &Path) -> (Proc, String, String) {
             "--heartbeat-ms",
             "200",
             "--worker-timeout",
-            "2",
+            worker_timeout,
             "--token-file",
             "token",
         ],
@@ -385,4 +390,175 @@ fn dashboard_in_a_headless_browser() {
     assert_eq!(code, 200);
     let img = image::load_from_memory(&png).expect("a PNG");
     assert_eq!((img.width(), img.height()), (32, 32));
+}
+
+/// Renders on the cluster in the background; the client's process.
+fn render_in_background(dir: &Path, url: &str, size: &str) -> Proc {
+    Proc::start(
+        dir,
+        &[
+            "render",
+            "spd:balls:2",
+            "-o",
+            "out.png",
+            "--coordinator",
+            url,
+            "--token-file",
+            "token",
+            "--width",
+            size,
+            "--height",
+            size,
+            "--shard-rays",
+            "256",
+            "--quiet",
+        ],
+        &[],
+    )
+}
+
+fn signal(p: &Proc, sig: libc::c_int) {
+    // SAFETY: kill(2) takes integers only; the pid is our own child's,
+    // which has not been waited for, so it names that process.
+    let r = unsafe { libc::kill(p.child.id() as libc::pid_t, sig) };
+    assert_eq!(r, 0, "kill({sig})");
+}
+
+/// The dashboard while a job runs: the worker is stopped (SIGSTOP) in the
+/// job's second round, so the job is certainly still running when the
+/// browser looks, with the first round's image as its preview.
+#[test]
+fn dashboard_shows_a_running_job_with_its_preview() {
+    let Some(browser) = browser() else {
+        eprintln!(
+            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
+        );
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A stopped worker must not be declared lost while the browser looks.
+    let (coord, url, http) = coordinator_with_timeout(d, "120");
+    let w = worker(d, &url, "live-w1");
+    coord.wait_for(&["worker registered", "worker=live-w1 "], 30.0);
+
+    let mut client = render_in_background(d, &url, "64");
+    let mark = coord.mark();
+    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        coord.wait_for_after(mark, &["round done"], 60.0);
+    }))
+    .is_err()
+    {
+        panic!("the client said: {}", client.log());
+    }
+    coord.wait_for_after(mark, &["task assigned", "round=2"], 60.0);
+    signal(&w, libc::SIGSTOP);
+
+    let (code, body) = get(&http, "/api/status");
+    assert_eq!(code, 200);
+    let st = json(&String::from_utf8_lossy(&body));
+    let job = &st["jobs"][0];
+    assert_eq!(job["state"], "running", "{st}");
+    let id = job["id"].as_str().unwrap().to_string();
+
+    let dom = dump_dom(&browser, &d.join("profile"), &format!("http://{http}/"));
+    signal(&w, libc::SIGCONT);
+    assert!(dom.contains("live-w1"), "no worker in the page:\n{dom}");
+    assert!(dom.contains(&id), "no job {id} in the page:\n{dom}");
+    assert!(
+        dom.contains("job-state running"),
+        "the job is not shown running:\n{dom}"
+    );
+    assert!(
+        dom.contains(&format!("/jobs/{id}/preview.png")),
+        "no preview <img> in the page:\n{dom}"
+    );
+    assert!(
+        dom.contains("data-loaded=\"64x64\""),
+        "the first round's preview did not load in the browser:\n{dom}"
+    );
+
+    // Resumed, the job finishes and the client gets its image.
+    assert!(client.wait(120.0).success(), "{}", client.log());
+    let img = image::open(d.join("out.png")).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 64));
+}
+
+/// Standard gRPC health and server reflection answer on the gRPC port,
+/// without a token (probes and tools such as grpcurl carry none).
+#[test]
+fn grpc_health_and_reflection_answer() {
+    use tonic_health::pb::health_check_response::ServingStatus;
+    use tonic_health::pb::{HealthCheckRequest, health_client::HealthClient};
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+
+    let dir = tempfile::tempdir().unwrap();
+    let (_coord, url, _http) = coordinator(dir.path());
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let ch = tonic::transport::Endpoint::from_shared(url.clone())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        let mut health = HealthClient::new(ch.clone());
+        for service in ["", "sray.v1.Coordinator"] {
+            let r = health
+                .check(HealthCheckRequest {
+                    service: service.into(),
+                })
+                .await
+                .unwrap_or_else(|e| panic!("health of '{service}': {e}"))
+                .into_inner();
+            assert_eq!(r.status, ServingStatus::Serving as i32, "'{service}'");
+        }
+        let unknown = health
+            .check(HealthCheckRequest {
+                service: "no.such.Service".into(),
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(unknown.code(), tonic::Code::NotFound);
+
+        let mut refl = ServerReflectionClient::new(ch);
+        let ask = |r: MessageRequest| ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(r),
+        };
+        let reqs = vec![
+            ask(MessageRequest::ListServices(String::new())),
+            ask(MessageRequest::FileContainingSymbol(
+                "sray.v1.Coordinator".into(),
+            )),
+        ];
+        let mut answers = refl
+            .server_reflection_info(tokio_stream::iter(reqs))
+            .await
+            .unwrap()
+            .into_inner();
+        let listed = answers.message().await.unwrap().unwrap();
+        let Some(MessageResponse::ListServicesResponse(l)) = listed.message_response else {
+            panic!("not a service list: {listed:?}");
+        };
+        let names: Vec<_> = l.service.iter().map(|s| s.name.as_str()).collect();
+        for want in ["sray.v1.Coordinator", "grpc.health.v1.Health"] {
+            assert!(names.contains(&want), "{want} not listed: {names:?}");
+        }
+        let file = answers.message().await.unwrap().unwrap();
+        let Some(MessageResponse::FileDescriptorResponse(f)) = file.message_response else {
+            panic!("no descriptor for sray.v1.Coordinator: {file:?}");
+        };
+        assert!(!f.file_descriptor_proto.is_empty());
+        let text = String::from_utf8_lossy(&f.file_descriptor_proto[0]).to_string();
+        assert!(
+            text.contains("NextTask"),
+            "the descriptor lacks the service's methods"
+        );
+    });
 }
