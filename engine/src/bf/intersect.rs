@@ -202,9 +202,13 @@ const EMPTY_COLD: Cold = Cold {
     material: 0,
 };
 
-/// Bytes one ray slot takes.
+/// Bytes one ray slot takes (with its place in the queue of rays loaded
+/// in parallel, see [`Shard::pending`]).
 pub fn slot_bytes<R: Real>() -> usize {
-    std::mem::size_of::<Hot<R>>() + std::mem::size_of::<Cold>() + std::mem::size_of::<RayQ<R>>()
+    std::mem::size_of::<Hot<R>>()
+        + std::mem::size_of::<Cold>()
+        + std::mem::size_of::<RayQ<R>>()
+        + std::mem::size_of::<Pending>()
 }
 
 /// Memory per registration: its key, its slot id, and its share of the
@@ -250,11 +254,18 @@ impl Region {
     }
 }
 
+/// A ray given a slot, to be loaded into it by the shard's own thread.
+type Pending = (u32, u64, RayRec);
+
 /// One thread's rays and their registrations.
 struct Shard<R> {
     hot: Vec<Hot<R>>,
     q: Vec<RayQ<R>>,
     cold: Vec<Cold>,
+    /// Rays given a slot since the last pass (slot, id, ray). Filling is
+    /// serial, as rays come in order from one source; preparing a ray for
+    /// its walk and tests is not, so each shard does it for its own.
+    pending: Vec<Pending>,
     regs: [RegMap; MAX_GRIDS],
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
@@ -315,6 +326,7 @@ impl<R: Real> Slots<R> {
                     hot: Vec::new(),
                     q: Vec::new(),
                     cold: Vec::new(),
+                    pending: Vec::new(),
                     regs: Default::default(),
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
@@ -336,6 +348,7 @@ impl<R: Real> Slots<R> {
                 .iter()
                 .map(|sh| {
                     sh.hot.capacity() * size_of::<Hot<R>>()
+                        + sh.pending.capacity() * size_of::<Pending>()
                         + sh.q.capacity() * size_of::<RayQ<R>>()
                         + sh.cold.capacity() * size_of::<Cold>()
                         + sh.done.capacity() * size_of::<Outcome>()
@@ -371,6 +384,9 @@ impl<R: Real> Slots<R> {
             sh.cold.resize(per, EMPTY_COLD);
             sh.q.truncate(per);
             sh.cold.truncate(per);
+            // At most every slot waits to be loaded: no growth mid-fill.
+            sh.pending.clear();
+            sh.pending.reserve_exact(per);
         }
     }
 }
@@ -486,7 +502,10 @@ pub fn intersect_rays<R: Real>(
                                     }))?;
                                     continue;
                                 }
-                                load(sh, i, id, &r, setup.eps);
+                                // Loaded by the shard's thread before it
+                                // registers (below); taken from now on.
+                                sh.hot[i].active = true;
+                                sh.pending.push((i as u32, id, r));
                                 active += 1;
                                 break;
                             }
@@ -522,8 +541,15 @@ pub fn intersect_rays<R: Real>(
         let store = setup.store;
         let dense_cells = setup.dense_cells;
         let share = (setup.registrations / shards.len()).max(1) as u64;
+        let eps = setup.eps;
         pool.install(|| {
             shards.par_iter_mut().for_each(|sh| {
+                let pending = std::mem::take(&mut sh.pending);
+                for (i, id, r) in &pending {
+                    load(sh, *i as usize, *id, r, eps);
+                }
+                sh.pending = pending;
+                sh.pending.clear();
                 let expect = (share as usize).clamp(1024, 1 << 20);
                 for g in 0..ngrids {
                     let cells = grids.grids[g].spec.cells();
