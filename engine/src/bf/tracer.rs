@@ -266,7 +266,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         let mut results = if resident {
             let mut v = std::mem::take(&mut self.dense_buf);
             v.clear();
-            v.extend((first..first + n).map(miss));
+            // Written (and so first touched, page by page) by every thread.
+            self.pool.install(|| {
+                use rayon::prelude::*;
+                v.par_extend((first..first + n).into_par_iter().map(miss));
+            });
             Results::Dense { first, v }
         } else {
             Results::Sort(ExternalSorter::new(
