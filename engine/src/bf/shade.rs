@@ -176,9 +176,7 @@ fn shade_carried(
     });
     for (rays, c) in setup.outputs[..n_chunks].iter() {
         *counts += *c;
-        for r in rays {
-            next.push(*r)?;
-        }
+        next.extend_from_slice(rays)?;
     }
     carried.clear();
     Ok(())
@@ -234,9 +232,7 @@ fn shade_set(
         });
         for (rays, c) in setup.outputs[..n_chunks].iter() {
             *counts += *c;
-            for r in rays {
-                next.push(*r)?;
-            }
+            next.extend_from_slice(rays)?;
         }
         at = stop;
     }

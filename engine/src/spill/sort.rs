@@ -77,6 +77,39 @@ impl<T: Pod + Send, K: Ord + Copy + Send + Into<u64>, F: Fn(&T) -> K + Sync>
         Ok(())
     }
 
+    /// Pushes `records` in order, as [`ExternalSorter::push`] would one by
+    /// one, copying them in bulk where the buffer has room.
+    pub fn extend_from_slice(&mut self, mut records: &[T]) -> Result<(), Error> {
+        while !records.is_empty() {
+            if self.buf.len() == self.cap {
+                self.spill_run()?;
+            }
+            let room = self.cap - self.buf.len();
+            let (now, rest) = records.split_at(room.min(records.len()));
+            if self.in_order {
+                for r in now {
+                    let k = (self.key)(r);
+                    if self.last.is_some_and(|l| k < l) {
+                        self.in_order = false;
+                        break;
+                    }
+                    self.last = Some(k);
+                }
+            }
+            if self.buf.capacity() - self.buf.len() < now.len() {
+                // Grow geometrically, but never past the memory share.
+                let want = (self.buf.capacity() * 2)
+                    .max(self.buf.len() + now.len())
+                    .max(1 << 12)
+                    .min(self.cap);
+                self.buf.reserve_exact(want - self.buf.len());
+            }
+            self.buf.extend_from_slice(now);
+            records = rest;
+        }
+        Ok(())
+    }
+
     fn spill_run(&mut self) -> Result<(), Error> {
         if !self.in_order {
             let key = &self.key;
@@ -307,10 +340,29 @@ mod tests {
     use super::*;
 
     fn sorted_back(keys: &[u64], mem: usize) -> Vec<u64> {
+        let one_by_one = sorted_back_in(keys, mem, 1);
+        // Pushed in bulk, in slices of several sizes: the same records.
+        for slice in [7, 100, 3000] {
+            assert_eq!(
+                sorted_back_in(keys, mem, slice),
+                one_by_one,
+                "slices of {slice}"
+            );
+        }
+        one_by_one
+    }
+
+    fn sorted_back_in(keys: &[u64], mem: usize, slice: usize) -> Vec<u64> {
         let spill = SpillDir::new(None).unwrap();
         let mut s = ExternalSorter::new(&spill, "t", mem, (|k: &u64| *k) as fn(&u64) -> u64);
-        for &k in keys {
-            s.push(k).unwrap();
+        if slice == 1 {
+            for &k in keys {
+                s.push(k).unwrap();
+            }
+        } else {
+            for c in keys.chunks(slice) {
+                s.extend_from_slice(c).unwrap();
+            }
         }
         let mut out = Vec::new();
         let mut r = s.finish().unwrap();
