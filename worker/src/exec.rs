@@ -150,6 +150,9 @@ pub struct Executor {
     pub key: String,
     pub scene: String,
     pub db_path: PathBuf,
+    /// The jobs it has run tasks of (each job's first task checks the
+    /// scene, as a new setup's does).
+    pub jobs: std::collections::HashSet<String>,
     tx: Option<std::sync::mpsc::Sender<Work>>,
     thread: Option<std::thread::JoinHandle<()>>,
     /// The ids of the tasks whose records the executor keeps.
@@ -187,6 +190,7 @@ impl Executor {
             key,
             scene,
             db_path,
+            jobs: Default::default(),
             tx: Some(tx),
             thread: Some(thread),
             held,

@@ -195,8 +195,19 @@ impl Node {
         let mut fresh = false;
         if let Some(i) = self.execs.iter().position(|e| e.key == key) {
             let e = self.execs.remove(i);
+            let new_job = !e.jobs.contains(&task.job_id);
             self.execs.push(e);
-        } else {
+            if new_job {
+                // A job's first task checks (and repairs) the cached
+                // scene, as a new setup's does; a repaired scene ends the
+                // setups that have it open.
+                let (_, written) = self.cache.check(&mut self.client, &hash, false).await?;
+                if written {
+                    self.execs.retain(|e| e.scene != hash);
+                }
+            }
+        }
+        if !self.execs.iter().any(|e| e.key == key) {
             // A new setup (scene or settings): check (and repair) the
             // cached scene once, then build the grids on an executor of
             // its own. The setup is named by content, never by job id.
@@ -205,12 +216,17 @@ impl Node {
                 self.execs.remove(0);
             }
             fresh = true;
-            // A scene another kept setup has open was checked when that
-            // setup started, and is not touched again (checking it marks
-            // it used, which an open database takes for a change).
-            let path = match self.execs.iter().find(|e| e.scene == hash) {
-                Some(e) => e.db_path.clone(),
-                None => self.cache.ensure(&mut self.client, &hash).await?,
+            // A scene another kept setup has open is checked without
+            // marking it used (which an open database takes for a
+            // change); if it had to be repaired, those setups end.
+            let path = if self.execs.iter().any(|e| e.scene == hash) {
+                let (path, written) = self.cache.check(&mut self.client, &hash, false).await?;
+                if written {
+                    self.execs.retain(|e| e.scene != hash);
+                }
+                path
+            } else {
+                self.cache.ensure(&mut self.client, &hash).await?
             };
             let (opts, store) = from_proto(params, self.cfg.threads).map_err(anyhow::Error::msg)?;
             self.execs.push(Executor::start(
@@ -232,7 +248,9 @@ impl Node {
                 tokio::runtime::Handle::current(),
             ));
         }
-        let exec = self.execs.last().context("no executor")?;
+        let exec = self.execs.last_mut().context("no executor")?;
+        exec.jobs.insert(task.job_id.clone());
+        let exec = &*exec;
         let shade = task.stage == v1::Stage::Shade as i32;
         let input = if shade || !task.eye_rays {
             let mut r = tref.clone();
