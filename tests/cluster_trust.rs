@@ -193,6 +193,7 @@ fn tref(session: &str, t: &v1::Task) -> v1::TaskRef {
         session: session.into(),
         task_id: t.task_id,
         attempt: t.attempt,
+        ..Default::default()
     }
 }
 
@@ -220,7 +221,8 @@ async fn lie(c: &mut Client, session: &str, t: &v1::Task, seed: &mut u64) -> boo
             msgs.push(v1::TaskOutput {
                 part: Some(Part::Records(v1::RecordChunk {
                     kind: v1::RecordKind::Results as i32,
-                    data: sray_proto::wire::pack(chunk),
+                    data: sray_proto::wire::encode(chunk),
+                    held: None,
                 })),
             });
         }

@@ -1,6 +1,8 @@
 //! Cluster scaling on this machine: the embedded breadth-first render
 //! against one and two local worker processes, with the traffic per ray
-//! and per hit.
+//! and per hit, against the goals of a cheap wire (issue 17): one local
+//! worker at most [`GOAL_ONE_WORKER`] times the embedded time, at most
+//! [`GOAL_BYTES_PER_RAY`] bytes on the wire per ray.
 
 use super::report::{Report, num};
 use super::{Ctx, Plan, chart, exec};
@@ -21,6 +23,15 @@ const SETUPS: [(&str, &[&str]); 3] = [
         &["--local-workers", "2", "--threads", "2"],
     ),
 ];
+
+/// One local worker's wall time over the embedded breadth-first render's.
+pub const GOAL_ONE_WORKER: f64 = 1.15;
+/// Bytes of records on the wire per ray traced.
+pub const GOAL_BYTES_PER_RAY: f64 = 64.0;
+
+fn met(ok: bool) -> &'static str {
+    if ok { "met" } else { "NOT met" }
+}
 
 fn scenes(ctx: &Ctx) -> Vec<(SpdScene, u32)> {
     if ctx.quick {
@@ -56,6 +67,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     let mut data = Vec::new();
     let mut cats = Vec::new();
+    let mut goals = Vec::new();
     let mut series: Vec<(String, Vec<f64>)> = SETUPS
         .iter()
         .map(|(l, _)| (l.to_string(), Vec::new()))
@@ -65,6 +77,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         cats.push(name.clone());
         let sdb = ctx.scene_file(scene, size, "sdb")?;
         let mut base_rate = f64::NAN;
+        let mut base_seconds = f64::NAN;
         for (si, (label, extra)) in SETUPS.iter().enumerate() {
             let mut args: Vec<String> = vec![
                 sdb.display().to_string(),
@@ -85,8 +98,21 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 .map(|k| st[k].as_f64().unwrap_or(0.0))
                 .sum();
             let rate = rays / m.seconds();
+            let bpr = st["bytes_per_ray"].as_f64().unwrap_or(f64::NAN);
             if si == 0 {
                 base_rate = rate;
+                base_seconds = m.seconds();
+            }
+            if si == 1 {
+                let over = m.seconds() / base_seconds;
+                goals.push(format!(
+                    "{name}: one local worker takes {} the embedded time (goal at most {GOAL_ONE_WORKER}: {}); \
+                     {} bytes per ray on the wire (goal at most {GOAL_BYTES_PER_RAY}: {})",
+                    num(over, 2),
+                    met(over <= GOAL_ONE_WORKER),
+                    num(bpr, 1),
+                    met(bpr <= GOAL_BYTES_PER_RAY),
+                ));
             }
             series[si].1.push(rate / 1e6);
             rows.push(vec![
@@ -95,7 +121,8 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 num(m.seconds(), 2),
                 num(rate / 1e6, 3),
                 num(rate / base_rate, 2),
-                num(st["bytes_per_ray"].as_f64().unwrap_or(f64::NAN), 0),
+                num(m.seconds() / base_seconds, 2),
+                num(bpr, 1),
                 num(st["bytes_per_hit"].as_f64().unwrap_or(f64::NAN), 0),
                 st["tasks"].as_u64().map_or("-".into(), |t| t.to_string()),
                 num(m.peak_kib() as f64 / 1024.0, 1),
@@ -118,6 +145,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             "seconds",
             "Mrays/s",
             "vs embedded",
+            "time vs embedded",
             "bytes/ray",
             "bytes/hit",
             "tasks",
@@ -126,6 +154,11 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         &rows,
     )?;
     r.json("scaling", &serde_json::Value::Array(data))?;
+    r.para(&format!(
+        "Goals of a cheap wire (issue 17): one local worker at most {GOAL_ONE_WORKER}x the embedded \
+         breadth-first time, at most {GOAL_BYTES_PER_RAY} bytes per ray. {}.",
+        goals.join("; ")
+    ));
     let file = "throughput_local_workers.svg";
     chart::bars(
         &r.path(file),

@@ -33,7 +33,7 @@
 
 use crate::jobs::{self, JobEntry, JobState, Record, Resume};
 use crate::service::Receiver;
-use crate::state::{Shared, TaskEvent, TaskInput, TaskOutput, WorkerTag};
+use crate::state::{Held, Segment, Shared, TaskEvent, TaskInput, TaskOutput, WorkerTag};
 use anyhow::{Context, bail};
 use sray_engine::bf::{BfOptions, Contribution, RayRec, ResultRec, SPAWN_SLOTS, StoreNumber};
 use sray_engine::render::{
@@ -370,6 +370,9 @@ struct Totals {
     /// Seconds workers (and the coordinator) spent tracing samples.
     #[serde(default)]
     verify_seconds: f64,
+    /// Tasks for which a worker had to build its grids.
+    #[serde(default)]
+    grid_builds: u64,
 }
 
 impl Totals {
@@ -384,6 +387,7 @@ impl Totals {
         }
         self.hits += o.hits;
         self.tasks += 1;
+        self.grid_builds += s.built_grids as u64;
         self.worker_seconds += s.seconds;
     }
 }
@@ -414,6 +418,8 @@ async fn drive(
         rays = r.rays.map(Arc::new);
     }
     let mut arbiter = Arbiter::new(shared, job);
+    // Which workers hold the round's rays (none after a restart).
+    let mut segments: Arc<Vec<Segment>> = Arc::default();
     while n > 0 {
         tot.rays_per_round.push(n);
         let shards: Vec<(u64, u64)> = (0..n.div_ceil(job.shard_rays))
@@ -431,13 +437,18 @@ async fn drive(
         let ts = Instant::now();
         let inputs: Vec<Arc<TaskInput>> = shards
             .iter()
-            .map(|_| {
+            .map(|&(first, _)| {
                 Arc::new(TaskInput {
                     rays: rays.clone(),
                     results: None,
                     results_offset: 0,
                     objects: job.objects,
                     corners,
+                    held: Held {
+                        rays: segments.clone(),
+                        intersect: None,
+                        shard_first: first,
+                    },
                 })
             })
             .collect();
@@ -453,11 +464,14 @@ async fn drive(
             main_ids: Vec::new(),
         };
         let outs = stage.run(&mut tot, &mut arbiter).await?;
+        let intersect_ids = stage.main_ids.clone();
         let mut round_passes = Vec::new();
+        let mut winners = Vec::new();
         let results: Vec<_> = outs
             .into_iter()
-            .map(|o| {
+            .map(|(o, w)| {
                 round_passes.push(passes_of(&o.summary.stats_json));
+                winners.push(w.session);
                 o.results
                     .map(Arc::new)
                     .context("an intersection task returned no results")
@@ -473,17 +487,40 @@ async fn drive(
         stage.inputs = shards
             .iter()
             .enumerate()
-            .map(|(i, _)| {
+            .map(|(i, &(first, _))| {
                 Arc::new(TaskInput {
                     rays: rays.clone(),
                     results: Some(results[i].clone()),
                     results_offset: 0,
                     objects: job.objects,
                     corners,
+                    held: Held {
+                        rays: Arc::default(),
+                        intersect: Some((intersect_ids[i], winners[i].clone())),
+                        shard_first: first,
+                    },
                 })
             })
             .collect();
         let outs = stage.run(&mut tot, &mut arbiter).await?;
+        // The next round's rays are the shards' spawned rays in shard
+        // order (each shard's keys lie below the next one's), each run
+        // held by the worker that spawned it.
+        let mut segs = Vec::with_capacity(outs.len());
+        let mut start = 0;
+        for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
+            let len = o.rays.as_ref().map_or(0, |r| r.len());
+            if len > 0 {
+                segs.push(Segment {
+                    start,
+                    len,
+                    task: id,
+                    session: w.session.clone(),
+                });
+            }
+            start += len;
+        }
+        let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();
         drop(stage);
         drop(results);
         // Colour into the frame; spawned rays merged by key.
@@ -492,6 +529,7 @@ async fn drive(
             tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill)).await??;
         frame = f;
         n = next.as_ref().map_or(0, |f| f.len());
+        segments = Arc::new(if start == n { segs } else { Vec::new() });
         rays = next.map(Arc::new);
         tot.shade_seconds += ts.elapsed().as_secs_f64();
         round += 1;
@@ -626,6 +664,7 @@ impl Stage<'_> {
             results_offset: s - self.shards[i].0,
             objects: inp.objects,
             corners: inp.corners,
+            held: inp.held.clone(),
         })
     }
 
@@ -647,7 +686,7 @@ impl Stage<'_> {
         &mut self,
         tot: &mut Totals,
         arbiter: &mut Arbiter,
-    ) -> anyhow::Result<Vec<TaskOutput>> {
+    ) -> anyhow::Result<Vec<(TaskOutput, WorkerTag)>> {
         let shared = self.shared;
         let cfg = &shared.cfg;
         let total = self.shards.len();
@@ -717,6 +756,7 @@ impl Stage<'_> {
                             }
                             let Some((main, main_worker)) = st[i].out.clone() else { continue };
                             tot.verify_seconds += output.summary.seconds;
+                            tot.grid_builds += output.summary.built_grids as u64;
                             let sample = Arc::new(output);
                             let first = self.shards[i].0;
                             let stage = self.stage;
@@ -877,15 +917,16 @@ impl Stage<'_> {
             }
         }
         drop(guard);
-        let outs: Vec<TaskOutput> = st
+        let outs: Vec<(TaskOutput, WorkerTag)> = st
             .into_iter()
             .map(|s| {
-                let (o, _) = s.out.expect("every shard is done");
+                let (o, w) = s.out.expect("every shard is done");
                 Arc::try_unwrap(o)
+                    .map(|o| (o, w))
                     .map_err(|_| anyhow::anyhow!("internal: an output is still shared"))
             })
             .collect::<anyhow::Result<_>>()?;
-        for o in &outs {
+        for (o, _) in &outs {
             tot.add(o);
         }
         tot.shard_rays += rays;
@@ -955,6 +996,7 @@ impl Arbiter {
                 Arc::new(sray_worker::exec::Executor::start(
                     sray_worker::exec::JobSetup {
                         key: format!("arbiter-{}", &self.hash[..16]),
+                        scene: self.hash.clone(),
                         db_path: self.db.clone(),
                         opts: self.opts.clone(),
                         bf: BfOptions {
@@ -963,6 +1005,7 @@ impl Arbiter {
                             spill_dir: Some(self.shared.spill.path().to_path_buf()),
                             shading: sray_engine::bf::Shading::Join,
                         },
+                        keep: false,
                     },
                     tokio::runtime::Handle::current(),
                 ))
@@ -993,7 +1036,7 @@ async fn trace_here(
     task: v1::Task,
     input: Arc<TaskInput>,
 ) -> anyhow::Result<TaskOutput> {
-    use sray_worker::exec::{Input, Inputs, Work};
+    use sray_worker::exec::{Input, Inputs, Slice, Work};
     // The sample's input records, copied out of the round's files.
     let (t2, i2, spill) = (task.clone(), input.clone(), shared.spill.clone());
     let files = tokio::task::spawn_blocking(move || -> anyhow::Result<Inputs> {
@@ -1004,7 +1047,7 @@ async fn trace_here(
             while let Some(x) = rd.next()? {
                 w.push(&x)?;
             }
-            inputs.rays = Some(w.finish()?);
+            inputs.rays = Some(Slice::whole(w.finish()?));
         }
         if let Some(r) = &i2.results {
             let mut rd = r.reader_range(i2.results_offset, t2.ray_count)?;
@@ -1012,7 +1055,7 @@ async fn trace_here(
             while let Some(x) = rd.next()? {
                 w.push(&x)?;
             }
-            inputs.results = Some(w.finish()?);
+            inputs.results = Some(Slice::whole(w.finish()?));
         }
         Ok(inputs)
     })
@@ -1024,6 +1067,7 @@ async fn trace_here(
         input: Input::Files(files),
         out: out_tx,
         done: done_tx,
+        fresh: false,
     };
     if !exec.submit(work) {
         bail!("the coordinator's tracer has stopped");
@@ -1217,6 +1261,7 @@ fn job_stats(
         "tasks_requeued": requeued,
         "backup_tasks": backups.max(tot.backups),
         "worker_seconds": tot.worker_seconds,
+        "grid_builds": tot.grid_builds,
         "bytes_to_workers": d[0],
         "bytes_from_workers": d[1],
         "scene_bytes_served": d[2],

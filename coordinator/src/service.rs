@@ -13,7 +13,7 @@ use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::RecordWriter;
 use sray_proto::auth::{Role, require};
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
-use sray_proto::wire::{SCENE_CHUNK_BYTES, pack, records_per_chunk, unpack};
+use sray_proto::wire::{SCENE_CHUNK_BYTES, decode, encode, records_per_chunk};
 use std::io::Write;
 use std::pin::Pin;
 use std::sync::Arc;
@@ -153,38 +153,104 @@ impl Coordinator for Service {
     ) -> Result<Response<Self::TaskInputStream>, Status> {
         require(&req, Role::Worker, "TaskInput")?;
         let (task, input) = self.shared.task_input(req.get_ref()).map_err(refused)?;
+        let r = req.into_inner();
+        let (session, held) = (r.session, r.held);
         let (tx, rx) = mpsc::channel(4);
         let shared = self.shared.clone();
         tokio::task::spawn_blocking(move || {
-            let send = |kind: v1::RecordKind, data: Vec<u8>| {
+            let send = |c: v1::RecordChunk| {
+                let bytes = prost::Message::encoded_len(&c) as u64;
                 shared
                     .traffic
                     .to_workers
-                    .fetch_add(data.len() as u64, Ordering::Relaxed);
-                tx.blocking_send(Ok(v1::RecordChunk {
-                    kind: kind as i32,
-                    data,
-                }))
-                .is_ok()
+                    .fetch_add(bytes, Ordering::Relaxed);
+                tx.blocking_send(Ok(c)).is_ok()
             };
             let fail = |e: sray_engine::Error| {
                 let _ = tx.blocking_send(Err(internal(e)));
             };
-            if let (Some(rays), false) = (&input.rays, task.eye_rays) {
-                let mut rd = match rays.reader_range(task.first_ray, task.ray_count) {
-                    Ok(r) => r,
-                    Err(e) => return fail(e),
+            // What the worker holds of a task's output, if the output taken
+            // was this worker's.
+            let holds = |t: u64, s: &str| {
+                held.contains(&t) && sray_proto::ids::same(s.as_bytes(), session.as_bytes())
+            };
+            let named =
+                |kind: v1::RecordKind, task_id: u64, offset: u64, count: u64| v1::RecordChunk {
+                    kind: kind as i32,
+                    data: Vec::new(),
+                    held: Some(v1::HeldRecords {
+                        task_id,
+                        offset,
+                        count,
+                    }),
                 };
-                if !stream_records(&mut rd, v1::RecordKind::Rays, &send, &fail) {
-                    return;
+            let (first, n) = (task.first_ray, task.ray_count);
+            let by_intersect = input
+                .held
+                .intersect
+                .as_ref()
+                .filter(|(t, s)| holds(*t, s))
+                .map(|(t, _)| *t);
+            if let (Some(rays), false) = (&input.rays, task.eye_rays) {
+                if let Some(t) = by_intersect {
+                    let off = first - input.held.shard_first;
+                    if !send(named(v1::RecordKind::Rays, t, off, n)) {
+                        return;
+                    }
+                } else {
+                    // Runs of the range held by the worker are named, the
+                    // rest sent.
+                    let mut at = first;
+                    let end = first + n;
+                    let segs = input.held.rays.clone();
+                    let mut next = segs
+                        .iter()
+                        .filter(|g| g.start + g.len > first && g.start < end)
+                        .peekable();
+                    while at < end {
+                        let (upto, mine) = match next.peek() {
+                            Some(g) if g.start <= at => {
+                                let hi = (g.start + g.len).min(end);
+                                let m = holds(g.task, &g.session).then_some((g.task, at - g.start));
+                                next.next();
+                                (hi, m)
+                            }
+                            Some(g) => (g.start.min(end), None),
+                            None => (end, None),
+                        };
+                        if upto <= at {
+                            break;
+                        }
+                        match mine {
+                            Some((t, off)) => {
+                                if !send(named(v1::RecordKind::Rays, t, off, upto - at)) {
+                                    return;
+                                }
+                            }
+                            None => {
+                                let mut rd = match rays.reader_range(at, upto - at) {
+                                    Ok(r) => r,
+                                    Err(e) => return fail(e),
+                                };
+                                if !stream_records(&mut rd, v1::RecordKind::Rays, &send, &fail) {
+                                    return;
+                                }
+                            }
+                        }
+                        at = upto;
+                    }
                 }
             }
             if let Some(results) = &input.results {
-                let mut rd = match results.reader_range(input.results_offset, task.ray_count) {
-                    Ok(r) => r,
-                    Err(e) => return fail(e),
-                };
-                stream_records(&mut rd, v1::RecordKind::Results, &send, &fail);
+                if let Some(t) = by_intersect {
+                    send(named(v1::RecordKind::Results, t, input.results_offset, n));
+                } else {
+                    let mut rd = match results.reader_range(input.results_offset, n) {
+                        Ok(r) => r,
+                        Err(e) => return fail(e),
+                    };
+                    stream_records(&mut rd, v1::RecordKind::Results, &send, &fail);
+                }
             }
         });
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
@@ -224,7 +290,7 @@ impl Coordinator for Service {
                     self.shared
                         .traffic
                         .from_workers
-                        .fetch_add(c.data.len() as u64, Ordering::Relaxed);
+                        .fetch_add(prost::Message::encoded_len(&c) as u64, Ordering::Relaxed);
                     if let Err(e) = rx.take(c) {
                         self.shared.fail(&tref, format!("bad output: {e}"));
                         return Err(Status::invalid_argument(e));
@@ -524,22 +590,27 @@ async fn watch(
     }
 }
 
-/// Streams a reader's records in chunks; false if the receiver went away
-/// or reading failed.
+/// Streams a reader's records in encoded chunks; false if the receiver
+/// went away or reading failed.
 fn stream_records<T: bytemuck::Pod>(
     rd: &mut sray_engine::spill::RecordReader<T>,
     kind: v1::RecordKind,
-    send: &dyn Fn(v1::RecordKind, Vec<u8>) -> bool,
+    send: &dyn Fn(v1::RecordChunk) -> bool,
     fail: &dyn Fn(sray_engine::Error),
 ) -> bool {
     let per = records_per_chunk::<T>();
     let mut buf = Vec::with_capacity(per);
+    let chunk = |buf: &[T]| v1::RecordChunk {
+        kind: kind as i32,
+        data: encode(buf),
+        held: None,
+    };
     loop {
         match rd.next() {
             Ok(Some(r)) => {
                 buf.push(r);
                 if buf.len() == per {
-                    if !send(kind, pack(&buf)) {
+                    if !send(chunk(&buf)) {
                         return false;
                     }
                     buf.clear();
@@ -552,7 +623,7 @@ fn stream_records<T: bytemuck::Pod>(
             }
         }
     }
-    buf.is_empty() || send(kind, pack(&buf))
+    buf.is_empty() || send(chunk(&buf))
 }
 
 /// Takes a task's output records, checking them as they come.
@@ -599,11 +670,15 @@ impl<'a> Receiver<'a> {
     }
 
     pub(crate) fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
+        if c.held.is_some() {
+            return Err("an output names held records".into());
+        }
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
         let io = |e: sray_engine::Error| e.to_string();
         match (v1::RecordKind::try_from(c.kind), intersect) {
             (Ok(v1::RecordKind::Results), true) => {
-                let v = unpack::<ResultRec>(&c.data).map_err(|e| e.to_string())?;
+                let v = decode::<ResultRec>(&c.data, records_per_chunk::<ResultRec>())
+                    .map_err(|e| e.to_string())?;
                 for r in &v {
                     let want = self.task.first_ray + self.n_results;
                     if r.ray != want {
@@ -625,7 +700,8 @@ impl<'a> Receiver<'a> {
                 self.results.as_mut().expect("made").extend(&v).map_err(io)
             }
             (Ok(v1::RecordKind::Contributions), false) => {
-                let v = unpack::<Contribution>(&c.data).map_err(|e| e.to_string())?;
+                let v = decode::<Contribution>(&c.data, records_per_chunk::<Contribution>())
+                    .map_err(|e| e.to_string())?;
                 if let Some(bad) = v.iter().find(|x| x.corner as u64 >= self.input.corners) {
                     return Err(format!(
                         "a contribution to pixel corner {} of {}",
@@ -640,7 +716,8 @@ impl<'a> Receiver<'a> {
                     .map_err(io)
             }
             (Ok(v1::RecordKind::Rays), false) => {
-                let v = unpack::<RayRec>(&c.data).map_err(|e| e.to_string())?;
+                let v = decode::<RayRec>(&c.data, records_per_chunk::<RayRec>())
+                    .map_err(|e| e.to_string())?;
                 let slots = sray_engine::bf::SPAWN_SLOTS;
                 let lo = self.task.first_ray * slots;
                 let hi = (self.task.first_ray + self.task.ray_count) * slots;

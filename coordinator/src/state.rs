@@ -189,6 +189,55 @@ pub struct TaskInput {
     pub objects: u64,
     /// Frame slots (pixel corners, or pixels): the bound of contributions.
     pub corners: u64,
+    /// Where workers may hold this input already.
+    pub held: Held,
+}
+
+/// Which workers hold which records of a stage's input, by the tasks
+/// that left them there: what a worker holds is named, not sent.
+#[derive(Clone, Default)]
+pub struct Held {
+    /// The round's rays as the shadings of the previous round spawned
+    /// them, in order (the round's ray file is their concatenation).
+    pub rays: Arc<Vec<Segment>>,
+    /// Shading: the intersection of this shard (its task and the worker
+    /// whose output was taken), which holds the shard's rays and results
+    /// from the shard's first ray, `shard_first`, on.
+    pub intersect: Option<(u64, String)>,
+    pub shard_first: u64,
+}
+
+/// Rays `start .. start + len` of a round: the output of task `task`,
+/// taken from the worker `session`.
+#[derive(Clone, Debug)]
+pub struct Segment {
+    pub start: u64,
+    pub len: u64,
+    pub task: u64,
+    pub session: String,
+}
+
+impl Held {
+    /// The worker most of the rays `first .. first + count` are with.
+    pub fn preferred(&self, first: u64, count: u64) -> Option<String> {
+        if let Some((_, s)) = &self.intersect {
+            return Some(s.clone());
+        }
+        let mut best: Option<(u64, &str)> = None;
+        let mut by: HashMap<&str, u64> = HashMap::new();
+        for g in self.rays.iter() {
+            let lo = g.start.max(first);
+            let hi = (g.start + g.len).min(first + count);
+            if lo < hi {
+                let n = by.entry(&g.session).or_default();
+                *n += hi - lo;
+                if best.is_none_or(|(b, _)| *n > b) {
+                    best = Some((*n, &g.session));
+                }
+            }
+        }
+        best.map(|(_, s)| s.to_string())
+    }
 }
 
 /// A task's output, as received.
@@ -254,6 +303,9 @@ pub struct TaskEntry {
     backup: bool,
     /// When it was last queued with no attempt live.
     queued_at: Instant,
+    /// The worker that holds (most of) its input, if any: it gets the
+    /// task first.
+    prefer: Option<String>,
 }
 
 impl TaskEntry {
@@ -531,6 +583,7 @@ impl Shared {
             }
             task.task_id = id;
             task.attempt = 0;
+            let prefer = input.held.preferred(task.first_ray, task.ray_count);
             g.tasks.insert(
                 id,
                 TaskEntry {
@@ -549,6 +602,7 @@ impl Shared {
                     took: None,
                     backup: false,
                     queued_at: Instant::now(),
+                    prefer,
                 },
             );
             g.queue.push_back(id);
@@ -620,7 +674,10 @@ impl Shared {
                 };
                 if !Self::quarantined_now(&g, &tag, now) {
                     let g = &mut *g;
-                    let mut pick = None;
+                    // The first task this worker may run, unless a later
+                    // one's input is held here.
+                    let mut first = None;
+                    let mut mine = None;
                     g.queue.retain(|id| {
                         let Some(t) = g.tasks.get(id) else {
                             return false;
@@ -628,15 +685,23 @@ impl Shared {
                         if t.state == TaskState::Done {
                             return false;
                         }
-                        if pick.is_none()
+                        if mine.is_none()
                             && !t.excludes(&tag)
                             && !t.live.values().any(|a| a.worker.session == tag.session)
                         {
-                            pick = Some(*id);
-                            return false;
+                            first.get_or_insert(*id);
+                            if t.prefer.as_deref() == Some(session) {
+                                mine = Some(*id);
+                            }
                         }
                         true
                     });
+                    let pick = mine.or(first);
+                    if let Some(id) = pick
+                        && let Some(i) = g.queue.iter().position(|&x| x == id)
+                    {
+                        g.queue.remove(i);
+                    }
                     if let Some(id) = pick {
                         let t = g.tasks.get_mut(&id).expect("picked");
                         let attempt = t.next_attempt;

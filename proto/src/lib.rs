@@ -21,4 +21,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 
 /// Bumped whenever the messages or their meaning change incompatibly.
 /// 3: random job ids with secrets, worker sessions, separate roles.
-pub const PROTOCOL_VERSION: u32 = 3;
+/// 4: compressed records, held records not sent again, grid builds
+/// reported.
+pub const PROTOCOL_VERSION: u32 = 4;

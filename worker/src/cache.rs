@@ -61,6 +61,18 @@ impl SceneCache {
 
     /// A verified local copy of scene `hash`.
     pub async fn ensure(&self, client: &mut Client, hash: &str) -> anyhow::Result<PathBuf> {
+        Ok(self.check(client, hash, true).await?.0)
+    }
+
+    /// Checks (and repairs) the local copy of scene `hash`: its path, and
+    /// whether it was fetched or repaired (written). `touch`: mark it used
+    /// (for eviction), which a database open on it takes for a change.
+    pub async fn check(
+        &self,
+        client: &mut Client,
+        hash: &str,
+        touch: bool,
+    ) -> anyhow::Result<(PathBuf, bool)> {
         check_hash(hash)?;
         let m = client
             .scene_manifest(v1::SceneRef { hash: hash.into() })
@@ -122,11 +134,15 @@ impl SceneCache {
         }
         // Last use is the file's modification time (symlinks, as a local
         // render makes, are left alone).
+        let written = !bad.is_empty();
+        if !(touch || written) {
+            return Ok((path, false));
+        }
         if let Ok(f) = OpenOptions::new().write(true).open(&path) {
             let _ = f.set_modified(std::time::SystemTime::now());
         }
         self.evict(hash);
-        Ok(path)
+        Ok((path, written))
     }
 
     /// Removes cached scenes, least recently used first, until the cache

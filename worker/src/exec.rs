@@ -10,10 +10,12 @@ use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, EyeRays, Precision, RayCounts, RenderOptions};
 use sray_engine::sdb::Database;
-use sray_engine::spill::RecordWriter;
+use sray_engine::spill::{RecordFile, RecordReader, RecordWriter};
 use sray_proto::v1::{self, RecordKind, task_output::Part};
-use sray_proto::wire::{pack, records_per_chunk, unpack};
+use sray_proto::wire::{decode, encode, records_per_chunk};
+use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tokio::sync::{mpsc, oneshot};
 
@@ -24,9 +26,14 @@ use tokio::sync::{mpsc, oneshot};
 /// scene's executor.
 pub struct JobSetup {
     pub key: String,
+    /// The scene's content hash.
+    pub scene: String,
     pub db_path: PathBuf,
     pub opts: RenderOptions,
     pub bf: BfOptions,
+    /// Keep what tasks received and made (their rays and results) for
+    /// later tasks, which then need not receive them again.
+    pub keep: bool,
 }
 
 /// One task for the executor, with its input stream (if it has input), the
@@ -36,6 +43,9 @@ pub struct Work {
     pub input: Input,
     pub out: mpsc::Sender<v1::TaskOutput>,
     pub done: oneshot::Sender<Result<(), String>>,
+    /// The executor was started for this task (its grids were built for
+    /// it): said in the task's summary.
+    pub fresh: bool,
 }
 
 /// A task's input records.
@@ -48,10 +58,105 @@ pub enum Input {
     Files(Inputs),
 }
 
+/// Records `start .. start + count` of a file (shared: a kept output may
+/// be a task's input as it is).
+pub struct Slice<T: bytemuck::Pod> {
+    pub file: Arc<RecordFile<T>>,
+    pub start: u64,
+    pub count: u64,
+}
+
+impl<T: bytemuck::Pod> Slice<T> {
+    pub fn whole(f: RecordFile<T>) -> Slice<T> {
+        let count = f.len();
+        Slice {
+            file: Arc::new(f),
+            start: 0,
+            count,
+        }
+    }
+    pub fn len(&self) -> u64 {
+        self.count
+    }
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+    pub fn reader(&self) -> Result<RecordReader<T>, sray_engine::Error> {
+        self.file.reader_range(self.start, self.count)
+    }
+    /// Records `offset .. offset + count` of this slice.
+    fn sub(&self, offset: u64, count: u64) -> Option<Slice<T>> {
+        (offset.checked_add(count)? <= self.count).then(|| Slice {
+            file: self.file.clone(),
+            start: self.start + offset,
+            count,
+        })
+    }
+    fn bytes(&self) -> u64 {
+        self.count * std::mem::size_of::<T>() as u64
+    }
+}
+
+/// What the executor keeps of a finished task: an intersection's input
+/// rays (none for eye rays) and results; a shading's spawned rays.
+#[derive(Default)]
+pub struct Kept {
+    pub rays: Option<Slice<RayRec>>,
+    pub results: Option<Slice<ResultRec>>,
+}
+
+/// Most bytes of records kept (on disk, in the spill directory), and most
+/// tasks' worth; the oldest go first.
+const KEPT_BYTES: u64 = 1 << 30;
+const KEPT_TASKS: usize = 4096;
+
+/// The tasks' records an executor keeps, by task id, oldest first.
+#[derive(Default)]
+struct KeptStore {
+    by_task: HashMap<u64, Kept>,
+    order: VecDeque<u64>,
+    bytes: u64,
+}
+
+impl KeptStore {
+    fn size(k: &Kept) -> u64 {
+        k.rays.as_ref().map_or(0, Slice::bytes) + k.results.as_ref().map_or(0, Slice::bytes)
+    }
+
+    fn insert(&mut self, task: u64, k: Kept) {
+        if let Some(old) = self.by_task.remove(&task) {
+            self.bytes -= Self::size(&old);
+            self.order.retain(|&t| t != task);
+        }
+        self.bytes += Self::size(&k);
+        self.by_task.insert(task, k);
+        self.order.push_back(task);
+        while self.bytes > KEPT_BYTES || self.order.len() > KEPT_TASKS {
+            let Some(t) = self.order.pop_front() else {
+                break;
+            };
+            if let Some(old) = self.by_task.remove(&t) {
+                self.bytes -= Self::size(&old);
+            }
+        }
+    }
+
+    fn ids(&self) -> Vec<u64> {
+        self.order.iter().copied().collect()
+    }
+}
+
 pub struct Executor {
     pub key: String,
+    pub scene: String,
+    pub db_path: PathBuf,
+    /// The jobs it has run tasks of (each job's first task checks the
+    /// scene, as a new setup's does).
+    pub jobs: std::collections::HashSet<String>,
     tx: Option<std::sync::mpsc::Sender<Work>>,
     thread: Option<std::thread::JoinHandle<()>>,
+    /// The ids of the tasks whose records the executor keeps.
+    held: Arc<Mutex<Vec<u64>>>,
 }
 
 /// Dropping an executor ends its thread and waits for it, so that the
@@ -71,18 +176,33 @@ impl Executor {
     pub fn start(setup: JobSetup, rt: tokio::runtime::Handle) -> Executor {
         let (tx, rx) = std::sync::mpsc::channel::<Work>();
         let key = setup.key.clone();
+        let (scene, db_path) = (setup.scene.clone(), setup.db_path.clone());
+        let held = Arc::new(Mutex::new(Vec::new()));
+        let h2 = held.clone();
         let thread = std::thread::Builder::new()
             .name(format!("setup-{}", &key[..key.len().min(8)]))
             .spawn(move || match setup.opts.precision {
-                Precision::Double => job_thread::<f64>(setup, rt, rx),
-                Precision::Single => job_thread::<f32>(setup, rt, rx),
+                Precision::Double => job_thread::<f64>(setup, rt, rx, h2),
+                Precision::Single => job_thread::<f32>(setup, rt, rx, h2),
             })
             .expect("cannot start a thread");
         Executor {
             key,
+            scene,
+            db_path,
+            jobs: Default::default(),
             tx: Some(tx),
             thread: Some(thread),
+            held,
         }
+    }
+
+    /// The tasks whose records this executor keeps (for a TaskInput
+    /// request: the coordinator sends only what is not among them).
+    /// Between this call and the task's input being read nothing is
+    /// dropped: the executor drops kept records only when a task ends.
+    pub fn held(&self) -> Vec<u64> {
+        self.held.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     /// Queues a task; false if the thread has ended.
@@ -95,6 +215,7 @@ fn job_thread<R: Real>(
     setup: JobSetup,
     rt: tokio::runtime::Handle,
     rx: std::sync::mpsc::Receiver<Work>,
+    held: Arc<Mutex<Vec<u64>>>,
 ) {
     let db = match Database::open(&setup.db_path) {
         Ok(db) => db,
@@ -118,15 +239,25 @@ fn job_thread<R: Real>(
         "grids built"
     );
     let eye_rays = eye.count();
+    let mut kept = KeptStore::default();
     for w in rx {
         let Work {
             task,
             input,
             out,
             done,
+            fresh,
         } = w;
         let run = std::panic::AssertUnwindSafe(|| {
-            run_task(&mut tracer, &eye, eye_rays, &rt, &task, input, &out)
+            let mut ctx = TaskCtx {
+                eye: &eye,
+                eye_rays,
+                rt: &rt,
+                kept: &kept,
+                keep: setup.keep,
+                fresh,
+            };
+            run_task(&mut tracer, &mut ctx, &task, input, &out)
         });
         let r = std::panic::catch_unwind(run).unwrap_or_else(|p| {
             Err(format!(
@@ -137,8 +268,24 @@ fn job_thread<R: Real>(
                     .unwrap_or("unknown cause")
             ))
         });
+        let r = r.map(|k| {
+            if let Some(k) = k {
+                kept.insert(task.task_id, k);
+                *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
+            }
+        });
         let _ = done.send(r);
     }
+}
+
+/// What a task runs with, besides the tracer.
+struct TaskCtx<'a> {
+    eye: &'a EyeRays,
+    eye_rays: u64,
+    rt: &'a tokio::runtime::Handle,
+    kept: &'a KeptStore,
+    keep: bool,
+    fresh: bool,
 }
 
 fn fail_all(rx: std::sync::mpsc::Receiver<Work>, e: &str) {
@@ -162,7 +309,8 @@ fn send_records<T: bytemuck::Pod>(
         out,
         Part::Records(v1::RecordChunk {
             kind: kind as i32,
-            data: pack(recs),
+            data: encode(recs),
+            held: None,
         }),
     )
 }
@@ -170,13 +318,89 @@ fn send_records<T: bytemuck::Pod>(
 /// A task's input records, in local files.
 #[derive(Default)]
 pub struct Inputs {
-    pub rays: Option<sray_engine::spill::RecordFile<RayRec>>,
-    pub results: Option<sray_engine::spill::RecordFile<ResultRec>>,
+    pub rays: Option<Slice<RayRec>>,
+    pub results: Option<Slice<ResultRec>>,
+}
+
+/// Where a task's input of one kind is gathered: nothing yet, one kept
+/// slice as it is, or records copied into a file of their own.
+enum Gather<T: bytemuck::Pod> {
+    Empty,
+    Slice(Slice<T>),
+    File(RecordWriter<T>),
+}
+
+impl<T: bytemuck::Pod> Gather<T> {
+    fn file(
+        &mut self,
+        tracer_spill: &sray_engine::spill::SpillDir,
+        what: &str,
+    ) -> Result<&mut RecordWriter<T>, String> {
+        let io = |e: sray_engine::Error| e.to_string();
+        match std::mem::replace(self, Gather::Empty) {
+            Gather::Empty => {
+                *self = Gather::File(RecordWriter::create(tracer_spill, what).map_err(io)?)
+            }
+            Gather::Slice(s) => {
+                let mut w = RecordWriter::create(tracer_spill, what).map_err(io)?;
+                let mut rd = s.reader().map_err(io)?;
+                while let Some(r) = rd.next().map_err(io)? {
+                    w.push(&r).map_err(io)?;
+                }
+                *self = Gather::File(w);
+            }
+            f @ Gather::File(_) => *self = f,
+        }
+        match self {
+            Gather::File(w) => Ok(w),
+            _ => unreachable!("made a file"),
+        }
+    }
+
+    fn add_data(
+        &mut self,
+        spill: &sray_engine::spill::SpillDir,
+        what: &str,
+        data: &[u8],
+    ) -> Result<(), String> {
+        let v = decode::<T>(data, records_per_chunk::<T>()).map_err(|e| e.to_string())?;
+        self.file(spill, what)?
+            .extend(&v)
+            .map_err(|e| e.to_string())
+    }
+
+    fn add_kept(
+        &mut self,
+        spill: &sray_engine::spill::SpillDir,
+        what: &str,
+        s: Slice<T>,
+    ) -> Result<(), String> {
+        if let Gather::Empty = self {
+            *self = Gather::Slice(s);
+            return Ok(());
+        }
+        let io = |e: sray_engine::Error| e.to_string();
+        let w = self.file(spill, what)?;
+        let mut rd = s.reader().map_err(io)?;
+        while let Some(r) = rd.next().map_err(io)? {
+            w.push(&r).map_err(io)?;
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> Result<Option<Slice<T>>, String> {
+        Ok(match self {
+            Gather::Empty => None,
+            Gather::Slice(s) => Some(s),
+            Gather::File(w) => Some(Slice::whole(w.finish().map_err(|e| e.to_string())?)),
+        })
+    }
 }
 
 fn read_inputs<R: Real>(
     tracer: &Tracer<R>,
     rt: &tokio::runtime::Handle,
+    kept: &KeptStore,
     input: Input,
 ) -> Result<Inputs, String> {
     let mut inputs = Inputs::default();
@@ -185,46 +409,70 @@ fn read_inputs<R: Real>(
         Input::Files(f) => return Ok(f),
         Input::Stream(s) => s,
     };
-    let io = |e: sray_engine::Error| e.to_string();
-    let mut rays: Option<RecordWriter<RayRec>> = None;
-    let mut results: Option<RecordWriter<ResultRec>> = None;
+    let mut rays = Gather::<RayRec>::Empty;
+    let mut results = Gather::<ResultRec>::Empty;
+    let spill = &tracer.spill;
     loop {
         let msg = rt
             .block_on(stream.message())
             .map_err(|s| format!("task input: {}", s.message()))?;
         let Some(chunk) = msg else { break };
-        match RecordKind::try_from(chunk.kind) {
-            Ok(RecordKind::Rays) => {
-                let v = unpack::<RayRec>(&chunk.data).map_err(|e| e.to_string())?;
-                if rays.is_none() {
-                    rays = Some(RecordWriter::create(&tracer.spill, "in-rays").map_err(io)?);
+        let kind = RecordKind::try_from(chunk.kind);
+        if let Some(h) = &chunk.held {
+            let k = kept.by_task.get(&h.task_id).ok_or_else(|| {
+                format!(
+                    "task input: the records of task {} are not kept here",
+                    h.task_id
+                )
+            })?;
+            let gone = || {
+                format!(
+                    "task input: no records {}+{} of task {} here",
+                    h.offset, h.count, h.task_id
+                )
+            };
+            match kind {
+                Ok(RecordKind::Rays) => {
+                    let s = k
+                        .rays
+                        .as_ref()
+                        .and_then(|s| s.sub(h.offset, h.count))
+                        .ok_or_else(gone)?;
+                    rays.add_kept(spill, "in-rays", s)?;
                 }
-                rays.as_mut().expect("made").extend(&v).map_err(io)?;
-            }
-            Ok(RecordKind::Results) => {
-                let v = unpack::<ResultRec>(&chunk.data).map_err(|e| e.to_string())?;
-                if results.is_none() {
-                    results = Some(RecordWriter::create(&tracer.spill, "in-results").map_err(io)?);
+                Ok(RecordKind::Results) => {
+                    let s = k
+                        .results
+                        .as_ref()
+                        .and_then(|s| s.sub(h.offset, h.count))
+                        .ok_or_else(gone)?;
+                    results.add_kept(spill, "in-results", s)?;
                 }
-                results.as_mut().expect("made").extend(&v).map_err(io)?;
+                _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
             }
+            continue;
+        }
+        match kind {
+            Ok(RecordKind::Rays) => rays.add_data(spill, "in-rays", &chunk.data)?,
+            Ok(RecordKind::Results) => results.add_data(spill, "in-results", &chunk.data)?,
             _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
         }
     }
-    inputs.rays = rays.map(|w| w.finish()).transpose().map_err(io)?;
-    inputs.results = results.map(|w| w.finish()).transpose().map_err(io)?;
+    inputs.rays = rays.finish()?;
+    inputs.results = results.finish()?;
     Ok(inputs)
 }
 
+/// Runs a task; returns what to keep of it (when the setup keeps
+/// records).
 fn run_task<R: Real>(
     tracer: &mut Tracer<R>,
-    eye: &EyeRays,
-    eye_rays: u64,
-    rt: &tokio::runtime::Handle,
+    ctx: &mut TaskCtx<'_>,
     task: &v1::Task,
     input: Input,
     out: &mpsc::Sender<v1::TaskOutput>,
-) -> Result<(), String> {
+) -> Result<Option<Kept>, String> {
+    let (eye, eye_rays, rt) = (ctx.eye, ctx.eye_rays, ctx.rt);
     let t0 = Instant::now();
     let (first, n) = (task.first_ray, task.ray_count);
     if task.eye_rays && first.checked_add(n).is_none_or(|end| end > eye_rays) {
@@ -233,7 +481,7 @@ fn run_task<R: Real>(
             first.saturating_add(n)
         ));
     }
-    let inputs = read_inputs(tracer, rt, input)?;
+    let mut inputs = read_inputs(tracer, rt, ctx.kept, input)?;
     let t_in = t0.elapsed().as_secs_f64();
     let io = |e: sray_engine::Error| e.to_string();
     // The shard's rays: made here for the eye rays, else as received.
@@ -256,7 +504,11 @@ fn run_task<R: Real>(
                 }
             })
         };
-    let mut summary = v1::TaskSummary::default();
+    let mut summary = v1::TaskSummary {
+        built_grids: ctx.fresh,
+        ..Default::default()
+    };
+    let mut kept = None;
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
             let (mut results, ist) = tracer
@@ -264,17 +516,34 @@ fn run_task<R: Real>(
                 .map_err(io)?;
             let per = records_per_chunk::<ResultRec>();
             let mut buf = Vec::with_capacity(per);
+            let mut keep = if ctx.keep {
+                Some(RecordWriter::<ResultRec>::create(&tracer.spill, "kept-results").map_err(io)?)
+            } else {
+                None
+            };
             while let Some(r) = results.next_result().map_err(io)? {
                 buf.push(r);
                 if buf.len() == per {
                     send_records(out, RecordKind::Results, &buf)?;
+                    if let Some(w) = &mut keep {
+                        w.extend(&buf).map_err(io)?;
+                    }
                     buf.clear();
                 }
             }
             if !buf.is_empty() {
                 send_records(out, RecordKind::Results, &buf)?;
+                if let Some(w) = &mut keep {
+                    w.extend(&buf).map_err(io)?;
+                }
             }
             tracer.recycle(results);
+            if let Some(w) = keep {
+                kept = Some(Kept {
+                    rays: inputs.rays.take(),
+                    results: Some(Slice::whole(w.finish().map_err(io)?)),
+                });
+            }
             let t = ist.intersection_tests;
             summary.tests_by_kind = t.named().map(|(k, n)| (k.to_string(), n)).collect();
             summary.stats_json = serde_json::to_string(&ist).unwrap_or_default();
@@ -327,15 +596,32 @@ fn run_task<R: Real>(
             }
             let per = records_per_chunk::<RayRec>();
             let mut rbuf = Vec::with_capacity(per);
+            let mut keep = if ctx.keep {
+                Some(RecordWriter::<RayRec>::create(&tracer.spill, "kept-rays").map_err(io)?)
+            } else {
+                None
+            };
             while let Some(r) = next.next().map_err(io)? {
                 rbuf.push(r);
                 if rbuf.len() == per {
                     send_records(out, RecordKind::Rays, &rbuf)?;
+                    if let Some(w) = &mut keep {
+                        w.extend(&rbuf).map_err(io)?;
+                    }
                     rbuf.clear();
                 }
             }
             if !rbuf.is_empty() {
                 send_records(out, RecordKind::Rays, &rbuf)?;
+                if let Some(w) = &mut keep {
+                    w.extend(&rbuf).map_err(io)?;
+                }
+            }
+            if let Some(w) = keep {
+                kept = Some(Kept {
+                    rays: Some(Slice::whole(w.finish().map_err(io)?)),
+                    results: None,
+                });
             }
             summary.eye_hit_rays = counts.eye_hit_rays;
             summary.reflect_rays = counts.reflect_rays;
@@ -354,5 +640,6 @@ fn run_task<R: Real>(
         seconds = summary.seconds,
         "task run"
     );
-    send(out, Part::Summary(summary))
+    send(out, Part::Summary(summary))?;
+    Ok(kept)
 }

@@ -46,7 +46,7 @@ pub async fn run(
         cfg,
         client,
         cache,
-        exec: None,
+        execs: Vec::new(),
         running: Arc::new(AtomicU64::new(0)),
     };
     tokio::select! {
@@ -62,10 +62,16 @@ struct Node {
     cfg: WorkerConfig,
     client: Client,
     cache: Arc<SceneCache>,
-    exec: Option<Executor>,
+    /// Executors of recent setups (scene and settings), least recently
+    /// used first: a worker that alternates between the tasks of
+    /// concurrent jobs keeps their grids instead of building them again.
+    execs: Vec<Executor>,
     /// The task being run (0: none), for heartbeats.
     running: Arc<AtomicU64>,
 }
+
+/// Setups whose executors (grids, kept records) a worker keeps at once.
+const SETUPS_KEPT: usize = 2;
 
 /// How long to wait between attempts to reach the coordinator.
 const RETRY: Duration = Duration::from_secs(1);
@@ -156,6 +162,7 @@ impl Node {
             session: session.to_string(),
             task_id: task.task_id,
             attempt: task.attempt,
+            held: Vec::new(),
         };
         self.running.store(task.task_id, Ordering::Relaxed);
         let r = self.try_task(&tref, task).await;
@@ -185,16 +192,47 @@ impl Node {
             .as_ref()
             .context("task without render settings")?;
         let key = setup_key(&hash, params);
-        if self.exec.as_ref().map(|e| e.key.as_str()) != Some(key.as_str()) {
+        let mut fresh = false;
+        if let Some(i) = self.execs.iter().position(|e| e.key == key) {
+            let e = self.execs.remove(i);
+            let new_job = !e.jobs.contains(&task.job_id);
+            self.execs.push(e);
+            if new_job {
+                // A job's first task checks (and repairs) the cached
+                // scene, as a new setup's does; a repaired scene ends the
+                // setups that have it open.
+                let (_, written) = self.cache.check(&mut self.client, &hash, false).await?;
+                if written {
+                    self.execs.retain(|e| e.scene != hash);
+                }
+            }
+        }
+        if !self.execs.iter().any(|e| e.key == key) {
             // A new setup (scene or settings): check (and repair) the
             // cached scene once, then build the grids on an executor of
             // its own. The setup is named by content, never by job id.
-            self.exec = None;
-            let path = self.cache.ensure(&mut self.client, &hash).await?;
+            // The least recently used setup goes when too many are kept.
+            while self.execs.len() >= SETUPS_KEPT {
+                self.execs.remove(0);
+            }
+            fresh = true;
+            // A scene another kept setup has open is checked without
+            // marking it used (which an open database takes for a
+            // change); if it had to be repaired, those setups end.
+            let path = if self.execs.iter().any(|e| e.scene == hash) {
+                let (path, written) = self.cache.check(&mut self.client, &hash, false).await?;
+                if written {
+                    self.execs.retain(|e| e.scene != hash);
+                }
+                path
+            } else {
+                self.cache.ensure(&mut self.client, &hash).await?
+            };
             let (opts, store) = from_proto(params, self.cfg.threads).map_err(anyhow::Error::msg)?;
-            self.exec = Some(Executor::start(
+            self.execs.push(Executor::start(
                 JobSetup {
                     key,
+                    scene: hash.clone(),
                     db_path: path,
                     opts,
                     bf: BfOptions {
@@ -205,13 +243,19 @@ impl Node {
                         store,
                         spill_dir: self.cfg.tmp_dir.clone(),
                     },
+                    keep: true,
                 },
                 tokio::runtime::Handle::current(),
             ));
         }
+        let exec = self.execs.last_mut().context("no executor")?;
+        exec.jobs.insert(task.job_id.clone());
+        let exec = &*exec;
         let shade = task.stage == v1::Stage::Shade as i32;
         let input = if shade || !task.eye_rays {
-            Input::Stream(self.client.task_input(tref.clone()).await?.into_inner())
+            let mut r = tref.clone();
+            r.held = exec.held();
+            Input::Stream(self.client.task_input(r).await?.into_inner())
         } else {
             Input::None
         };
@@ -231,9 +275,10 @@ impl Node {
             input,
             out: out.clone(),
             done,
+            fresh,
         };
-        if !self.exec.as_ref().context("no executor")?.submit(work) {
-            self.exec = None;
+        if !self.execs.last().context("no executor")?.submit(work) {
+            self.execs.pop();
             anyhow::bail!("the job's executor has stopped");
         }
         let r = outcome
