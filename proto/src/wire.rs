@@ -1,5 +1,6 @@
-//! Records on the wire: packed little-endian bytes, exactly as the engine
-//! keeps them in its files, in chunks of whole records.
+//! Records on the wire: little-endian, as the engine keeps them in its
+//! files, compressed and exact ([`encode`], protocol 4), in chunks of whole
+//! records. [`pack`] and [`unpack`] give the plain bytes.
 
 use bytemuck::Pod;
 use std::io::Read as _;
