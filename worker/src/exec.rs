@@ -36,6 +36,13 @@ pub struct JobSetup {
     pub keep: bool,
 }
 
+/// What an executor's thread is asked to do.
+enum Msg {
+    Run(Box<Work>),
+    /// Give back the tracer's reusable buffers (see [`Executor::trim`]).
+    Trim,
+}
+
 /// One task for the executor, with its input stream (if it has input), the
 /// channel its output goes to, and where to say how it ended.
 pub struct Work {
@@ -153,7 +160,7 @@ pub struct Executor {
     /// The jobs it has run tasks of (each job's first task checks the
     /// scene, as a new setup's does).
     pub jobs: std::collections::HashSet<String>,
-    tx: Option<std::sync::mpsc::Sender<Work>>,
+    tx: Option<std::sync::mpsc::Sender<Msg>>,
     thread: Option<std::thread::JoinHandle<()>>,
     /// The ids of the tasks whose records the executor keeps.
     held: Arc<Mutex<Vec<u64>>>,
@@ -174,7 +181,7 @@ impl Executor {
     /// Starts the job's thread; the database is opened and the grids built
     /// there, before the first task runs.
     pub fn start(setup: JobSetup, rt: tokio::runtime::Handle) -> Executor {
-        let (tx, rx) = std::sync::mpsc::channel::<Work>();
+        let (tx, rx) = std::sync::mpsc::channel::<Msg>();
         let key = setup.key.clone();
         let (scene, db_path) = (setup.scene.clone(), setup.db_path.clone());
         let held = Arc::new(Mutex::new(Vec::new()));
@@ -207,14 +214,25 @@ impl Executor {
 
     /// Queues a task; false if the thread has ended.
     pub fn submit(&self, w: Work) -> bool {
-        self.tx.as_ref().is_some_and(|tx| tx.send(w).is_ok())
+        self.tx
+            .as_ref()
+            .is_some_and(|tx| tx.send(Msg::Run(Box::new(w))).is_ok())
+    }
+
+    /// Asks the (idle) executor to give back the buffers its tracer keeps
+    /// between tasks, keeping its grids: another setup's tasks run now,
+    /// with the worker's whole budget.
+    pub fn trim(&self) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(Msg::Trim);
+        }
     }
 }
 
 fn job_thread<R: Real>(
     setup: JobSetup,
     rt: tokio::runtime::Handle,
-    rx: std::sync::mpsc::Receiver<Work>,
+    rx: std::sync::mpsc::Receiver<Msg>,
     held: Arc<Mutex<Vec<u64>>>,
 ) {
     let db = match Database::open(&setup.db_path) {
@@ -240,7 +258,14 @@ fn job_thread<R: Real>(
     );
     let eye_rays = eye.count();
     let mut kept = KeptStore::default();
-    for w in rx {
+    for m in rx {
+        let w = match m {
+            Msg::Run(w) => *w,
+            Msg::Trim => {
+                tracer.trim();
+                continue;
+            }
+        };
         let Work {
             task,
             input,
@@ -288,9 +313,11 @@ struct TaskCtx<'a> {
     fresh: bool,
 }
 
-fn fail_all(rx: std::sync::mpsc::Receiver<Work>, e: &str) {
-    for w in rx {
-        let _ = w.done.send(Err(e.to_string()));
+fn fail_all(rx: std::sync::mpsc::Receiver<Msg>, e: &str) {
+    for m in rx {
+        if let Msg::Run(w) = m {
+            let _ = w.done.send(Err(e.to_string()));
+        }
     }
 }
 

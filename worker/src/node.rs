@@ -277,6 +277,14 @@ impl Node {
             done,
             fresh,
         };
+        // Only the setup at work holds more than its grids: the others give
+        // their buffers back, so that kept setups stay within --memory
+        // beside it (they keep their grids, a small part of a budget).
+        if let Some((_, idle)) = self.execs.split_last() {
+            for e in idle {
+                e.trim();
+            }
+        }
         if !self.execs.last().context("no executor")?.submit(work) {
             self.execs.pop();
             anyhow::bail!("the job's executor has stopped");

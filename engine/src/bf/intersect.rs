@@ -366,6 +366,7 @@ impl<R: Real> Slots<R> {
             sh.q = Vec::new();
             sh.cold = Vec::new();
             sh.done = Vec::new();
+            sh.pending = Vec::new();
             sh.regs = Default::default();
         }
     }

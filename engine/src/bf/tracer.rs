@@ -344,6 +344,19 @@ impl<'db, R: Real> Tracer<'db, R> {
         Ok((reader, ist))
     }
 
+    /// Gives back every buffer kept for reuse from call to call, keeping
+    /// the grids: an idle tracer then holds its grids and little else (a
+    /// cluster worker keeps idle tracers of other jobs beside a busy one).
+    pub fn trim(&mut self) {
+        self.slots.release();
+        self.dense_buf = Vec::new();
+        self.spare_rays = Vec::new();
+        self.set_buf = Vec::new();
+        self.carried_buf = Vec::new();
+        self.shade_outputs = Vec::new();
+        self.radix = Default::default();
+    }
+
     /// Hands a dense result buffer back for reuse.
     pub fn recycle(&mut self, results: ResultReader) {
         if let ResultReader::Dense(it) = results {
