@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{Proc, fails, json, ok, run};
+use common::{Proc, cluster, fails, json, ok, run};
 use std::path::Path;
 
 const COUNTS: [&str; 7] = [
@@ -16,46 +16,12 @@ const COUNTS: [&str; 7] = [
     "intersection_tests_by_kind",
 ];
 
-/// A coordinator on a free port; returns it and its URL.
 fn coordinator(dir: &Path, extra: &[&str]) -> (Proc, String) {
-    let mut args = vec![
-        "coordinator",
-        "--listen",
-        "127.0.0.1:0",
-        "--data-dir",
-        "data",
-        "--heartbeat-ms",
-        "200",
-        "--worker-timeout",
-        "2",
-    ];
-    args.extend_from_slice(extra);
-    let p = Proc::start(dir, &args, &[("RUST_LOG", "info,sray_coordinator=debug")]);
-    let line = p.wait_for(&["listening on"], 30.0);
-    let url = line.rsplit(' ').next().unwrap().to_string();
-    (p, url)
+    cluster::coordinator(dir, extra)
 }
 
 fn worker(dir: &Path, url: &str, name: &str, token: &str) -> Proc {
-    Proc::start(
-        dir,
-        &[
-            "worker",
-            "--coordinator",
-            url,
-            "--token-file",
-            token,
-            "--cache-dir",
-            &format!("cache-{name}"),
-            "--threads",
-            "1",
-            "--memory",
-            "64MiB",
-            "--name",
-            name,
-        ],
-        &[],
-    )
+    cluster::worker(dir, url, name, Some(token), &[])
 }
 
 /// The embedded breadth-first render of a scene: image bytes and stats.

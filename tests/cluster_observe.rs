@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{Proc, fails, json, ok};
+use common::{Proc, cluster, fails, json, ok};
 use std::io::{Read, Write};
 use std::path::Path;
 
@@ -20,27 +20,17 @@ fn coordinator(dir: &Path) -> (Proc, String, String) {
 /// The same, declaring a silent worker lost after `worker_timeout` seconds.
 fn coordinator_with_timeout(dir: &Path, worker_timeout: &str) -> (Proc, String, String) {
     std::fs::write(dir.join("token"), "observe-token-0123456789abcdef").unwrap();
-    let p = Proc::start(
+    let (p, url) = cluster::coordinator(
         dir,
         &[
-            "coordinator",
-            "--listen",
-            "127.0.0.1:0",
             "--http-listen",
             "127.0.0.1:0",
-            "--data-dir",
-            "data",
-            "--heartbeat-ms",
-            "200",
             "--worker-timeout",
             worker_timeout,
             "--token-file",
             "token",
         ],
-        &[("RUST_LOG", "info,sray_coordinator=debug")],
     );
-    let line = p.wait_for(&["listening on"], 30.0);
-    let url = line.rsplit(' ').next().unwrap().to_string();
     let line = p.wait_for(&["sray coordinator http on"], 5.0);
     let http = line
         .rsplit(' ')
@@ -53,25 +43,7 @@ fn coordinator_with_timeout(dir: &Path, worker_timeout: &str) -> (Proc, String, 
 }
 
 fn worker(dir: &Path, url: &str, name: &str) -> Proc {
-    Proc::start(
-        dir,
-        &[
-            "worker",
-            "--coordinator",
-            url,
-            "--token-file",
-            "token",
-            "--cache-dir",
-            &format!("cache-{name}"),
-            "--threads",
-            "1",
-            "--memory",
-            "64MiB",
-            "--name",
-            name,
-        ],
-        &[],
-    )
+    cluster::worker(dir, url, name, Some("token"), &[])
 }
 
 /// Renders 32x32 spd:balls:1 on the cluster; returns the job's id.

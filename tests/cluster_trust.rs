@@ -7,6 +7,7 @@
 
 mod common;
 
+use common::cluster::{coordinator, coordinator_on};
 use common::{Proc, fails, json, ok};
 use sray_proto::auth::Token;
 use sray_proto::net::{Client, Target};
@@ -14,59 +15,16 @@ use sray_proto::v1;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// A coordinator; returns it and its URL. `listen` may name a port
-/// (to restart on the same one).
-fn coordinator_on(dir: &Path, listen: &str, extra: &[&str]) -> (Proc, String) {
-    let mut args = vec![
-        "coordinator",
-        "--listen",
-        listen,
-        "--data-dir",
-        "data",
-        "--heartbeat-ms",
-        "200",
-        "--worker-timeout",
-        "2",
-    ];
-    args.extend_from_slice(extra);
-    let p = Proc::start(dir, &args, &[("RUST_LOG", "info,sray_coordinator=debug")]);
-    let line = p.wait_for(&["listening on"], 30.0);
-    let url = line.rsplit(' ').next().unwrap().to_string();
-    (p, url)
-}
-
-fn coordinator(dir: &Path, extra: &[&str]) -> (Proc, String) {
-    coordinator_on(dir, "127.0.0.1:0", extra)
-}
-
 fn port(url: &str) -> String {
     format!("127.0.0.1:{}", url.rsplit(':').next().unwrap())
 }
 
 fn worker(dir: &Path, url: &str, name: &str, token: &str, extra: &[&str]) -> Proc {
-    let cache = format!("cache-{name}");
-    let mut args = vec![
-        "worker",
-        "--coordinator",
-        url,
-        "--token-file",
-        token,
-        "--cache-dir",
-        &cache,
-        "--threads",
-        "1",
-        "--name",
-        name,
-    ];
-    if !extra.contains(&"--memory") {
-        args.extend_from_slice(&["--memory", "64MiB"]);
-    }
-    args.extend_from_slice(extra);
-    Proc::start(dir, &args, &[])
+    common::cluster::worker(dir, url, name, Some(token), extra)
 }
 
 fn registered(coord: &Proc, name: &str) {
-    coord.wait_for(&["worker registered", &format!("worker={name} ")], 30.0);
+    common::cluster::registered(coord, name)
 }
 
 /// The embedded render of a scene (the reference image).

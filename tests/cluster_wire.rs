@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{Proc, json, ok, run};
+use common::{cluster, json, ok, run};
 use std::path::Path;
 
 /// The embedded breadth-first image of a scene.
@@ -110,39 +110,11 @@ fn two_workers_same_image_small_traffic() {
 fn concurrent_jobs_keep_their_grids() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let coord = Proc::start(
-        d,
-        &[
-            "coordinator",
-            "--listen",
-            "127.0.0.1:0",
-            "--data-dir",
-            "data",
-            "--heartbeat-ms",
-            "200",
-        ],
-        &[],
-    );
-    let line = coord.wait_for(&["listening on"], 30.0);
-    let url = line.rsplit(' ').next().unwrap().to_string();
-    let _w = Proc::start(
-        d,
-        &[
-            "worker",
-            "--coordinator",
-            &url,
-            "--cache-dir",
-            "cache",
-            "--threads",
-            "1",
-            "--memory",
-            "64MiB",
-            "--name",
-            "w0",
-        ],
-        &[],
-    );
-    coord.wait_for(&["worker registered"], 30.0);
+    // A generous timeout: a worker slowed by a loaded machine must not be
+    // declared lost, which would requeue a task and rebuild grids.
+    let (coord, url) = cluster::coordinator(d, &["--worker-timeout", "30"]);
+    let _w = cluster::worker(d, &url, "w0", None, &[]);
+    cluster::registered(&coord, "w0");
     let jobs: Vec<_> = [("a", "40"), ("b", "44")]
         .into_iter()
         .map(|(name, size)| {

@@ -183,3 +183,69 @@ impl Drop for Proc {
         let _ = self.child.wait();
     }
 }
+
+/// Cluster processes on loopback, as the cluster tests start them.
+pub mod cluster {
+    use super::Proc;
+    use std::path::Path;
+
+    /// A coordinator listening on `listen` (`127.0.0.1:0` for a free port)
+    /// with its data in `data`, fast heartbeats and a worker declared lost
+    /// after 2 s of silence (unless `extra` sets `--worker-timeout`), and
+    /// debug logs of its lifecycle; returns it and its gRPC URL.
+    pub fn coordinator_on(dir: &Path, listen: &str, extra: &[&str]) -> (Proc, String) {
+        let mut args = vec![
+            "coordinator",
+            "--listen",
+            listen,
+            "--data-dir",
+            "data",
+            "--heartbeat-ms",
+            "200",
+        ];
+        if !extra.contains(&"--worker-timeout") {
+            args.extend_from_slice(&["--worker-timeout", "2"]);
+        }
+        args.extend_from_slice(extra);
+        let p = Proc::start(dir, &args, &[("RUST_LOG", "info,sray_coordinator=debug")]);
+        let line = p.wait_for(&["listening on"], 30.0);
+        let url = line.rsplit(' ').next().unwrap().to_string();
+        (p, url)
+    }
+
+    /// [`coordinator_on`] a free port.
+    pub fn coordinator(dir: &Path, extra: &[&str]) -> (Proc, String) {
+        coordinator_on(dir, "127.0.0.1:0", extra)
+    }
+
+    /// A worker named `name` with a cache of its own, one thread and
+    /// 64 MiB (unless `extra` sets `--memory`), authenticated with the
+    /// token file `token` if one is given.
+    pub fn worker(dir: &Path, url: &str, name: &str, token: Option<&str>, extra: &[&str]) -> Proc {
+        let cache = format!("cache-{name}");
+        let mut args = vec![
+            "worker",
+            "--coordinator",
+            url,
+            "--cache-dir",
+            &cache,
+            "--threads",
+            "1",
+            "--name",
+            name,
+        ];
+        if let Some(t) = token {
+            args.extend_from_slice(&["--token-file", t]);
+        }
+        if !extra.contains(&"--memory") {
+            args.extend_from_slice(&["--memory", "64MiB"]);
+        }
+        args.extend_from_slice(extra);
+        Proc::start(dir, &args, &[])
+    }
+
+    /// Waits until the coordinator has registered the worker `name`.
+    pub fn registered(coord: &Proc, name: &str) {
+        coord.wait_for(&["worker registered", &format!("worker={name} ")], 30.0);
+    }
+}
