@@ -266,10 +266,16 @@ impl<'db, R: Real> Tracer<'db, R> {
         let mut results = if resident {
             let mut v = std::mem::take(&mut self.dense_buf);
             v.clear();
-            // Written (and so first touched, page by page) by every thread.
+            // Written (and so first touched, page by page) by every thread,
+            // in place: a usize range is an indexed parallel iterator (a
+            // u64 range is not, and would be collected in pieces first).
             self.pool.install(|| {
                 use rayon::prelude::*;
-                v.par_extend((first..first + n).into_par_iter().map(miss));
+                v.par_extend(
+                    (0..n as usize)
+                        .into_par_iter()
+                        .map(|i| miss(first + i as u64)),
+                );
             });
             Results::Dense { first, v }
         } else {
