@@ -133,7 +133,7 @@ fn status_json_healthz_metrics_and_preview() {
     let d = dir.path();
     let (coord, url, http) = coordinator(d);
     let _w = worker(d, &url, "obs-w1");
-    coord.wait_for(&["worker registered", "worker=obs-w1 "], 30.0);
+    cluster::registered(&coord, "obs-w1");
 
     // Healthy as soon as it serves.
     let (code, body) = get(&http, "/healthz");
@@ -299,6 +299,17 @@ fn browser() -> Option<String> {
     .map(String::from)
 }
 
+/// A headless browser, or None after saying why the test skips.
+fn browser_or_skip() -> Option<String> {
+    let b = browser();
+    if b.is_none() {
+        eprintln!(
+            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
+        );
+    }
+    b
+}
+
 /// The page's DOM after its scripts ran for a few (virtual) seconds.
 fn dump_dom(browser: &str, profile: &Path, url: &str) -> String {
     let o = std::process::Command::new(browser)
@@ -325,17 +336,14 @@ fn dump_dom(browser: &str, profile: &Path, url: &str) -> String {
 
 #[test]
 fn dashboard_in_a_headless_browser() {
-    let Some(browser) = browser() else {
-        eprintln!(
-            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
-        );
+    let Some(browser) = browser_or_skip() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let (coord, url, http) = coordinator(d);
     let _w = worker(d, &url, "dash-w1");
-    coord.wait_for(&["worker registered", "worker=dash-w1 "], 30.0);
+    cluster::registered(&coord, "dash-w1");
 
     // While no job runs: the worker is shown.
     let profile = d.join("profile");
@@ -401,10 +409,7 @@ fn signal(p: &Proc, sig: libc::c_int) {
 /// browser looks, with the first round's image as its preview.
 #[test]
 fn dashboard_shows_a_running_job_with_its_preview() {
-    let Some(browser) = browser() else {
-        eprintln!(
-            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
-        );
+    let Some(browser) = browser_or_skip() else {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
@@ -412,7 +417,7 @@ fn dashboard_shows_a_running_job_with_its_preview() {
     // A stopped worker must not be declared lost while the browser looks.
     let (coord, url, http) = coordinator_with_timeout(d, "120");
     let w = worker(d, &url, "live-w1");
-    coord.wait_for(&["worker registered", "worker=live-w1 "], 30.0);
+    cluster::registered(&coord, "live-w1");
 
     let mut client = render_in_background(d, &url, "64");
     let mark = coord.mark();

@@ -22,6 +22,44 @@ fn stats(dir: &Path, file: &str) -> serde_json::Value {
     json(&std::fs::read_to_string(dir.join(file)).unwrap())
 }
 
+/// Renders `scene` at `size`x`size` on `workers` local workers, checks the
+/// image equals `want` (the embedded one) bit for bit, and returns the
+/// render's statistics.
+fn local_render(
+    dir: &Path,
+    scene: &str,
+    size: &str,
+    workers: &str,
+    shard_rays: &str,
+    want: &[u8],
+) -> serde_json::Value {
+    let o = run(
+        dir,
+        &[
+            "render",
+            scene,
+            "-o",
+            "local.png",
+            "--local-workers",
+            workers,
+            "--width",
+            size,
+            "--height",
+            size,
+            "--shard-rays",
+            shard_rays,
+            "--stats",
+            "cluster.json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        std::fs::read(dir.join("local.png")).unwrap() == want,
+        "the cluster's image differs from the embedded one"
+    );
+    stats(dir, "cluster.json")
+}
+
 /// One local worker: the image is the embedded one, bit for bit, and at
 /// most 64 bytes cross the wire per ray traced (the goal; 277 before).
 /// The worker builds its grids once for the job's many tasks.
@@ -30,31 +68,7 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let want = embedded(d, "spd:balls:2", "64", "emb.png");
-    let o = run(
-        d,
-        &[
-            "render",
-            "spd:balls:2",
-            "-o",
-            "local.png",
-            "--local-workers",
-            "1",
-            "--width",
-            "64",
-            "--height",
-            "64",
-            "--shard-rays",
-            "1024",
-            "--stats",
-            "cluster.json",
-        ],
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(
-        std::fs::read(d.join("local.png")).unwrap() == want,
-        "the cluster's image differs from the embedded one"
-    );
-    let s = stats(d, "cluster.json");
+    let s = local_render(d, "spd:balls:2", "64", "1", "1024", &want);
     let bpr = s["bytes_per_ray"].as_f64().unwrap();
     eprintln!(
         "bytes per ray {bpr:.1}: {} to workers, {} from workers",
@@ -73,31 +87,7 @@ fn two_workers_same_image_small_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let want = embedded(d, "spd:teapot:3", "48", "emb.png");
-    let o = run(
-        d,
-        &[
-            "render",
-            "spd:teapot:3",
-            "-o",
-            "local.png",
-            "--local-workers",
-            "2",
-            "--width",
-            "48",
-            "--height",
-            "48",
-            "--shard-rays",
-            "300",
-            "--stats",
-            "cluster.json",
-        ],
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(
-        std::fs::read(d.join("local.png")).unwrap() == want,
-        "the cluster's image differs from the embedded one"
-    );
-    let s = stats(d, "cluster.json");
+    let s = local_render(d, "spd:teapot:3", "48", "2", "300", &want);
     let bpr = s["bytes_per_ray"].as_f64().unwrap();
     eprintln!("two workers: {bpr:.1} bytes per ray");
     assert!(bpr > 0.0 && bpr <= 128.0, "{bpr} bytes per ray: {s}");
