@@ -3,7 +3,6 @@
 //! records. [`pack`] and [`unpack`] give the plain bytes.
 
 use bytemuck::Pod;
-use std::io::Read as _;
 
 // Records are sent as they lie in memory; every supported target is
 // little-endian, and a big-endian build would silently disagree.
@@ -52,6 +51,49 @@ pub fn unpack<T: Pod>(data: &[u8]) -> Result<Vec<T>, WireError> {
 /// redundancy the transform exposes.
 const ZSTD_LEVEL: i32 = 1;
 
+/// One thread's zstd contexts and buffers, kept from chunk to chunk:
+/// making a compression context clears about a megabyte, and fresh
+/// megabyte buffers cost a page fault per 4 KiB each time (profiled with
+/// one local worker, the chunks' buffers and contexts were half of all
+/// page faults of a render).
+struct Codec {
+    compressor: zstd::bulk::Compressor<'static>,
+    decompressor: zstd::bulk::Decompressor<'static>,
+    /// The byte planes of the chunk at hand (only its first bytes count).
+    planes: Vec<u8>,
+    /// The compressed frame being made.
+    frame: Vec<u8>,
+}
+
+thread_local! {
+    static CODEC: std::cell::RefCell<Option<Codec>> = const { std::cell::RefCell::new(None) };
+}
+
+/// Runs `f` with this thread's [`Codec`], made on first use.
+fn with_codec<R>(f: impl FnOnce(&mut Codec) -> std::io::Result<R>) -> std::io::Result<R> {
+    CODEC.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.is_none() {
+            *c = Some(Codec {
+                compressor: zstd::bulk::Compressor::new(ZSTD_LEVEL)?,
+                decompressor: zstd::bulk::Decompressor::new()?,
+                planes: Vec::new(),
+                frame: Vec::new(),
+            });
+        }
+        f(c.as_mut().expect("made above"))
+    })
+}
+
+/// The first `len` bytes of `buf`, grown if it is shorter; their contents
+/// are whatever was there (every caller overwrites them all).
+fn scratch(buf: &mut Vec<u8>, len: usize) -> &mut [u8] {
+    if buf.len() < len {
+        buf.resize(len, 0);
+    }
+    &mut buf[..len]
+}
+
 /// Records packed compactly and exactly (protocol 4): each record is
 /// seen as 64-bit words; every word is replaced by its difference to the
 /// same word of the previous record (wrapping), the differences are
@@ -68,32 +110,38 @@ pub fn encode<T: Pod>(recs: &[T]) -> Vec<u8> {
     let size = std::mem::size_of::<T>();
     let bytes: &[u8] = bytemuck::cast_slice(recs);
     let n = recs.len();
-    let mut planes = vec![0u8; bytes.len()];
-    if size.is_multiple_of(8) {
-        let words = size / 8;
-        let mut prev = vec![0u64; words];
-        for (i, rec) in bytes.chunks_exact(size).enumerate() {
-            for (j, w) in rec.chunks_exact(8).enumerate() {
-                let v = u64::from_le_bytes(w.try_into().expect("8 bytes"));
-                let d = v.wrapping_sub(prev[j]).to_le_bytes();
-                prev[j] = v;
-                for (b, &x) in d.iter().enumerate() {
-                    planes[(j * 8 + b) * n + i] = x;
+    with_codec(|c| {
+        let planes = scratch(&mut c.planes, bytes.len());
+        if size.is_multiple_of(8) {
+            for j in 0..size / 8 {
+                let mut prev = 0u64;
+                for (i, rec) in bytes.chunks_exact(size).enumerate() {
+                    let w = rec[j * 8..j * 8 + 8].try_into().expect("8 bytes");
+                    let v = u64::from_le_bytes(w);
+                    let d = v.wrapping_sub(prev).to_le_bytes();
+                    prev = v;
+                    for (b, &x) in d.iter().enumerate() {
+                        planes[(j * 8 + b) * n + i] = x;
+                    }
+                }
+            }
+        } else {
+            for (i, rec) in bytes.chunks_exact(size).enumerate() {
+                for (b, &x) in rec.iter().enumerate() {
+                    planes[b * n + i] = x;
                 }
             }
         }
-    } else {
-        for (i, rec) in bytes.chunks_exact(size).enumerate() {
-            for (b, &x) in rec.iter().enumerate() {
-                planes[b * n + i] = x;
-            }
-        }
-    }
-    let mut out = Vec::with_capacity(bytes.len() / 4 + 16);
-    out.extend_from_slice(&(n as u32).to_le_bytes());
-    zstd::stream::copy_encode(planes.as_slice(), &mut out, ZSTD_LEVEL)
-        .expect("compressing into memory cannot fail");
-    out
+        c.frame.clear();
+        c.frame
+            .reserve(zstd::zstd_safe::compress_bound(planes.len()));
+        c.compressor.compress_to_buffer(&*planes, &mut c.frame)?;
+        let mut out = Vec::with_capacity(4 + c.frame.len());
+        out.extend_from_slice(&(n as u32).to_le_bytes());
+        out.extend_from_slice(&c.frame);
+        Ok(out)
+    })
+    .expect("compressing into a buffer of the bound's size cannot fail")
 }
 
 /// The records of an [`encode`]d chunk; at most `max` of them (a bound
@@ -109,38 +157,42 @@ pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
         return Err(bad("too many records"));
     }
     let want = n * size;
-    let mut planes = Vec::with_capacity(want);
-    let mut dec = zstd::stream::read::Decoder::new(body).map_err(|e| bad(&e.to_string()))?;
-    // Read one byte more than due, to notice a chunk that holds more.
-    std::io::Read::take(&mut dec, want as u64 + 1)
-        .read_to_end(&mut planes)
-        .map_err(|e| bad(&e.to_string()))?;
-    if planes.len() != want {
-        return Err(bad("the record count and the data disagree"));
-    }
-    let mut bytes = vec![0u8; want];
-    if size.is_multiple_of(8) {
-        let words = size / 8;
-        let mut prev = vec![0u64; words];
-        for i in 0..n {
-            for j in 0..words {
-                let mut d = [0u8; 8];
-                for (b, x) in d.iter_mut().enumerate() {
-                    *x = planes[(j * 8 + b) * n + i];
+    let mut out: Vec<T> = vec![T::zeroed(); n];
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+    with_codec(|c| {
+        // Exactly the room the count allows: a frame that holds more
+        // does not fit, one that holds less is caught by the length.
+        let planes = scratch(&mut c.planes, want);
+        let got = c.decompressor.decompress_to_buffer(body, planes)?;
+        if got != want {
+            return Err(std::io::Error::other(
+                "the record count and the data disagree",
+            ));
+        }
+        if size.is_multiple_of(8) {
+            for j in 0..size / 8 {
+                let mut prev = 0u64;
+                for i in 0..n {
+                    let mut d = [0u8; 8];
+                    for (b, x) in d.iter_mut().enumerate() {
+                        *x = planes[(j * 8 + b) * n + i];
+                    }
+                    prev = prev.wrapping_add(u64::from_le_bytes(d));
+                    bytes[i * size + j * 8..i * size + j * 8 + 8]
+                        .copy_from_slice(&prev.to_le_bytes());
                 }
-                let v = prev[j].wrapping_add(u64::from_le_bytes(d));
-                prev[j] = v;
-                bytes[i * size + j * 8..i * size + j * 8 + 8].copy_from_slice(&v.to_le_bytes());
+            }
+        } else {
+            for i in 0..n {
+                for b in 0..size {
+                    bytes[i * size + b] = planes[b * n + i];
+                }
             }
         }
-    } else {
-        for i in 0..n {
-            for b in 0..size {
-                bytes[i * size + b] = planes[b * n + i];
-            }
-        }
-    }
-    Ok(bytemuck::pod_collect_to_vec(&bytes))
+        Ok(())
+    })
+    .map_err(|e| bad(&e.to_string()))?;
+    Ok(out)
 }
 
 #[cfg(test)]
