@@ -588,7 +588,7 @@ fn run_task<R: Real>(
             let mut buf: Vec<Contribution> = Vec::with_capacity(per);
             let mut send_err = None;
             let mut counts = RayCounts::default();
-            let (mut next, _count, sst) = {
+            let (next, _count, sst) = {
                 let mut contribute = |corner: u32, rgb: [i64; 3]| {
                     if send_err.is_some() {
                         return;
@@ -622,26 +622,39 @@ fn run_task<R: Real>(
                 send_records(out, RecordKind::Contributions, &buf)?;
             }
             let per = records_per_chunk::<RayRec>();
-            let mut rbuf = Vec::with_capacity(per);
             let mut keep = if ctx.keep {
                 Some(RecordWriter::<RayRec>::create(&tracer.spill, "kept-rays").map_err(io)?)
             } else {
                 None
             };
-            while let Some(r) = next.next().map_err(io)? {
-                rbuf.push(r);
-                if rbuf.len() == per {
-                    send_records(out, RecordKind::Rays, &rbuf)?;
-                    if let Some(w) = &mut keep {
-                        w.extend(&rbuf).map_err(io)?;
-                    }
-                    rbuf.clear();
-                }
-            }
-            if !rbuf.is_empty() {
-                send_records(out, RecordKind::Rays, &rbuf)?;
+            let mut send_rays = |chunk: &[RayRec]| -> Result<(), String> {
+                send_records(out, RecordKind::Rays, chunk)?;
                 if let Some(w) = &mut keep {
-                    w.extend(&rbuf).map_err(io)?;
+                    w.extend(chunk).map_err(io)?;
+                }
+                Ok(())
+            };
+            match next.into_vec() {
+                // Sorted in memory: sent from where they lie, and the
+                // buffer goes back to the tracer for the next task's sort.
+                Ok(v) => {
+                    for chunk in v.chunks(per) {
+                        send_rays(chunk)?;
+                    }
+                    tracer.recycle_rays(v);
+                }
+                Err(mut sorted) => {
+                    let mut rbuf = Vec::with_capacity(per);
+                    while let Some(r) = sorted.next().map_err(io)? {
+                        rbuf.push(r);
+                        if rbuf.len() == per {
+                            send_rays(&rbuf)?;
+                            rbuf.clear();
+                        }
+                    }
+                    if !rbuf.is_empty() {
+                        send_rays(&rbuf)?;
+                    }
                 }
             }
             if let Some(w) = keep {

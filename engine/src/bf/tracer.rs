@@ -86,7 +86,13 @@ pub type SortedOutcomes = Sorted<Outcome, u64, fn(&Outcome) -> u64>;
 /// them (with the surfaces it carried, if any), or read from a file of
 /// results already in order.
 pub enum ResultReader {
-    Dense(std::vec::IntoIter<Outcome>),
+    /// Every result, and the index of the next one; the buffer goes back
+    /// to the tracer for the next call ([`Tracer::recycle`]), so that it
+    /// is not faulted in afresh every round or task.
+    Dense {
+        v: Vec<Outcome>,
+        next: usize,
+    },
     /// The stored hits in ray order, misses filled in between.
     Sparse {
         hits: Box<SortedOutcomes>,
@@ -101,7 +107,11 @@ impl ResultReader {
     /// The next result, with its carried surface if there is one.
     pub fn next_outcome(&mut self) -> Result<Option<Outcome>, Error> {
         match self {
-            ResultReader::Dense(it) => Ok(it.next()),
+            ResultReader::Dense { v, next } => {
+                let o = v.get(*next).copied();
+                *next += o.is_some() as usize;
+                Ok(o)
+            }
             ResultReader::Sparse {
                 hits,
                 pending,
@@ -338,7 +348,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             self.slots.release();
         }
         let reader = match results {
-            Results::Dense { v, .. } => ResultReader::Dense(v.into_iter()),
+            Results::Dense { v, .. } => ResultReader::Dense { v, next: 0 },
             Results::Sort(s) => ResultReader::Sparse {
                 hits: Box::new(s.finish()?),
                 pending: None,
@@ -365,8 +375,7 @@ impl<'db, R: Real> Tracer<'db, R> {
 
     /// Hands a dense result buffer back for reuse.
     pub fn recycle(&mut self, results: ResultReader) {
-        if let ResultReader::Dense(it) = results {
-            let mut v: Vec<Outcome> = it.collect();
+        if let ResultReader::Dense { mut v, .. } = results {
             v.clear();
             if v.capacity() > self.dense_buf.capacity() {
                 self.dense_buf = v;
