@@ -30,6 +30,7 @@
 
 use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
+use super::skip::Touched;
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
@@ -291,6 +292,8 @@ pub struct IntersectStats {
     pub tests_skipped_last_voxel: u64,
     pub db_scans: u64,
     pub db_bytes_read: u64,
+    /// Blocks the passes left unread (no registered ray near them).
+    pub db_blocks_skipped: u64,
 }
 
 /// What the intersection stage is given.
@@ -316,6 +319,8 @@ pub struct Slots<R> {
     shards: Vec<Shard<R>>,
     /// The current block's candidate objects, shared by the shards.
     candidates: Vec<Candidate>,
+    /// The coarse cells this pass has rays in (which blocks it skips).
+    touched: Touched,
 }
 
 impl<R: Real> Slots<R> {
@@ -336,6 +341,7 @@ impl<R: Real> Slots<R> {
                 })
                 .collect(),
             candidates: Vec::new(),
+            touched: Touched::default(),
         }
     }
 
@@ -599,22 +605,37 @@ pub fn intersect_rays<R: Real>(
             .sum();
         st.registrations += regs;
         let mut region = [NO_REGION; MAX_GRIDS];
+        let touched = &mut slots.touched;
+        touched.clear(setup.grids);
         for sh in shards.iter() {
             for g in 0..ngrids {
                 region[g].union(&sh.region[g]);
+                let grid = &mut setup.grids.grids[g];
                 for &v in sh.regs[g].voxels() {
-                    setup.grids.grids[g].flags[v as usize] |= REGISTERED;
+                    grid.flags[v as usize] |= REGISTERED;
+                    touched.mark(g, &grid.spec, v);
                 }
             }
         }
+        touched.finish();
 
-        // Scan the objects.
+        // Scan the objects, passing over the blocks no registered ray is
+        // near.
         if regs > 0 {
             let mut scan = setup.db.scan()?;
             let grids = &*setup.grids;
             let found = &mut slots.candidates;
             let carry = setup.carry;
-            while let Some(block) = scan.next_block()? {
+            loop {
+                if let Some(boxes) = grids.block_boxes(scan.next_index())
+                    && !touched.meets(boxes)
+                    && scan.skip_block()?
+                {
+                    continue;
+                }
+                let Some(block) = scan.next_block()? else {
+                    break;
+                };
                 candidates(&block, grids, &region, found);
                 if found.is_empty() {
                     continue;
@@ -628,6 +649,7 @@ pub fn intersect_rays<R: Real>(
             }
             st.db_scans += 1;
             st.db_bytes_read += scan.stats().bytes_read;
+            st.db_blocks_skipped += scan.stats().blocks_skipped;
         }
         for sh in shards.iter() {
             for g in 0..ngrids {

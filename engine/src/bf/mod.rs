@@ -21,6 +21,7 @@ mod intersect;
 mod records;
 mod regmap;
 mod shade;
+mod skip;
 mod tracer;
 mod voxels;
 
@@ -259,6 +260,8 @@ pub struct BfStats {
     pub rays_per_round: Vec<u64>,
     pub db_scans: u64,
     pub db_bytes_read: u64,
+    /// Blocks the intersection passes left unread (see `skip`).
+    pub db_blocks_skipped: u64,
     pub spill_bytes_written: u64,
     pub ray_voxel_registrations: u64,
     pub tests_skipped_last_voxel: u64,

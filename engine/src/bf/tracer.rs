@@ -190,7 +190,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         if specs.len() > MAX_GRIDS {
             return Err(Error::Invalid("too many grids".into()));
         }
-        let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum();
+        // The voxel flags, and per block its voxel boxes (one per grid)
+        // and its place in the file (which let passes skip it).
+        let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum::<u64>()
+            + db.block_count()
+                * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64);
         let threads = if opts.threads == 0 {
             crate::sys::cpus()
         } else {
@@ -337,6 +341,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.store_numbers.push(ist.store_numbers.clone());
         st.db_scans += ist.db_scans;
         st.db_bytes_read += ist.db_bytes_read;
+        st.db_blocks_skipped += ist.db_blocks_skipped;
         st.ray_voxel_registrations += ist.registrations;
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;

@@ -3,6 +3,7 @@
 //! any object's bounding box overlaps the voxel, and which of its six faces
 //! lie on the boundary of some object's voxel box.
 
+use super::skip::CellBox;
 use crate::error::Error;
 use crate::grid::{GridSpec, GridStat, Partition};
 use crate::progress::Progress;
@@ -36,6 +37,9 @@ pub struct VoxelGrid {
 pub struct VoxelGrids {
     pub grids: Vec<VoxelGrid>,
     pub partition: Partition,
+    /// Each block's voxel box in each grid (block-major, one box per
+    /// grid): what a pass needs to know to leave the block unread.
+    pub blocks: Vec<CellBox>,
 }
 
 impl VoxelGrids {
@@ -54,20 +58,39 @@ impl VoxelGrids {
                 objects: 0,
             })
             .collect();
+        let n = grids.len();
+        let mut blocks = Vec::with_capacity(db.block_count() as usize * n);
         let mut scan = db.scan()?;
         progress.set_total(db.object_count());
         while let Some(block) = scan.next_block()? {
+            let at = blocks.len();
+            blocks.resize(at + n, CellBox::EMPTY);
             for o in block.objects() {
-                let g = &mut grids[partition.group(&o.bbox)];
+                let gi = partition.group(&o.bbox);
+                let g = &mut grids[gi];
                 g.objects += 1;
                 let Some((lo, hi)) = g.spec.cell_range(&o.bbox) else {
                     continue;
                 };
+                blocks[at + gi].add(lo, hi);
                 mark_box(&g.spec, &mut g.flags, lo, hi);
             }
             progress.inc(block.object_count as u64);
         }
-        Ok((VoxelGrids { grids, partition }, scan.stats()))
+        let grids = VoxelGrids {
+            grids,
+            partition,
+            blocks,
+        };
+        Ok((grids, scan.stats()))
+    }
+
+    /// The voxel boxes of block `index`, one per grid (`None` for a block
+    /// the build did not see).
+    pub fn block_boxes(&self, index: u64) -> Option<&[CellBox]> {
+        let n = self.grids.len();
+        let at = usize::try_from(index).ok()?.checked_mul(n)?;
+        self.blocks.get(at..at + n)
     }
 
     pub fn stats(&self) -> Vec<GridStat> {
@@ -83,7 +106,8 @@ impl VoxelGrids {
     }
 
     pub fn bytes(&self) -> u64 {
-        self.grids.iter().map(|g| g.flags.len() as u64).sum()
+        self.grids.iter().map(|g| g.flags.len() as u64).sum::<u64>()
+            + (self.blocks.len() * std::mem::size_of::<CellBox>()) as u64
     }
 }
 

@@ -9,8 +9,8 @@ use crate::shapes::{KINDS, KindCounts, Shape, ShapeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::SystemTime;
 
 /// Checksums are verified always, except when fuzzing (`cargo fuzz` builds
@@ -48,6 +48,18 @@ pub struct Database {
     /// later scans of the unchanged file skip those checks (they cost a
     /// third of a pass over a large mesh). Shared by clones.
     verified: Arc<AtomicBool>,
+    /// Where each block ends and how many objects it holds, learned by
+    /// the first complete scan: later scans may pass over a block without
+    /// reading it ([`Scan::skip_block`]). Shared by clones.
+    layout: Arc<OnceLock<Vec<BlockSpan>>>,
+}
+
+/// One block's place in the file.
+#[derive(Clone, Copy, Debug)]
+struct BlockSpan {
+    /// The byte after its payload (where the next block starts).
+    end: u64,
+    objects: u32,
 }
 
 /// Counters of one scan.
@@ -55,6 +67,9 @@ pub struct Database {
 pub struct DbStats {
     pub bytes_read: u64,
     pub blocks_read: u64,
+    /// Blocks passed over unread, and their bytes.
+    pub blocks_skipped: u64,
+    pub bytes_skipped: u64,
 }
 
 impl Database {
@@ -188,6 +203,7 @@ impl Database {
             mesh: h.flags & FLAG_MESH != 0,
             stamp,
             verified: Arc::new(AtomicBool::new(false)),
+            layout: Arc::new(OnceLock::new()),
         })
     }
 
@@ -327,6 +343,7 @@ impl Database {
             offset: HEADER_BYTES as u64,
             stats: DbStats::default(),
             verify,
+            learned: Vec::new(),
         })
     }
 }
@@ -433,6 +450,8 @@ pub struct Scan<'d> {
     stats: DbStats,
     /// Whether this scan checks checksums and records.
     verify: bool,
+    /// The blocks' spans so far, while the database's layout is unknown.
+    learned: Vec<BlockSpan>,
 }
 
 /// One decoded, validated block.
@@ -482,6 +501,36 @@ impl Scan<'_> {
         })
     }
 
+    /// The index of the block [`Scan::next_block`] reads next.
+    pub fn next_index(&self) -> u64 {
+        self.next_index
+    }
+
+    /// Passes over the next block without reading it (a seek forward),
+    /// once a complete scan of this database has learned where its blocks
+    /// lie; returns `false`, and does nothing, before then or after the
+    /// last block.
+    pub fn skip_block(&mut self) -> Result<bool, Error> {
+        let Some(span) = self
+            .db
+            .layout
+            .get()
+            .and_then(|l| l.get(self.next_index as usize))
+            .copied()
+        else {
+            return Ok(false);
+        };
+        self.file
+            .seek(SeekFrom::Start(span.end))
+            .map_err(|e| Error::io(&self.db.path, e))?;
+        self.stats.blocks_skipped += 1;
+        self.stats.bytes_skipped += span.end - self.offset;
+        self.offset = span.end;
+        self.next_index += 1;
+        self.next_object += span.objects as u64;
+        Ok(true)
+    }
+
     /// The next block, or `None` after the last one.
     pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
         if self.next_index == self.db.block_count {
@@ -493,6 +542,9 @@ impl Scan<'_> {
             }
             if self.verify {
                 self.db.verified.store(true, Ordering::Release);
+            }
+            if self.db.layout.get().is_none() && self.learned.len() as u64 == self.db.block_count {
+                let _ = self.db.layout.set(std::mem::take(&mut self.learned));
             }
             return Ok(None);
         }
@@ -567,6 +619,12 @@ impl Scan<'_> {
         self.next_index += 1;
         let first = self.next_object;
         self.next_object += h.object_count as u64;
+        if self.db.layout.get().is_none() {
+            self.learned.push(BlockSpan {
+                end,
+                objects: h.object_count,
+            });
+        }
         if self.next_object > self.db.object_count {
             return Err(self.err("blocks hold more objects than the header says"));
         }
