@@ -22,6 +22,8 @@ pub struct ShadeStats {
     pub sets: u64,
     pub db_scans: u64,
     pub db_bytes_read: u64,
+    /// Blocks the joins passed over (none of their objects was hit).
+    pub db_blocks_skipped: u64,
 }
 
 pub struct ShadeSetup<'a> {
@@ -197,10 +199,17 @@ fn shade_set(
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;
-    while let Some(block) = scan.next_block()? {
-        if at == set.len() {
-            break;
+    while at < set.len() {
+        // A block holding none of the hit objects is passed over unread.
+        if let Some(end) = scan.next_block_end()
+            && set[at].prim.0 >= end
+            && scan.skip_block()?
+        {
+            continue;
         }
+        let Some(block) = scan.next_block()? else {
+            break;
+        };
         let first = block.first_object;
         let end = first + block.object_count as u64;
         let stop = at + set[at..].partition_point(|h| h.prim.0 < end);
@@ -238,6 +247,7 @@ fn shade_set(
     }
     st.db_scans += 1;
     st.db_bytes_read += scan.stats().bytes_read;
+    st.db_blocks_skipped += scan.stats().blocks_skipped;
     set.clear();
     Ok(())
 }

@@ -439,6 +439,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         )?;
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
+        self.stats.db_blocks_skipped += sst.db_blocks_skipped;
         // The hit set and its outputs are the shading phase's; the next
         // intersection gets their share back (unless they are small).
         let held = self.set_buf.capacity() * std::mem::size_of::<super::records::HitRec>()

@@ -506,6 +506,13 @@ impl Scan<'_> {
         self.next_index
     }
 
+    /// The id after the last object of the block [`Scan::next_block`]
+    /// reads next, where the block layout is known.
+    pub fn next_block_end(&self) -> Option<u64> {
+        let span = self.db.layout.get()?.get(self.next_index as usize)?;
+        Some(self.next_object + span.objects as u64)
+    }
+
     /// Passes over the next block without reading it (a seek forward),
     /// once a complete scan of this database has learned where its blocks
     /// lie; returns `false`, and does nothing, before then or after the
