@@ -190,9 +190,13 @@ impl<'db, R: Real> Tracer<'db, R> {
         if specs.len() > MAX_GRIDS {
             return Err(Error::Invalid("too many grids".into()));
         }
-        // The voxel flags, and per block its voxel boxes (one per grid)
-        // and its place in the file (which let passes skip it).
-        let cells: u64 = specs.iter().map(|s| s.cells() as u64).sum::<u64>()
+        // The voxel flags, a pass's coarse cells (four bytes per 64
+        // voxels), and per block its voxel boxes (one per grid) and its
+        // place in the file (which let passes skip it).
+        let voxels: u64 = specs.iter().map(|s| s.cells() as u64).sum();
+        let cells = voxels
+            + voxels / 16
+            + specs.len() as u64 * 4096
             + db.block_count()
                 * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64);
         let threads = if opts.threads == 0 {
