@@ -290,3 +290,101 @@ fn later_scans_trust_only_the_file_that_was_checked() {
         assert!(failed, "the flipped byte went unnoticed ({c:?})");
     }
 }
+
+/// A scan read ahead on a thread of its own gives the blocks, the
+/// prepared data and the counters of a scan on the caller's thread; it
+/// passes over the blocks it is told to skip once the layout is known,
+/// and stops at the first error of either side.
+#[test]
+fn read_ahead_scans_agree_with_plain_scans_and_stop_on_errors() {
+    use sray_engine::sdb::scan_blocks;
+    let dir = tempfile::tempdir().unwrap();
+    for c in [Compression::None, Compression::Zstd(3)] {
+        let path = write_tetra(dir.path(), c);
+        let db = Database::open(&path).unwrap();
+        assert!(db.block_count() >= 4, "{} blocks", db.block_count());
+        let run = |ahead: bool, skip: &(dyn Fn(u64) -> bool + Sync)| {
+            let mut seen = Vec::new();
+            let stats = scan_blocks::<u64>(
+                db.scan().unwrap(),
+                ahead,
+                skip,
+                &|b, p| *p = b.words().iter().map(|&w| w as u64).sum(),
+                &mut |b, p| {
+                    seen.push((b.index, b.first_object, b.object_count, *p));
+                    Ok(())
+                },
+            )
+            .unwrap();
+            (seen, stats.bytes_read, stats.blocks_skipped)
+        };
+        // The first scan learns the layout: nothing is skipped yet.
+        let all = run(false, &|i| i % 2 == 1);
+        assert_eq!(all.0.len() as u64, db.block_count());
+        assert_eq!(all.2, 0);
+        assert_eq!(run(true, &|_| false), all);
+        let odd = |i: u64| i % 2 == 1;
+        let plain = run(false, &odd);
+        let ahead = run(true, &odd);
+        assert_eq!(plain, ahead);
+        assert!(plain.0.iter().all(|b| b.0 % 2 == 0));
+        assert_eq!(plain.2, db.block_count() / 2);
+        assert!(plain.1 < all.1);
+        // The caller's error stops the scan and is returned.
+        for ahead in [false, true] {
+            let mut n = 0;
+            let e = scan_blocks::<()>(
+                db.scan().unwrap(),
+                ahead,
+                &|_| false,
+                &|_, _| {},
+                &mut |_, _| {
+                    n += 1;
+                    if n == 2 {
+                        Err(Error::Invalid("stop here".into()))
+                    } else {
+                        Ok(())
+                    }
+                },
+            )
+            .unwrap_err();
+            assert!(e.to_string().contains("stop here"), "{e}");
+            assert_eq!(n, 2);
+        }
+        // A corrupt block found by the reader thread is an error, after
+        // the blocks before it.
+        let mut bytes = std::fs::read(&path).unwrap();
+        let at = bytes.len() / 2;
+        bytes[at] ^= 0x10;
+        let bad = dir.path().join("bad.sdb");
+        std::fs::write(&bad, &bytes).unwrap();
+        let db = Database::open(&bad).unwrap();
+        let mut n = 0u64;
+        let e = scan_blocks::<()>(
+            db.scan().unwrap(),
+            true,
+            &|_| false,
+            &|_, _| {},
+            &mut |_, _| {
+                n += 1;
+                Ok(())
+            },
+        )
+        .unwrap_err();
+        assert!(matches!(e, Error::Database { .. }), "{e}");
+        assert!(n > 0 && n < db.block_count(), "{n} blocks before the error");
+    }
+}
+
+fn write_tetra(dir: &Path, c: Compression) -> PathBuf {
+    let p = dir.join(format!("tetra6-{}.sdb", c.name()));
+    write_db(
+        &SceneSource::Spd {
+            scene: SpdScene::Tetra,
+            size: 6,
+        },
+        &p,
+        c,
+    );
+    p
+}

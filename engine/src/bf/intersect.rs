@@ -311,14 +311,15 @@ pub struct IntersectSetup<'a> {
     /// Work out the surface at each ray's best hit as it is found, so that
     /// shading needs no pass over the objects.
     pub carry: bool,
+    /// Read (and decompress) each pass's blocks on a thread of their own,
+    /// a block ahead of the shards.
+    pub read_ahead: bool,
 }
 
 /// The ray slots, kept from round to round so that their memory is
 /// allocated once.
 pub struct Slots<R> {
     shards: Vec<Shard<R>>,
-    /// The current block's candidate objects, shared by the shards.
-    candidates: Vec<Candidate>,
     /// The coarse cells this pass has rays in (which blocks it skips).
     touched: Touched,
 }
@@ -340,7 +341,6 @@ impl<R: Real> Slots<R> {
                     store_walks: 0,
                 })
                 .collect(),
-            candidates: Vec::new(),
             touched: Touched::default(),
         }
     }
@@ -348,25 +348,22 @@ impl<R: Real> Slots<R> {
     /// Bytes the slots hold.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        self.candidates.capacity() * size_of::<Candidate>()
-            + self
-                .shards
-                .iter()
-                .map(|sh| {
-                    sh.hot.capacity() * size_of::<Hot<R>>()
-                        + sh.pending.capacity() * size_of::<Pending>()
-                        + sh.q.capacity() * size_of::<RayQ<R>>()
-                        + sh.cold.capacity() * size_of::<Cold>()
-                        + sh.done.capacity() * size_of::<Outcome>()
-                        + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
-                })
-                .sum::<usize>()
+        self.shards
+            .iter()
+            .map(|sh| {
+                sh.hot.capacity() * size_of::<Hot<R>>()
+                    + sh.pending.capacity() * size_of::<Pending>()
+                    + sh.q.capacity() * size_of::<RayQ<R>>()
+                    + sh.cold.capacity() * size_of::<Cold>()
+                    + sh.done.capacity() * size_of::<Outcome>()
+                    + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
+            })
+            .sum::<usize>()
     }
 
     /// Gives the slots' memory back at the end of a round's intersection,
     /// so that shading can use the same share of the budget.
     pub fn release(&mut self) {
-        self.candidates = Vec::new();
         for sh in self.shards.iter_mut() {
             sh.hot = Vec::new();
             sh.q = Vec::new();
@@ -622,34 +619,31 @@ pub fn intersect_rays<R: Real>(
         // Scan the objects, passing over the blocks no registered ray is
         // near.
         if regs > 0 {
-            let mut scan = setup.db.scan()?;
             let grids = &*setup.grids;
-            let found = &mut slots.candidates;
             let carry = setup.carry;
-            loop {
-                if let Some(boxes) = grids.block_boxes(scan.next_index())
-                    && !touched.meets(boxes)
-                    && scan.skip_block()?
-                {
-                    continue;
-                }
-                let Some(block) = scan.next_block()? else {
-                    break;
-                };
-                candidates(&block, grids, &region, found);
-                if found.is_empty() {
-                    continue;
-                }
-                let found = &found[..];
-                pool.install(|| {
-                    shards
-                        .par_iter_mut()
-                        .for_each(|sh| scan_block(sh, &block, found, grids, carry));
-                });
-            }
+            let touched = &*touched;
+            let region = &region;
+            // A reader thread may read, decompress and pick each block's
+            // candidates ahead of the shards.
+            let stats = crate::sdb::scan_blocks::<Vec<Candidate>>(
+                setup.db.scan()?,
+                setup.read_ahead,
+                &|index| grids.block_boxes(index).is_some_and(|b| !touched.meets(b)),
+                &|block, found| candidates(block, grids, region, found),
+                &mut |block, found| {
+                    if !found.is_empty() {
+                        pool.install(|| {
+                            shards
+                                .par_iter_mut()
+                                .for_each(|sh| scan_block(sh, block, found, grids, carry));
+                        });
+                    }
+                    Ok(())
+                },
+            )?;
             st.db_scans += 1;
-            st.db_bytes_read += scan.stats().bytes_read;
-            st.db_blocks_skipped += scan.stats().blocks_skipped;
+            st.db_bytes_read += stats.bytes_read;
+            st.db_blocks_skipped += stats.blocks_skipped;
         }
         for sh in shards.iter() {
             for g in 0..ngrids {

@@ -145,6 +145,9 @@ impl ResultReader {
     }
 }
 
+/// Read-ahead buffers may take at most this part of the memory budget.
+const READ_AHEAD_SHARE: u64 = 32;
+
 /// The breadth-first stages over one database.
 pub struct Tracer<'db, R: Real> {
     db: &'db Database,
@@ -158,6 +161,8 @@ pub struct Tracer<'db, R: Real> {
     shading: super::Shading,
     shade_scene: ShadeScene,
     slots: Slots<R>,
+    /// Intersection passes read their blocks on a thread of their own.
+    read_ahead: bool,
     // Buffers reused from call to call: allocating them afresh costs page
     // faults every round.
     dense_buf: Vec<Outcome>,
@@ -205,11 +210,20 @@ impl<'db, R: Real> Tracer<'db, R> {
             opts.threads
         };
         let store = StorePlan::new(bf.store, &specs);
+        // A reader thread needs a core beside the shards' and a few block
+        // buffers: worth it when they are a small part of the budget.
+        let read_ahead =
+            threads > 1 && crate::sdb::read_ahead_bytes(db) * READ_AHEAD_SHARE <= bf.memory;
         let budget = Budget::plan::<R>(
             bf.memory,
             super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
-            db.scan_buffer_bytes() as u64,
+            db.scan_buffer_bytes() as u64
+                + if read_ahead {
+                    crate::sdb::read_ahead_bytes(db)
+                } else {
+                    0
+                },
             &store,
             threads,
         )?;
@@ -258,6 +272,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             tests: KindCounts::default(),
             preprocess_seconds,
             intersect_seconds: 0.0,
+            read_ahead,
             shade_seconds: 0.0,
         })
     }
@@ -318,6 +333,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             registrations: (slots_n * budget.regs_per_slot) as usize,
             dense_cells: budget.dense_cells(self.threads),
             carry: self.shading == super::Shading::Carry,
+            read_ahead: self.read_ahead,
             eps: self.eps,
         };
         let ist = {

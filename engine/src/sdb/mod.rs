@@ -19,10 +19,12 @@
 //! readers fetch them at open and then read blocks strictly front to back.
 
 mod format;
+mod read_ahead;
 mod reader;
 mod writer;
 
 pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
 pub use writer::{DbWriter, WRITE_BUFFER, WriteSummary};

@@ -723,6 +723,21 @@ impl<'a> Block<'a> {
         self.words
     }
 
+    /// A block from words a [`Scan`] has read and checked.
+    pub(super) fn from_words(
+        index: u64,
+        first_object: u64,
+        object_count: u32,
+        words: &'a [u32],
+    ) -> Block<'a> {
+        Block {
+            index,
+            first_object,
+            object_count,
+            words,
+        }
+    }
+
     /// Uncompressed payload bytes of this block.
     pub fn raw_bytes(&self) -> usize {
         self.words.len() * 4
