@@ -5,7 +5,7 @@
 #
 # The container healthcheck of deploy/compose.yaml. The image has bash but
 # no curl or wget; this needs nothing else (bash's /dev/tcp), so the
-# runtime image stays Debian slim plus one binary. tests/deploy.rs runs it
+# runtime image stays Debian slim plus one binary. tests/it/deploy.rs runs it
 # against a listener answering 200, one answering 503 and a closed port.
 set -u
 port="${1:-9100}"

@@ -5,7 +5,7 @@
 //! installs one through .ci/run). Real processes on loopback, small
 //! images.
 
-mod common;
+use crate::common;
 
 use common::{Proc, cluster, fails, json, ok};
 use std::io::{Read, Write};

@@ -1,7 +1,7 @@
 //! The SPD generators against real SPD output (tests/fixtures/spd) and
 //! against the object counts of the paper's Tables 2 and 3.
 
-mod common;
+use crate::common;
 
 use common::{DEFAULT_SCENES, spd_fixtures};
 use sray_engine::Error;

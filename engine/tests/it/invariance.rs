@@ -4,10 +4,10 @@
 //! the thread count, the order of the objects in the database, or the
 //! scale of the scene (the last within a measured, documented tolerance).
 //!
-//! Worker count and shard size are the cluster's knobs; tests/invariance.rs
+//! Worker count and shard size are the cluster's knobs; tests/it/cluster.rs
 //! at the repository root covers them with real processes.
 
-mod common;
+use crate::common;
 
 use sray_engine::bf::StoreNumber;
 use sray_engine::nff::read_nff;

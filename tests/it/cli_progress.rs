@@ -1,7 +1,7 @@
 //! What `sray render` shows while and after it works: progress bars and
 //! the summary line on a terminal, nothing with --quiet.
 
-mod common;
+use crate::common;
 
 use common::{fails, sray};
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! to depth-first, memory within the budget, models far from the origin,
 //! the command line's overrides, and errors.
 
-mod common;
+use crate::common;
 
 use common::{fails, json, ok, run, shared_meshes};
 use std::io::{BufRead, BufReader, Read};

@@ -1,6 +1,6 @@
 //! `sray render` as a user runs it.
 
-mod common;
+use crate::common;
 
 use common::{fails, json, ok, spd_fixtures};
 

@@ -1,7 +1,7 @@
 //! The NFF reader: the quirks of real files, and a clear file:line error for
 //! every kind of bad input.
 
-mod common;
+use crate::common;
 
 use sray_engine::Error;
 use sray_engine::nff::{MAX_LINE_BYTES, read_nff, read_nff_from};

@@ -3,7 +3,7 @@
 //! `--memory` budget puts its big arrays in a temporary file, and must give
 //! the same image as the render in ordinary memory and leave nothing behind.
 
-mod common;
+use crate::common;
 
 use common::{json, ok};
 

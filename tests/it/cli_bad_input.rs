@@ -1,7 +1,7 @@
 //! Bad input to `sray render`: each gets a clear error, a non-zero exit, no
 //! panic, and no output file (nor a temporary one) left behind.
 
-mod common;
+use crate::common;
 
 use common::{fails, ok, sray};
 use std::path::Path;

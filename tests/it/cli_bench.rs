@@ -1,6 +1,6 @@
 //! `sray bench --quick`: every experiment, small, end to end.
 
-mod common;
+use crate::common;
 
 use common::{json, ok, shared_dir, spd_fixtures};
 

@@ -1,6 +1,6 @@
 //! `sray gen`, `convert`, `info` and `verify` as a user runs them.
 
-mod common;
+use crate::common;
 
 use common::{fails, json, ok, spd_fixtures};
 

@@ -1,8 +1,6 @@
 //! The rendering contract (shared/SCENES.md) on scenes simple enough to
 //! trace by hand, and the invariances every count must have.
 
-mod common;
-
 use sray_engine::df;
 use sray_engine::nff::read_nff_from;
 use sray_engine::progress::NoProgress;

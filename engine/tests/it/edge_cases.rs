@@ -14,7 +14,7 @@ use sray_engine::sdb::{Compression, Database, DbWriter};
 use std::fmt::Write;
 use std::path::Path;
 
-mod common;
+use crate::common;
 
 use common::{Render, bf_render, df_render};
 

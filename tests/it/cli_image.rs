@@ -1,7 +1,7 @@
 //! Image files: PNG and OpenEXR, chosen by the output's extension, on one
 //! machine and through the cluster path.
 
-mod common;
+use crate::common;
 
 use common::{fails, ok};
 use std::path::Path;

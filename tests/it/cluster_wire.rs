@@ -2,7 +2,7 @@
 //! nothing sent twice to a worker that holds it, and workers that keep
 //! their grids between the tasks of a job.
 
-mod common;
+use crate::common;
 
 use common::{cluster, json, ok, run};
 use std::path::Path;

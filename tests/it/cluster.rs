@@ -1,7 +1,7 @@
 //! The cluster with real processes on loopback: a coordinator, workers and
 //! clients started as `sray coordinator`, `sray worker` and `sray render`.
 
-mod common;
+use crate::common;
 
 use common::{Proc, cluster, fails, json, ok, run};
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! Renders at the edges of what the options allow: grids as fine as a grid
 //! may be, and images far larger than the memory budget.
 
-mod common;
+use crate::common;
 
 use common::{fails, json, ok};
 use std::path::Path;

@@ -5,7 +5,7 @@
 //!
 //! Each test names the item of the issue it covers.
 
-mod common;
+use crate::common;
 
 use common::cluster::{coordinator, coordinator_on};
 use common::{Proc, fails, json, ok};

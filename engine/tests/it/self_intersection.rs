@@ -5,10 +5,11 @@
 //! the seven SPD scenes (tests/fixtures/spd). Brute force: every ray
 //! against every object, so that no grid can hide or cause anything.
 //!
-//! The figures are printed (`cargo test --release --test self_intersection
-//! -- --nocapture`) and quoted in the README's Stability section.
+//! The figures are printed (`cargo test --release -p sray-engine --test it
+//! self_intersection:: -- --nocapture`) and quoted in the README's
+//! Stability section.
 
-mod common;
+use crate::common;
 
 use sray_engine::intersect::RayQ;
 use sray_engine::math::{Real, Vec3};

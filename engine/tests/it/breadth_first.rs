@@ -2,7 +2,7 @@
 //! counts, whatever its store number, memory budget, grids, compression and
 //! threads; and its own counts do not depend on the number of threads.
 
-mod common;
+use crate::common;
 
 use sray_engine::bf::{self, BfOptions, StoreNumber};
 use sray_engine::df;

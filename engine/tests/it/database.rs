@@ -1,7 +1,7 @@
 //! The object database: round trips, and a clear error (never a panic, never
 //! a wrong scene) for every corrupt, truncated or foreign file.
 
-mod common;
+use crate::common;
 
 use sray_engine::Error;
 use sray_engine::info::scene_info;
