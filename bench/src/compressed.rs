@@ -224,6 +224,10 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 "-".into()
             },
             st["db_scans"].to_string(),
+            st["db_bytes_read"]
+                .as_u64()
+                .map_or_else(|| "-".into(), fmt_bytes),
+            st["db_blocks_skipped"].to_string(),
             if paper_hours.is_finite() {
                 num(paper_hours, 2)
             } else {
@@ -233,7 +237,9 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         data.push(serde_json::json!({
             "scene": name, "objects": objects, "raw_bytes": raw, "file_bytes": bytes,
             "generate_seconds": gen_s, "seconds": secs, "cgroup_peak_bytes": c.peak_bytes,
-            "db_scans": st["db_scans"], "passes": st["passes"], "grid_res": st["grid_res"],
+            "db_scans": st["db_scans"], "db_bytes_read": st["db_bytes_read"],
+            "db_blocks_skipped": st["db_blocks_skipped"],
+            "passes": st["passes"], "grid_res": st["grid_res"],
             "paper_hours": paper_hours.is_finite().then_some(paper_hours),
         }));
     }
@@ -248,6 +254,8 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             "render s",
             "cgroup peak",
             "database scans",
+            "bytes read",
+            "blocks skipped",
             "paper (hours)",
         ],
         &rows,
