@@ -30,6 +30,16 @@ struct Ahead<P> {
     prepared: P,
 }
 
+/// The next block `skip` does not pass over (once the layout is known,
+/// [`Scan::skip_block`] seeks past the others), or `None` after the last.
+fn next_wanted<'s>(
+    scan: &'s mut Scan<'_>,
+    skip: &(dyn Fn(u64) -> bool + Sync),
+) -> Result<Option<Block<'s>>, Error> {
+    while skip(scan.next_index()) && scan.skip_block()? {}
+    scan.next_block()
+}
+
 /// Runs `consume` on every block of `scan` that `skip` does not pass
 /// over, in file order, with what `prepare` made of it. With `ahead`,
 /// reading and `prepare` run on a thread of their own, a block ahead
@@ -44,16 +54,11 @@ pub fn scan_blocks<P: Default + Send>(
 ) -> Result<DbStats, Error> {
     if !ahead {
         let mut p = P::default();
-        loop {
-            if skip(scan.next_index()) && scan.skip_block()? {
-                continue;
-            }
-            let Some(block) = scan.next_block()? else {
-                return Ok(scan.stats());
-            };
+        while let Some(block) = next_wanted(&mut scan, skip)? {
             prepare(&block, &mut p);
             consume(&block, &p)?;
         }
+        return Ok(scan.stats());
     }
     std::thread::scope(|s| {
         let (tx, rx) = mpsc::sync_channel::<Result<Ahead<P>, Error>>(AHEAD);
@@ -62,10 +67,7 @@ pub fn scan_blocks<P: Default + Send>(
             .name("sray-read-ahead".into())
             .spawn_scoped(s, move || {
                 let mut read = || -> Result<bool, Error> {
-                    if skip(scan.next_index()) && scan.skip_block()? {
-                        return Ok(true);
-                    }
-                    let Some(block) = scan.next_block()? else {
+                    let Some(block) = next_wanted(&mut scan, skip)? else {
                         return Ok(false);
                     };
                     let mut a = spare.try_recv().unwrap_or_else(|_| Ahead {

@@ -67,9 +67,8 @@ struct BlockSpan {
 pub struct DbStats {
     pub bytes_read: u64,
     pub blocks_read: u64,
-    /// Blocks passed over unread, and their bytes.
+    /// Blocks passed over unread.
     pub blocks_skipped: u64,
-    pub bytes_skipped: u64,
 }
 
 impl Database {
@@ -531,7 +530,6 @@ impl Scan<'_> {
             .seek(SeekFrom::Start(span.end))
             .map_err(|e| Error::io(&self.db.path, e))?;
         self.stats.blocks_skipped += 1;
-        self.stats.bytes_skipped += span.end - self.offset;
         self.offset = span.end;
         self.next_index += 1;
         self.next_object += span.objects as u64;
