@@ -40,7 +40,7 @@ use sray_engine::render::{
     Camera, Frame, GridRes, ImageFormat, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
 };
 use sray_engine::sdb::Database;
-use sray_engine::spill::{ExternalSorter, RecordFile, RecordWriter};
+use sray_engine::spill::{MemoryShare, RecordWriter, Records, RecordsWriter, SpillDir};
 use sray_proto::v1;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -370,6 +370,11 @@ struct Totals {
     /// Seconds workers (and the coordinator) spent tracing samples.
     #[serde(default)]
     verify_seconds: f64,
+    /// Passes over the objects made by shading tasks: none when every
+    /// shard's results stayed, with their surfaces, on the worker that
+    /// found them.
+    #[serde(default)]
+    shading_scans: u64,
     /// Tasks for which a worker had to build its grids.
     #[serde(default)]
     grid_builds: u64,
@@ -407,7 +412,7 @@ async fn drive(
     let corners = opts.frame_slots();
     let mut frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
     let mut tot = Totals::default();
-    let mut rays: Option<Arc<RecordFile<RayRec>>> = None;
+    let mut rays: Option<Arc<Records<RayRec>>> = None;
     let mut n = opts.eye_rays();
     let mut round = 1u32;
     if let Some(r) = resume {
@@ -415,7 +420,7 @@ async fn drive(
         tot = serde_json::from_value(r.totals).unwrap_or_default();
         round = r.round;
         n = r.rays.as_ref().map_or(0, |f| f.len());
-        rays = r.rays.map(Arc::new);
+        rays = r.rays.map(|f| Arc::new(Records::File(f)));
     }
     let mut arbiter = Arbiter::new(shared, job);
     // Which workers hold the round's rays (none after a restart).
@@ -509,6 +514,7 @@ async fn drive(
         let mut segs = Vec::with_capacity(outs.len());
         let mut start = 0;
         for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
+            tot.shading_scans += stat_of(&o.summary.stats_json, "db_scans").unwrap_or(0);
             let len = o.rays.as_ref().map_or(0, |r| r.len());
             if len > 0 {
                 segs.push(Segment {
@@ -523,10 +529,10 @@ async fn drive(
         let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();
         drop(stage);
         drop(results);
-        // Colour into the frame; spawned rays merged by key.
-        let spill = shared.spill.clone();
+        // Colour into the frame; spawned rays in key order.
+        let (spill, share) = (shared.spill.clone(), shared.records.clone());
         let (f, next) =
-            tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill)).await??;
+            tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill, &share)).await??;
         frame = f;
         n = next.as_ref().map_or(0, |f| f.len());
         segments = Arc::new(if start == n { segs } else { Vec::new() });
@@ -1006,6 +1012,8 @@ impl Arbiter {
                             shading: sray_engine::bf::Shading::Join,
                         },
                         keep: false,
+                        // Its inputs are files already.
+                        kept_memory: sray_engine::spill::MemoryShare::new(0),
                     },
                     tokio::runtime::Handle::current(),
                 ))
@@ -1036,7 +1044,8 @@ async fn trace_here(
     task: v1::Task,
     input: Arc<TaskInput>,
 ) -> anyhow::Result<TaskOutput> {
-    use sray_worker::exec::{Input, Inputs, Slice, Work};
+    use sray_engine::spill::Records;
+    use sray_worker::exec::{Input, Inputs, ResultSlice, Slice, Work};
     // The sample's input records, copied out of the round's files.
     let (t2, i2, spill) = (task.clone(), input.clone(), shared.spill.clone());
     let files = tokio::task::spawn_blocking(move || -> anyhow::Result<Inputs> {
@@ -1047,7 +1056,7 @@ async fn trace_here(
             while let Some(x) = rd.next()? {
                 w.push(&x)?;
             }
-            inputs.rays = Some(Slice::whole(w.finish()?));
+            inputs.rays = Some(Slice::whole(Records::File(w.finish()?)));
         }
         if let Some(r) = &i2.results {
             let mut rd = r.reader_range(i2.results_offset, t2.ray_count)?;
@@ -1055,7 +1064,7 @@ async fn trace_here(
             while let Some(x) = rd.next()? {
                 w.push(&x)?;
             }
-            inputs.results = Some(Slice::whole(w.finish()?));
+            inputs.results = Some(ResultSlice::Bare(Slice::whole(Records::File(w.finish()?))));
         }
         Ok(inputs)
     })
@@ -1186,15 +1195,20 @@ fn stage_name(s: v1::Stage) -> &'static str {
     }
 }
 
-/// Adds the shading outputs' colour to the frame and merges their spawned
-/// rays (each sorted by key) into the next round's rays.
+/// Adds the shading outputs' colour to the frame and joins their spawned
+/// rays into the next round's rays. The outputs come in shard order, and
+/// each shard's keys lie below the next shard's (the receiver checked
+/// each output's keys against its shard's range), so joining them in
+/// order keeps the rays sorted by key; the join checks that it does.
 fn merge_shade(
     mut frame: Frame,
     outs: Vec<TaskOutput>,
-    spill: &sray_engine::spill::SpillDir,
-) -> anyhow::Result<(Frame, Option<RecordFile<RayRec>>)> {
-    let key = (|r: &RayRec| r.key) as fn(&RayRec) -> u64;
-    let mut sorter = ExternalSorter::new(spill, "next", 16, key);
+    spill: &SpillDir,
+    share: &MemoryShare,
+) -> anyhow::Result<(Frame, Option<Records<RayRec>>)> {
+    let mut w = RecordsWriter::<RayRec>::new(share, spill, "round");
+    let mut last: Option<u64> = None;
+    let mut buf = Vec::with_capacity(4096);
     for o in outs {
         if let Some(c) = o.contributions {
             let mut rd = c.reader()?;
@@ -1202,25 +1216,57 @@ fn merge_shade(
                 frame.add(x.corner, x.rgb);
             }
         }
-        if let Some(r) = o.rays {
-            sorter.add_sorted_run(r);
+        let Some(r) = o.rays else { continue };
+        if let (Some(v), Some(l)) = (r.as_slice(), last) {
+            anyhow::ensure!(
+                v.first().is_none_or(|x| x.key > l),
+                "spawned rays out of key order across shards"
+            );
+        }
+        // The output's memory goes back to the share as it is copied.
+        match r.as_slice() {
+            Some(v) => {
+                w.extend(v)?;
+                last = v.last().map(|x| x.key).or(last);
+            }
+            None => {
+                let mut rd = r.reader()?;
+                loop {
+                    buf.clear();
+                    while buf.len() < 4096 {
+                        match rd.next()? {
+                            Some(x) => buf.push(x),
+                            None => break,
+                        }
+                    }
+                    if buf.is_empty() {
+                        break;
+                    }
+                    anyhow::ensure!(
+                        last.is_none_or(|l| buf[0].key > l),
+                        "spawned rays out of key order across shards"
+                    );
+                    last = buf.last().map(|x| x.key);
+                    w.extend(&buf)?;
+                }
+            }
         }
     }
-    if sorter.is_empty() {
+    if w.is_empty() {
         return Ok((frame, None));
-    }
-    let mut sorted = sorter.finish()?;
-    let mut w = RecordWriter::<RayRec>::create(spill, "round")?;
-    while let Some(r) = sorted.next()? {
-        w.push(&r)?;
     }
     Ok((frame, Some(w.finish()?)))
 }
 
 fn passes_of(stats_json: &str) -> Option<u64> {
+    stat_of(stats_json, "passes")
+}
+
+/// A count from a task's statistics.
+fn stat_of(stats_json: &str, key: &str) -> Option<u64> {
     serde_json::from_str::<serde_json::Value>(stats_json)
         .ok()
-        .and_then(|v| v["passes"].as_u64())
+        .and_then(|v| v[key].as_u64())
 }
 
 fn job_stats(
@@ -1257,6 +1303,7 @@ fn job_stats(
         "shards_per_round": tot.shards_per_round,
         "rays_per_round": tot.rays_per_round,
         "passes": tot.passes,
+        "shading_scans": tot.shading_scans,
         "tasks": tot.tasks,
         "tasks_requeued": requeued,
         "backup_tasks": backups.max(tot.backups),

@@ -24,7 +24,7 @@ use crate::state::{Config, Shared};
 use anyhow::{Context, bail};
 use prost::Message;
 use sray_engine::bf::RayRec;
-use sray_engine::spill::{RecordFile, RecordWriter, SpillDir};
+use sray_engine::spill::{RecordFile, RecordWriter, Records, SpillDir};
 use sray_proto::v1;
 use std::collections::HashMap;
 use std::fs::File;
@@ -467,7 +467,7 @@ pub fn checkpoint(
     rec: &mut Record,
     next_round: u32,
     frame: &[[i64; 3]],
-    rays: Option<&RecordFile<RayRec>>,
+    rays: Option<&Records<RayRec>>,
     totals: serde_json::Value,
 ) -> anyhow::Result<()> {
     let dir = &e.dir;

@@ -10,7 +10,7 @@ use crate::driver;
 use crate::jobs::{JobEntry, JobRefusal, JobState};
 use crate::state::{Refusal, Shared, TaskOutput};
 use sray_engine::bf::{Contribution, RayRec, ResultRec};
-use sray_engine::spill::RecordWriter;
+use sray_engine::spill::RecordsWriter;
 use sray_proto::auth::{Role, require};
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
 use sray_proto::wire::{SCENE_CHUNK_BYTES, decode, encode, records_per_chunk};
@@ -593,7 +593,7 @@ async fn watch(
 /// Streams a reader's records in encoded chunks; false if the receiver
 /// went away or reading failed.
 fn stream_records<T: bytemuck::Pod>(
-    rd: &mut sray_engine::spill::RecordReader<T>,
+    rd: &mut sray_engine::spill::RecordsReader<'_, T>,
     kind: v1::RecordKind,
     send: &dyn Fn(v1::RecordChunk) -> bool,
     fail: &dyn Fn(sray_engine::Error),
@@ -631,9 +631,9 @@ pub(crate) struct Receiver<'a> {
     shared: &'a Shared,
     task: &'a v1::Task,
     input: &'a crate::state::TaskInput,
-    results: Option<RecordWriter<ResultRec>>,
-    contributions: Option<RecordWriter<Contribution>>,
-    rays: Option<RecordWriter<RayRec>>,
+    results: Option<RecordsWriter<ResultRec>>,
+    contributions: Option<RecordsWriter<Contribution>>,
+    rays: Option<RecordsWriter<RayRec>>,
     n_results: u64,
     hits: u64,
     last_key: Option<u64>,
@@ -659,12 +659,12 @@ impl<'a> Receiver<'a> {
     }
 
     fn writer<T: bytemuck::Pod>(
-        slot: &mut Option<RecordWriter<T>>,
+        slot: &mut Option<RecordsWriter<T>>,
         shared: &Shared,
-        what: &str,
+        what: &'static str,
     ) -> Result<(), String> {
         if slot.is_none() {
-            *slot = Some(RecordWriter::create(&shared.spill, what).map_err(|e| e.to_string())?);
+            *slot = Some(RecordsWriter::new(&shared.records, &shared.spill, what));
         }
         Ok(())
     }

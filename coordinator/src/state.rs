@@ -22,7 +22,7 @@
 
 use crate::scenes::SceneStore;
 use sray_engine::bf::{Contribution, RayRec, ResultRec};
-use sray_engine::spill::{RecordFile, SpillDir};
+use sray_engine::spill::{MemoryShare, Records, SpillDir};
 use sray_proto::v1;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::path::PathBuf;
@@ -102,6 +102,9 @@ pub struct Config {
     pub min_worker_memory: u64,
     /// Memory of the coordinator's own tracer (arbitration of mismatches).
     pub arbiter_memory: u64,
+    /// Memory for the records in flight (rounds' rays, tasks' outputs);
+    /// beyond it they go to spill files.
+    pub records_memory: u64,
     pub limits: Limits,
 }
 
@@ -130,6 +133,7 @@ impl Default for Config {
             scene_store_max: 50 << 30,
             min_worker_memory: MIN_WORKER_MEMORY,
             arbiter_memory: 256 << 20,
+            records_memory: 256 << 20,
             limits: Limits::default(),
         }
     }
@@ -182,9 +186,9 @@ pub struct Counters {
 #[derive(Default)]
 pub struct TaskInput {
     /// The round's rays (absent for eye rays, which workers make).
-    pub rays: Option<Arc<RecordFile<RayRec>>>,
+    pub rays: Option<Arc<Records<RayRec>>>,
     /// The shard's results (shading), from record `results_offset` on.
-    pub results: Option<Arc<RecordFile<ResultRec>>>,
+    pub results: Option<Arc<Records<ResultRec>>>,
     pub results_offset: u64,
     pub objects: u64,
     /// Frame slots (pixel corners, or pixels): the bound of contributions.
@@ -243,9 +247,9 @@ impl Held {
 /// A task's output, as received.
 #[derive(Default)]
 pub struct TaskOutput {
-    pub results: Option<RecordFile<ResultRec>>,
-    pub contributions: Option<RecordFile<Contribution>>,
-    pub rays: Option<RecordFile<RayRec>>,
+    pub results: Option<Records<ResultRec>>,
+    pub contributions: Option<Records<Contribution>>,
+    pub rays: Option<Records<RayRec>>,
     /// Results that hit something (intersection).
     pub hits: u64,
     pub summary: v1::TaskSummary,
@@ -354,6 +358,8 @@ pub struct Shared {
     pub run_id: String,
     pub scenes: SceneStore,
     pub spill: SpillDir,
+    /// What records in flight may hold in memory (`records_memory`).
+    pub records: MemoryShare,
     pub traffic: Traffic,
     pub counters: Counters,
     pub jobs: crate::jobs::Jobs,
@@ -384,10 +390,12 @@ impl Shared {
         let scenes = SceneStore::new(&cfg.data_dir)?;
         let (spill, spill_parent) = crate::jobs::spill_dir(&cfg)?;
         let jobs = crate::jobs::Jobs::new(&cfg.data_dir)?;
+        let records = MemoryShare::new(cfg.records_memory);
         Ok(Arc::new(Shared {
             cfg,
             run_id: sray_proto::ids::new_session(),
             scenes,
+            records,
             spill,
             traffic: Traffic::default(),
             counters: Counters::default(),

@@ -77,6 +77,10 @@ pub struct CoordinatorArgs {
     /// Bytes of uploaded scenes kept; least recently used are removed past it
     #[arg(long, default_value = "50GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub scene_store_max: u64,
+    /// Memory for the records in flight (rounds' rays, tasks' outputs);
+    /// beyond it they go to spill files under --tmp-dir
+    #[arg(long, default_value = "256MiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
+    pub records_memory: u64,
     /// Workers with less --memory are refused at registration
     #[arg(long, default_value_t = MIN_WORKER_MEMORY, value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub min_worker_memory: u64,
@@ -208,6 +212,7 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         job_retention: seconds(a.job_retention, "--job-retention")?,
         scene_store_max: a.scene_store_max,
         min_worker_memory: a.min_worker_memory,
+        records_memory: a.records_memory,
         limits: Limits {
             max_pixels: a.max_pixels,
             max_samples: a.max_samples,

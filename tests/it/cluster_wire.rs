@@ -31,27 +31,27 @@ fn local_render(
     size: &str,
     workers: &str,
     shard_rays: &str,
+    extra: &[&str],
     want: &[u8],
 ) -> serde_json::Value {
-    let o = run(
-        dir,
-        &[
-            "render",
-            scene,
-            "-o",
-            "local.png",
-            "--local-workers",
-            workers,
-            "--width",
-            size,
-            "--height",
-            size,
-            "--shard-rays",
-            shard_rays,
-            "--stats",
-            "cluster.json",
-        ],
-    );
+    let mut args = vec![
+        "render",
+        scene,
+        "-o",
+        "local.png",
+        "--local-workers",
+        workers,
+        "--width",
+        size,
+        "--height",
+        size,
+        "--shard-rays",
+        shard_rays,
+        "--stats",
+        "cluster.json",
+    ];
+    args.extend_from_slice(extra);
+    let o = run(dir, &args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
         std::fs::read(dir.join("local.png")).unwrap() == want,
@@ -68,7 +68,7 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let want = embedded(d, "spd:balls:2", "64", "emb.png");
-    let s = local_render(d, "spd:balls:2", "64", "1", "1024", &want);
+    let s = local_render(d, "spd:balls:2", "64", "1", "1024", &[], &want);
     let bpr = s["bytes_per_ray"].as_f64().unwrap();
     eprintln!(
         "bytes per ray {bpr:.1}: {} to workers, {} from workers",
@@ -80,6 +80,35 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     assert_eq!(s["grid_builds"], 1, "{s}");
 }
 
+/// A worker keeps each shard's results in memory with the surfaces it
+/// found with them, so shading them makes no pass over the objects. When
+/// its memory cannot hold them they go to a file without surfaces and the
+/// shading joins them with the objects (the paper's Pseudocode 4); the
+/// coordinator's records go to files too. Either way the image is the
+/// embedded one, bit for bit.
+#[test]
+fn kept_results_shade_without_a_pass_and_spilled_ones_by_the_join() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let want = embedded(d, "spd:teapot:3", "64", "emb.png");
+    let s = local_render(d, "spd:teapot:3", "64", "1", "1024", &[], &want);
+    assert_eq!(s["shading_scans"], 0, "{s}");
+    // 2 MiB: the coordinator may hold 256 KiB of records and the worker
+    // 448 KiB, where one round's results with their surfaces (over 4000
+    // rays, 88 bytes each) do not fit beside its rays.
+    let s = local_render(
+        d,
+        "spd:teapot:3",
+        "64",
+        "1",
+        "4096",
+        &["--memory", "2MiB"],
+        &want,
+    );
+    eprintln!("shading scans with 2 MiB: {}", s["shading_scans"]);
+    assert!(s["shading_scans"].as_u64().unwrap() > 0, "{s}");
+}
+
 /// Two local workers: still the embedded image; the traffic stays small
 /// (verification samples cross between the workers in full).
 #[test]
@@ -87,7 +116,7 @@ fn two_workers_same_image_small_traffic() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let want = embedded(d, "spd:teapot:3", "48", "emb.png");
-    let s = local_render(d, "spd:teapot:3", "48", "2", "300", &want);
+    let s = local_render(d, "spd:teapot:3", "48", "2", "300", &[], &want);
     let bpr = s["bytes_per_ray"].as_f64().unwrap();
     eprintln!("two workers: {bpr:.1} bytes per ray");
     assert!(bpr > 0.0 && bpr <= 128.0, "{bpr} bytes per ray: {s}");

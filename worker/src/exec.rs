@@ -5,12 +5,16 @@
 //! the network never waits on the tracer nor the tracer on the network,
 //! beyond the few chunks the channels hold.
 
-use sray_engine::bf::{BfOptions, Contribution, RayRec, ResultReader, ResultRec, Tracer, eye_ray};
+use sray_engine::bf::{
+    BfOptions, Contribution, Outcome, RayRec, ResultReader, ResultRec, Tracer, eye_ray,
+};
 use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, EyeRays, Precision, RayCounts, RenderOptions};
 use sray_engine::sdb::Database;
-use sray_engine::spill::{RecordFile, RecordReader, RecordWriter};
+use sray_engine::spill::{
+    MemoryShare, RecordWriter, Records, RecordsReader, RecordsWriter, SpillDir,
+};
 use sray_proto::v1::{self, RecordKind, task_output::Part};
 use sray_proto::wire::{decode, encode, records_per_chunk};
 use std::collections::{HashMap, VecDeque};
@@ -34,6 +38,9 @@ pub struct JobSetup {
     /// Keep what tasks received and made (their rays and results) for
     /// later tasks, which then need not receive them again.
     pub keep: bool,
+    /// What kept and received records may take of memory (shared by a
+    /// node's executors); beyond it they go to spill files.
+    pub kept_memory: MemoryShare,
 }
 
 /// What an executor's thread is asked to do.
@@ -65,19 +72,19 @@ pub enum Input {
     Files(Inputs),
 }
 
-/// Records `start .. start + count` of a file (shared: a kept output may
-/// be a task's input as it is).
+/// Records `start .. start + count` of some records in memory or in a
+/// file (shared: a kept output may be a task's input as it is).
 pub struct Slice<T: bytemuck::Pod> {
-    pub file: Arc<RecordFile<T>>,
+    pub records: Arc<Records<T>>,
     pub start: u64,
     pub count: u64,
 }
 
 impl<T: bytemuck::Pod> Slice<T> {
-    pub fn whole(f: RecordFile<T>) -> Slice<T> {
-        let count = f.len();
+    pub fn whole(r: Records<T>) -> Slice<T> {
+        let count = r.len();
         Slice {
-            file: Arc::new(f),
+            records: Arc::new(r),
             start: 0,
             count,
         }
@@ -88,19 +95,65 @@ impl<T: bytemuck::Pod> Slice<T> {
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
-    pub fn reader(&self) -> Result<RecordReader<T>, sray_engine::Error> {
-        self.file.reader_range(self.start, self.count)
+    pub fn reader(&self) -> Result<RecordsReader<'_, T>, sray_engine::Error> {
+        self.records.reader_range(self.start, self.count)
+    }
+    /// The records, if they are in memory.
+    fn as_slice(&self) -> Option<&[T]> {
+        let v = self.records.as_slice()?;
+        Some(&v[self.start as usize..(self.start + self.count) as usize])
     }
     /// Records `offset .. offset + count` of this slice.
     fn sub(&self, offset: u64, count: u64) -> Option<Slice<T>> {
         (offset.checked_add(count)? <= self.count).then(|| Slice {
-            file: self.file.clone(),
+            records: self.records.clone(),
             start: self.start + offset,
             count,
         })
     }
     fn bytes(&self) -> u64 {
         self.count * std::mem::size_of::<T>() as u64
+    }
+    fn in_memory(&self) -> bool {
+        self.records.memory_bytes() > 0
+    }
+}
+
+/// An intersection's results: as they travel (ray, object, distance), or
+/// in memory with the surfaces the tracer found with them, which spare
+/// the shading its pass over the objects (the paper's join).
+pub enum ResultSlice {
+    Bare(Slice<ResultRec>),
+    Carried(Slice<Outcome>),
+}
+
+impl ResultSlice {
+    pub fn len(&self) -> u64 {
+        match self {
+            ResultSlice::Bare(s) => s.len(),
+            ResultSlice::Carried(s) => s.len(),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    fn sub(&self, offset: u64, count: u64) -> Option<ResultSlice> {
+        Some(match self {
+            ResultSlice::Bare(s) => ResultSlice::Bare(s.sub(offset, count)?),
+            ResultSlice::Carried(s) => ResultSlice::Carried(s.sub(offset, count)?),
+        })
+    }
+    fn bytes(&self) -> u64 {
+        match self {
+            ResultSlice::Bare(s) => s.bytes(),
+            ResultSlice::Carried(s) => s.bytes(),
+        }
+    }
+    fn in_memory(&self) -> bool {
+        match self {
+            ResultSlice::Bare(s) => s.in_memory(),
+            ResultSlice::Carried(s) => s.in_memory(),
+        }
     }
 }
 
@@ -109,11 +162,15 @@ impl<T: bytemuck::Pod> Slice<T> {
 #[derive(Default)]
 pub struct Kept {
     pub rays: Option<Slice<RayRec>>,
-    pub results: Option<Slice<ResultRec>>,
+    pub results: Option<ResultSlice>,
 }
 
-/// Most bytes of records kept (on disk, in the spill directory), and most
-/// tasks' worth; the oldest go first.
+/// A worker's records kept in memory (and tasks' inputs received there)
+/// may take this part of its `--memory`; its tracers take the rest.
+pub const KEPT_MEMORY_PART: u64 = 4;
+
+/// Most bytes of records kept (in memory or in the spill directory), and
+/// most tasks' worth; the oldest go first.
 const KEPT_BYTES: u64 = 1 << 30;
 const KEPT_TASKS: usize = 4096;
 
@@ -127,7 +184,32 @@ struct KeptStore {
 
 impl KeptStore {
     fn size(k: &Kept) -> u64 {
-        k.rays.as_ref().map_or(0, Slice::bytes) + k.results.as_ref().map_or(0, Slice::bytes)
+        k.rays.as_ref().map_or(0, Slice::bytes) + k.results.as_ref().map_or(0, ResultSlice::bytes)
+    }
+
+    fn in_memory(k: &Kept) -> bool {
+        k.rays.as_ref().is_some_and(Slice::in_memory)
+            || k.results.as_ref().is_some_and(ResultSlice::in_memory)
+    }
+
+    /// Drops the oldest records held in memory until `share` has `bytes`
+    /// free (or none are left): records kept longest are the least likely
+    /// to be asked for, and a new task's output pays for its memory only
+    /// while the share lasts (else it goes to a file).
+    fn make_room(&mut self, share: &MemoryShare, bytes: u64) {
+        while share.available() < bytes {
+            let Some(pos) = self
+                .order
+                .iter()
+                .position(|t| self.by_task.get(t).is_some_and(Self::in_memory))
+            else {
+                break;
+            };
+            let t = self.order.remove(pos).expect("in range");
+            if let Some(old) = self.by_task.remove(&t) {
+                self.bytes -= Self::size(&old);
+            }
+        }
     }
 
     fn insert(&mut self, task: u64, k: Kept) {
@@ -278,7 +360,8 @@ fn job_thread<R: Real>(
                 eye: &eye,
                 eye_rays,
                 rt: &rt,
-                kept: &kept,
+                kept: &mut kept,
+                share: &setup.kept_memory,
                 keep: setup.keep,
                 fresh,
             };
@@ -308,7 +391,8 @@ struct TaskCtx<'a> {
     eye: &'a EyeRays,
     eye_rays: u64,
     rt: &'a tokio::runtime::Handle,
-    kept: &'a KeptStore,
+    kept: &'a mut KeptStore,
+    share: &'a MemoryShare,
     keep: bool,
     fresh: bool,
 }
@@ -342,84 +426,137 @@ fn send_records<T: bytemuck::Pod>(
     )
 }
 
-/// A task's input records, in local files.
+/// A task's input records, kept here or received.
 #[derive(Default)]
 pub struct Inputs {
     pub rays: Option<Slice<RayRec>>,
-    pub results: Option<Slice<ResultRec>>,
+    pub results: Option<ResultSlice>,
 }
 
 /// Where a task's input of one kind is gathered: nothing yet, one kept
-/// slice as it is, or records copied into a file of their own.
+/// slice as it is, or records copied into records of their own (in
+/// memory while the share lasts).
 enum Gather<T: bytemuck::Pod> {
     Empty,
     Slice(Slice<T>),
-    File(RecordWriter<T>),
+    Copy(RecordsWriter<T>),
 }
 
 impl<T: bytemuck::Pod> Gather<T> {
-    fn file(
+    fn copy(
         &mut self,
-        tracer_spill: &sray_engine::spill::SpillDir,
-        what: &str,
-    ) -> Result<&mut RecordWriter<T>, String> {
+        share: &MemoryShare,
+        spill: &SpillDir,
+        what: &'static str,
+    ) -> Result<&mut RecordsWriter<T>, String> {
         let io = |e: sray_engine::Error| e.to_string();
         match std::mem::replace(self, Gather::Empty) {
-            Gather::Empty => {
-                *self = Gather::File(RecordWriter::create(tracer_spill, what).map_err(io)?)
-            }
+            Gather::Empty => *self = Gather::Copy(RecordsWriter::new(share, spill, what)),
             Gather::Slice(s) => {
-                let mut w = RecordWriter::create(tracer_spill, what).map_err(io)?;
-                let mut rd = s.reader().map_err(io)?;
-                while let Some(r) = rd.next().map_err(io)? {
-                    w.push(&r).map_err(io)?;
-                }
-                *self = Gather::File(w);
+                let mut w = RecordsWriter::new(share, spill, what);
+                copy_into(&s, &mut w, |r| r).map_err(io)?;
+                *self = Gather::Copy(w);
             }
-            f @ Gather::File(_) => *self = f,
+            c @ Gather::Copy(_) => *self = c,
         }
         match self {
-            Gather::File(w) => Ok(w),
-            _ => unreachable!("made a file"),
+            Gather::Copy(w) => Ok(w),
+            _ => unreachable!("made a copy"),
         }
     }
 
-    fn add_data(
+    fn add(
         &mut self,
-        spill: &sray_engine::spill::SpillDir,
-        what: &str,
-        data: &[u8],
+        share: &MemoryShare,
+        spill: &SpillDir,
+        what: &'static str,
+        recs: &[T],
     ) -> Result<(), String> {
-        let v = decode::<T>(data, records_per_chunk::<T>()).map_err(|e| e.to_string())?;
-        self.file(spill, what)?
-            .extend(&v)
+        self.copy(share, spill, what)?
+            .extend(recs)
             .map_err(|e| e.to_string())
     }
 
     fn add_kept(
         &mut self,
-        spill: &sray_engine::spill::SpillDir,
-        what: &str,
+        share: &MemoryShare,
+        spill: &SpillDir,
+        what: &'static str,
         s: Slice<T>,
     ) -> Result<(), String> {
         if let Gather::Empty = self {
             *self = Gather::Slice(s);
             return Ok(());
         }
-        let io = |e: sray_engine::Error| e.to_string();
-        let w = self.file(spill, what)?;
-        let mut rd = s.reader().map_err(io)?;
-        while let Some(r) = rd.next().map_err(io)? {
-            w.push(&r).map_err(io)?;
-        }
-        Ok(())
+        let w = self.copy(share, spill, what)?;
+        copy_into(&s, w, |r| r).map_err(|e| e.to_string())
     }
 
     fn finish(self) -> Result<Option<Slice<T>>, String> {
         Ok(match self {
             Gather::Empty => None,
             Gather::Slice(s) => Some(s),
-            Gather::File(w) => Some(Slice::whole(w.finish().map_err(|e| e.to_string())?)),
+            Gather::Copy(w) => Some(Slice::whole(w.finish().map_err(|e| e.to_string())?)),
+        })
+    }
+}
+
+/// Appends a slice's records, mapped by `f`, to `w`.
+fn copy_into<S: bytemuck::Pod, T: bytemuck::Pod>(
+    s: &Slice<S>,
+    w: &mut RecordsWriter<T>,
+    f: impl Fn(S) -> T,
+) -> Result<(), sray_engine::Error> {
+    let mut rd = s.reader()?;
+    let mut buf = Vec::with_capacity(4096);
+    loop {
+        buf.clear();
+        while buf.len() < 4096 {
+            match rd.next()? {
+                Some(r) => buf.push(f(r)),
+                None => break,
+            }
+        }
+        if buf.is_empty() {
+            return Ok(());
+        }
+        w.extend(&buf)?;
+    }
+}
+
+/// A task's results as they are gathered: the kept results with their
+/// surfaces, if that is all the input holds, else bare results.
+enum GatherResults {
+    Carried(Slice<Outcome>),
+    Bare(Gather<ResultRec>),
+}
+
+impl GatherResults {
+    /// Goes over to bare results (keeping what came so far, in order).
+    fn bare(
+        &mut self,
+        share: &MemoryShare,
+        spill: &SpillDir,
+    ) -> Result<&mut Gather<ResultRec>, String> {
+        if let GatherResults::Carried(s) = self {
+            let mut w = RecordsWriter::new(share, spill, "in-results");
+            copy_into(s, &mut w, |o| o.res).map_err(|e| e.to_string())?;
+            *self = GatherResults::Bare(Gather::Copy(w));
+        }
+        match self {
+            GatherResults::Bare(g) => Ok(g),
+            GatherResults::Carried(_) => unreachable!("made bare"),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        matches!(self, GatherResults::Bare(Gather::Empty))
+    }
+
+    fn finish(self) -> Result<Option<ResultSlice>, String> {
+        Ok(match self {
+            GatherResults::Carried(s) => Some(ResultSlice::Carried(s)),
+            GatherResults::Bare(g) => g.finish()?.map(ResultSlice::Bare),
         })
     }
 }
@@ -428,6 +565,7 @@ fn read_inputs<R: Real>(
     tracer: &Tracer<R>,
     rt: &tokio::runtime::Handle,
     kept: &KeptStore,
+    share: &MemoryShare,
     input: Input,
 ) -> Result<Inputs, String> {
     let mut inputs = Inputs::default();
@@ -437,7 +575,7 @@ fn read_inputs<R: Real>(
         Input::Stream(s) => s,
     };
     let mut rays = Gather::<RayRec>::Empty;
-    let mut results = Gather::<ResultRec>::Empty;
+    let mut results = GatherResults::Bare(Gather::Empty);
     let spill = &tracer.spill;
     loop {
         let msg = rt
@@ -465,7 +603,7 @@ fn read_inputs<R: Real>(
                         .as_ref()
                         .and_then(|s| s.sub(h.offset, h.count))
                         .ok_or_else(gone)?;
-                    rays.add_kept(spill, "in-rays", s)?;
+                    rays.add_kept(share, spill, "in-rays", s)?;
                 }
                 Ok(RecordKind::Results) => {
                     let s = k
@@ -473,15 +611,39 @@ fn read_inputs<R: Real>(
                         .as_ref()
                         .and_then(|s| s.sub(h.offset, h.count))
                         .ok_or_else(gone)?;
-                    results.add_kept(spill, "in-results", s)?;
+                    match s {
+                        ResultSlice::Carried(c) if results.is_empty() => {
+                            results = GatherResults::Carried(c);
+                        }
+                        ResultSlice::Carried(c) => {
+                            let g = results.bare(share, spill)?;
+                            let w = g.copy(share, spill, "in-results")?;
+                            copy_into(&c, w, |o| o.res).map_err(|e| e.to_string())?;
+                        }
+                        ResultSlice::Bare(b) => {
+                            results
+                                .bare(share, spill)?
+                                .add_kept(share, spill, "in-results", b)?;
+                        }
+                    }
                 }
                 _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
             }
             continue;
         }
         match kind {
-            Ok(RecordKind::Rays) => rays.add_data(spill, "in-rays", &chunk.data)?,
-            Ok(RecordKind::Results) => results.add_data(spill, "in-results", &chunk.data)?,
+            Ok(RecordKind::Rays) => {
+                let v = decode::<RayRec>(&chunk.data, records_per_chunk::<RayRec>())
+                    .map_err(|e| e.to_string())?;
+                rays.add(share, spill, "in-rays", &v)?
+            }
+            Ok(RecordKind::Results) => {
+                let v = decode::<ResultRec>(&chunk.data, records_per_chunk::<ResultRec>())
+                    .map_err(|e| e.to_string())?;
+                results
+                    .bare(share, spill)?
+                    .add(share, spill, "in-results", &v)?
+            }
             _ => return Err(format!("task input: unexpected record kind {}", chunk.kind)),
         }
     }
@@ -508,11 +670,11 @@ fn run_task<R: Real>(
             first.saturating_add(n)
         ));
     }
-    let mut inputs = read_inputs(tracer, rt, ctx.kept, input)?;
+    let mut inputs = read_inputs(tracer, rt, ctx.kept, ctx.share, input)?;
     let t_in = t0.elapsed().as_secs_f64();
     let io = |e: sray_engine::Error| e.to_string();
     // The shard's rays: made here for the eye rays, else as received.
-    let ray_file = if task.eye_rays {
+    let ray_slice = if task.eye_rays {
         None
     } else {
         let f = inputs.rays.as_ref().ok_or("task input: no rays")?;
@@ -523,12 +685,15 @@ fn run_task<R: Real>(
     };
     let rays =
         || -> Result<Box<dyn Iterator<Item = Result<RayRec, sray_engine::Error>> + '_>, String> {
-            Ok(match ray_file {
+            Ok(match ray_slice {
                 None => Box::new((first..first + n).map(|i| Ok(eye_ray(eye, i)))),
-                Some(f) => {
-                    let mut rd = f.reader().map_err(io)?;
-                    Box::new(std::iter::from_fn(move || rd.next().transpose()))
-                }
+                Some(f) => match f.as_slice() {
+                    Some(v) => Box::new(v.iter().map(|&r| Ok(r))),
+                    None => {
+                        let mut rd = f.reader().map_err(io)?;
+                        Box::new(std::iter::from_fn(move || rd.next().transpose()))
+                    }
+                },
             })
         };
     let mut summary = v1::TaskSummary {
@@ -538,37 +703,14 @@ fn run_task<R: Real>(
     let mut kept = None;
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
-            let (mut results, ist) = tracer
+            let (results, ist) = tracer
                 .intersect(first, &mut *rays()?, n, false, &NoProgress)
                 .map_err(io)?;
-            let per = records_per_chunk::<ResultRec>();
-            let mut buf = Vec::with_capacity(per);
-            let mut keep = if ctx.keep {
-                Some(RecordWriter::<ResultRec>::create(&tracer.spill, "kept-results").map_err(io)?)
-            } else {
-                None
-            };
-            while let Some(r) = results.next_result().map_err(io)? {
-                buf.push(r);
-                if buf.len() == per {
-                    send_records(out, RecordKind::Results, &buf)?;
-                    if let Some(w) = &mut keep {
-                        w.extend(&buf).map_err(io)?;
-                    }
-                    buf.clear();
-                }
-            }
-            if !buf.is_empty() {
-                send_records(out, RecordKind::Results, &buf)?;
-                if let Some(w) = &mut keep {
-                    w.extend(&buf).map_err(io)?;
-                }
-            }
-            tracer.recycle(results);
-            if let Some(w) = keep {
+            let kept_results = send_results(tracer, ctx, results, out)?;
+            if let Some(r) = kept_results {
                 kept = Some(Kept {
                     rays: inputs.rays.take(),
-                    results: Some(Slice::whole(w.finish().map_err(io)?)),
+                    results: Some(r),
                 });
             }
             let t = ist.intersection_tests;
@@ -576,14 +718,14 @@ fn run_task<R: Real>(
             summary.stats_json = serde_json::to_string(&ist).unwrap_or_default();
         }
         Ok(v1::Stage::Shade) => {
-            let results_file = inputs.results.as_ref().ok_or("task input: no results")?;
-            if results_file.len() != n {
+            let results_in = inputs.results.as_ref().ok_or("task input: no results")?;
+            if results_in.len() != n {
                 return Err(format!(
                     "task input: {} results for a shard of {n}",
-                    results_file.len()
+                    results_in.len()
                 ));
             }
-            let mut results = ResultReader::File(results_file.reader().map_err(io)?);
+            let mut results = result_reader(tracer, results_in)?;
             let per = records_per_chunk::<Contribution>();
             let mut buf: Vec<Contribution> = Vec::with_capacity(per);
             let mut send_err = None;
@@ -615,6 +757,7 @@ fn run_task<R: Real>(
                     )
                     .map_err(io)?
             };
+            tracer.recycle(results);
             if let Some(e) = send_err {
                 return Err(e);
             }
@@ -622,44 +765,54 @@ fn run_task<R: Real>(
                 send_records(out, RecordKind::Contributions, &buf)?;
             }
             let per = records_per_chunk::<RayRec>();
-            let mut keep = if ctx.keep {
-                Some(RecordWriter::<RayRec>::create(&tracer.spill, "kept-rays").map_err(io)?)
-            } else {
-                None
-            };
-            let mut send_rays = |chunk: &[RayRec]| -> Result<(), String> {
-                send_records(out, RecordKind::Rays, chunk)?;
-                if let Some(w) = &mut keep {
-                    w.extend(chunk).map_err(io)?;
-                }
-                Ok(())
-            };
-            match next.into_vec() {
-                // Sorted in memory: sent from where they lie, and the
-                // buffer goes back to the tracer for the next task's sort.
+            let kept_rays = match next.into_vec() {
+                // Sorted in memory: sent from where they lie, and kept
+                // there if the share allows (else the buffer goes back to
+                // the tracer for the next task's sort).
                 Ok(v) => {
                     for chunk in v.chunks(per) {
-                        send_rays(chunk)?;
+                        send_records(out, RecordKind::Rays, chunk)?;
                     }
-                    tracer.recycle_rays(v);
+                    if ctx.keep {
+                        Some(keep_vec(tracer, ctx, v, "kept-rays", |t, v| {
+                            t.recycle_rays(v)
+                        })?)
+                    } else {
+                        tracer.recycle_rays(v);
+                        None
+                    }
                 }
                 Err(mut sorted) => {
+                    let mut keep = ctx
+                        .keep
+                        .then(|| RecordWriter::<RayRec>::create(&tracer.spill, "kept-rays"))
+                        .transpose()
+                        .map_err(io)?;
                     let mut rbuf = Vec::with_capacity(per);
-                    while let Some(r) = sorted.next().map_err(io)? {
-                        rbuf.push(r);
-                        if rbuf.len() == per {
-                            send_rays(&rbuf)?;
+                    loop {
+                        let r = sorted.next().map_err(io)?;
+                        if let Some(r) = r {
+                            rbuf.push(r);
+                        }
+                        if rbuf.len() == per || (r.is_none() && !rbuf.is_empty()) {
+                            send_records(out, RecordKind::Rays, &rbuf)?;
+                            if let Some(w) = &mut keep {
+                                w.extend(&rbuf).map_err(io)?;
+                            }
                             rbuf.clear();
                         }
+                        if r.is_none() {
+                            break;
+                        }
                     }
-                    if !rbuf.is_empty() {
-                        send_rays(&rbuf)?;
-                    }
+                    keep.map(|w| w.finish().map(|f| Slice::whole(Records::File(f))))
+                        .transpose()
+                        .map_err(io)?
                 }
-            }
-            if let Some(w) = keep {
+            };
+            if let Some(r) = kept_rays {
                 kept = Some(Kept {
-                    rays: Some(Slice::whole(w.finish().map_err(io)?)),
+                    rays: Some(r),
                     results: None,
                 });
             }
@@ -682,4 +835,113 @@ fn run_task<R: Real>(
     );
     send(out, Part::Summary(summary))?;
     Ok(kept)
+}
+
+/// Sends an intersection's results as they travel (ray, object, distance)
+/// and returns what the executor keeps of them: in memory with their
+/// surfaces while the share allows, else bare in a file.
+fn send_results<R: Real>(
+    tracer: &mut Tracer<R>,
+    ctx: &mut TaskCtx<'_>,
+    mut results: ResultReader,
+    out: &mpsc::Sender<v1::TaskOutput>,
+) -> Result<Option<ResultSlice>, String> {
+    let io = |e: sray_engine::Error| e.to_string();
+    let per = records_per_chunk::<ResultRec>();
+    let mut buf = Vec::with_capacity(per);
+    if let ResultReader::Dense { v, .. } = results {
+        for chunk in v.chunks(per) {
+            buf.clear();
+            buf.extend(chunk.iter().map(|o| o.res));
+            send_records(out, RecordKind::Results, &buf)?;
+        }
+        if !ctx.keep {
+            tracer.recycle(ResultReader::Dense { v, next: 0 });
+            return Ok(None);
+        }
+        let s = keep_vec(tracer, ctx, v, "kept-results", |t, v| {
+            t.recycle(ResultReader::Dense { v, next: 0 })
+        })?;
+        return Ok(Some(ResultSlice::Carried(s)));
+    }
+    let mut keep = ctx
+        .keep
+        .then(|| RecordWriter::<ResultRec>::create(&tracer.spill, "kept-results"))
+        .transpose()
+        .map_err(io)?;
+    loop {
+        let r = results.next_result().map_err(io)?;
+        if let Some(r) = r {
+            buf.push(r);
+        }
+        if buf.len() == per || (r.is_none() && !buf.is_empty()) {
+            send_records(out, RecordKind::Results, &buf)?;
+            if let Some(w) = &mut keep {
+                w.extend(&buf).map_err(io)?;
+            }
+            buf.clear();
+        }
+        if r.is_none() {
+            break;
+        }
+    }
+    tracer.recycle(results);
+    keep.map(|w| {
+        w.finish()
+            .map(|f| ResultSlice::Bare(Slice::whole(Records::File(f))))
+    })
+    .transpose()
+    .map_err(io)
+}
+
+/// Keeps a task's output vector: in memory if the share can pay for it
+/// (after dropping older records held in memory), else written to a file
+/// and the vector handed back to the tracer (`give_back`).
+fn keep_vec<R: Real, T: bytemuck::Pod>(
+    tracer: &mut Tracer<R>,
+    ctx: &mut TaskCtx<'_>,
+    v: Vec<T>,
+    what: &str,
+    give_back: impl FnOnce(&mut Tracer<R>, Vec<T>),
+) -> Result<Slice<T>, String> {
+    let bytes = (v.capacity() * std::mem::size_of::<T>()) as u64;
+    ctx.kept.make_room(ctx.share, bytes);
+    if let Some(lease) = ctx.share.try_lease(bytes) {
+        return Ok(Slice::whole(Records::memory(v, lease)));
+    }
+    let io = |e: sray_engine::Error| e.to_string();
+    let mut w = RecordWriter::<T>::create(&tracer.spill, what).map_err(io)?;
+    w.extend(&v).map_err(io)?;
+    give_back(tracer, v);
+    Ok(Slice::whole(Records::File(w.finish().map_err(io)?)))
+}
+
+/// A reader of a shading task's results: kept ones with their surfaces
+/// (copied into the tracer's result buffer), or bare ones, which the
+/// shading joins with the objects.
+fn result_reader<R: Real>(
+    tracer: &mut Tracer<R>,
+    results: &ResultSlice,
+) -> Result<ResultReader, String> {
+    let io = |e: sray_engine::Error| e.to_string();
+    Ok(match results {
+        ResultSlice::Carried(s) => match s.as_slice() {
+            Some(v) => tracer.dense_results(v.iter().copied()),
+            None => {
+                let mut rd = s.reader().map_err(io)?;
+                let mut v = Vec::with_capacity(s.len() as usize);
+                while let Some(o) = rd.next().map_err(io)? {
+                    v.push(o);
+                }
+                tracer.dense_results(v.into_iter())
+            }
+        },
+        ResultSlice::Bare(s) => match (s.as_slice(), &*s.records) {
+            (Some(v), _) => tracer.dense_results(v.iter().map(|&r| Outcome::bare(r))),
+            (None, Records::File(f)) => {
+                ResultReader::File(f.reader_range(s.start, s.count).map_err(io)?)
+            }
+            (None, Records::Memory { .. }) => unreachable!("memory records are a slice"),
+        },
+    })
 }

@@ -3,10 +3,11 @@
 //! job's executor and stream the output back.
 
 use crate::cache::SceneCache;
-use crate::exec::{Executor, Input, JobSetup, Work};
+use crate::exec::{Executor, Input, JobSetup, KEPT_MEMORY_PART, Work};
 use crate::params::from_proto;
 use anyhow::Context;
 use sray_engine::bf::BfOptions;
+use sray_engine::spill::MemoryShare;
 use sray_proto::net::{Client, Target};
 use sray_proto::v1::{self, task_output::Part};
 use std::path::PathBuf;
@@ -41,6 +42,7 @@ pub async fn run(
     shutdown: impl std::future::Future<Output = ()>,
 ) -> anyhow::Result<()> {
     let client = cfg.target.connect_lazy().map_err(anyhow::Error::msg)?;
+    let cfg_memory = cfg.memory;
     let cache = Arc::new(SceneCache::new(&cfg.cache_dir, cfg.cache_max)?);
     let mut node = Node {
         cfg,
@@ -48,6 +50,7 @@ pub async fn run(
         cache,
         execs: Vec::new(),
         running: Arc::new(AtomicU64::new(0)),
+        kept_memory: MemoryShare::new(cfg_memory / KEPT_MEMORY_PART),
     };
     tokio::select! {
         r = node.serve() => r,
@@ -68,6 +71,9 @@ struct Node {
     execs: Vec<Executor>,
     /// The task being run (0: none), for heartbeats.
     running: Arc<AtomicU64>,
+    /// The part of `--memory` that the executors' kept and received
+    /// records may hold in memory (the tracers get the rest).
+    kept_memory: MemoryShare,
 }
 
 /// Setups whose executors (grids, kept records) a worker keeps at once.
@@ -236,14 +242,18 @@ impl Node {
                     db_path: path,
                     opts,
                     bf: BfOptions {
-                        // Results travel to the coordinator without the
-                        // surfaces the carry mode would work out.
-                        shading: sray_engine::bf::Shading::Join,
-                        memory: self.cfg.memory,
+                        // The tracer finds each hit's surface with it: the
+                        // results stay here with them, and a shading of
+                        // kept results needs no pass over the objects.
+                        // Results that come from elsewhere (bare, as they
+                        // travel) are joined with the objects.
+                        shading: sray_engine::bf::Shading::Carry,
+                        memory: self.cfg.memory - self.kept_memory.cap(),
                         store,
                         spill_dir: self.cfg.tmp_dir.clone(),
                     },
                     keep: true,
+                    kept_memory: self.kept_memory.clone(),
                 },
                 tokio::runtime::Handle::current(),
             ));

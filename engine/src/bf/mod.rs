@@ -27,7 +27,7 @@ mod voxels;
 
 pub use crate::render::Contribution;
 pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
-pub use records::{RayKind, RayRec, ResultRec, SPAWN_SLOTS};
+pub use records::{Outcome, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};

@@ -398,6 +398,15 @@ impl<'db, R: Real> Tracer<'db, R> {
         self.radix = Default::default();
     }
 
+    /// Results in ray order, one per ray, read from `outcomes` into the
+    /// reusable result buffer (see [`Tracer::recycle`]).
+    pub fn dense_results(&mut self, outcomes: impl Iterator<Item = Outcome>) -> ResultReader {
+        let mut v = std::mem::take(&mut self.dense_buf);
+        v.clear();
+        v.extend(outcomes);
+        ResultReader::Dense { v, next: 0 }
+    }
+
     /// Hands a dense result buffer back for reuse.
     pub fn recycle(&mut self, results: ResultReader) {
         if let ResultReader::Dense { mut v, .. } = results {

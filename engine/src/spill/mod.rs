@@ -6,10 +6,12 @@
 
 mod radix;
 mod record_file;
+mod records;
 mod sort;
 
 pub use radix::{Scratch as RadixScratch, sort_by_key as radix_sort_by_key};
 pub use record_file::{RecordFile, RecordReader, RecordWriter};
+pub use records::{Lease, MemoryShare, Records, RecordsReader, RecordsWriter};
 pub use sort::{ExternalSorter, Sorted};
 
 use crate::error::{Error, IoContext};

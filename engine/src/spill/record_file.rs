@@ -33,6 +33,15 @@ impl<T: Pod> RecordWriter<T> {
         })
     }
 
+    /// Records written so far.
+    pub fn len(&self) -> u64 {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
     pub fn push(&mut self, r: &T) -> Result<(), Error> {
         self.out
             .write_all(bytemuck::bytes_of(r))

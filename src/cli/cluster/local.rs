@@ -44,6 +44,9 @@ pub async fn render(
         None => tempfile::Builder::new().prefix("sray-local-").tempdir(),
     }
     .context("cannot create a temporary directory")?;
+    // The records in flight take an eighth of the render's memory in the
+    // coordinator (beyond it they spill); the workers share the rest.
+    let records_memory = plan.memory / 8;
     let token = random_token()?;
     let token_file = dir.path().join("token");
     std::fs::write(&token_file, &token).context("cannot write the token file")?;
@@ -53,6 +56,7 @@ pub async fn render(
         worker_wait: Duration::from_secs(30),
         // The user split their own --memory among the workers.
         min_worker_memory: 0,
+        records_memory,
         ..Config::default()
     })?;
     // The workers share one cache, where the scene is already (a link to
@@ -91,7 +95,7 @@ pub async fn render(
         plan.threads
     };
     let each_threads = (threads / plan.workers).max(1);
-    let each_memory = (plan.memory / plan.workers as u64).max(1 << 20);
+    let each_memory = ((plan.memory - records_memory) / plan.workers as u64).max(1 << 20);
     let exe = std::env::current_exe().context("cannot find the sray executable")?;
     let mut children: Vec<Child> = Vec::new();
     let mut logs = Vec::new();
