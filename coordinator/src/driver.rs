@@ -423,6 +423,8 @@ async fn drive(
         rays = r.rays.map(|f| Arc::new(Records::File(f)));
     }
     let mut arbiter = Arbiter::new(shared, job);
+    // The checkpoint being written.
+    let mut checkpointing: Option<tokio::task::JoinHandle<anyhow::Result<Record>>> = None;
     // Which workers hold the round's rays (none after a restart).
     let mut segments: Arc<Vec<Segment>> = Arc::default();
     while n > 0 {
@@ -540,26 +542,34 @@ async fn drive(
         tot.shade_seconds += ts.elapsed().as_secs_f64();
         round += 1;
 
-        // Checkpoint: a restart resumes here.
+        // Checkpoint: a restart resumes here. It is written while the
+        // next round runs (its rays are shared, its frame copied): a
+        // restart before it is complete resumes from the one before, and
+        // checkpoints are written one at a time, in order.
+        if let Some(h) = checkpointing.take() {
+            *rec = h.await??;
+        }
         let e = entry.clone();
         let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
-        let slots = std::mem::take(&mut frame.slots);
+        let slots = frame.slots.clone();
         let rays2 = rays.clone();
         let totals = serde_json::to_value(&tot)?;
-        let (slots, r2) = tokio::task::spawn_blocking(move || {
-            let r = jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals);
-            r.map(|()| (slots, r2))
-        })
-        .await??;
-        frame.slots = slots;
-        *rec = r2;
+        let done = round - 1;
+        checkpointing = Some(tokio::task::spawn_blocking(move || {
+            jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
+            tracing::info!(job = %e.id, round = done, "checkpoint written");
+            Ok(r2)
+        }));
         tracing::info!(
             job = %entry.id,
-            round = round - 1,
+            round = done,
             seconds = round_t0.elapsed().as_secs_f64(),
             next_rays = n,
-            "round done (checkpoint written)"
+            "round done"
         );
+    }
+    if let Some(h) = checkpointing.take() {
+        *rec = h.await??;
     }
     drop(arbiter);
 

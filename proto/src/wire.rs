@@ -107,9 +107,20 @@ fn scratch(buf: &mut Vec<u8>, len: usize) -> &mut [u8] {
 ///
 /// Layout: the record count (u32 little-endian), then the zstd frame.
 pub fn encode<T: Pod>(recs: &[T]) -> Vec<u8> {
-    let size = std::mem::size_of::<T>();
-    let bytes: &[u8] = bytemuck::cast_slice(recs);
-    let n = recs.len();
+    encode_bytes(bytemuck::cast_slice(recs), std::mem::size_of::<T>())
+}
+
+/// [`encode`] of records given as their bytes, `size` bytes each (for a
+/// thread that encodes records of any type).
+///
+/// # Panics
+/// If `bytes` does not hold whole records.
+pub fn encode_bytes(bytes: &[u8], size: usize) -> Vec<u8> {
+    assert!(
+        size > 0 && bytes.len().is_multiple_of(size),
+        "whole records of {size} bytes"
+    );
+    let n = bytes.len() / size;
     with_codec(|c| {
         let planes = scratch(&mut c.planes, bytes.len());
         if size.is_multiple_of(8) {

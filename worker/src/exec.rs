@@ -5,6 +5,7 @@
 //! the network never waits on the tracer nor the tracer on the network,
 //! beyond the few chunks the channels hold.
 
+use crate::output::{Encoder, Output};
 use sray_engine::bf::{
     BfOptions, Contribution, Outcome, RayRec, ResultReader, ResultRec, Tracer, eye_ray,
 };
@@ -16,7 +17,7 @@ use sray_engine::spill::{
     MemoryShare, RecordWriter, Records, RecordsReader, RecordsWriter, SpillDir,
 };
 use sray_proto::v1::{self, RecordKind, task_output::Part};
-use sray_proto::wire::{decode, encode, records_per_chunk};
+use sray_proto::wire::{decode, records_per_chunk};
 use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -340,6 +341,7 @@ fn job_thread<R: Real>(
     );
     let eye_rays = eye.count();
     let mut kept = KeptStore::default();
+    let encoder = Encoder::start();
     for m in rx {
         let w = match m {
             Msg::Run(w) => *w,
@@ -365,7 +367,13 @@ fn job_thread<R: Real>(
                 keep: setup.keep,
                 fresh,
             };
-            run_task(&mut tracer, &mut ctx, &task, input, &out)
+            run_task(
+                &mut tracer,
+                &mut ctx,
+                &task,
+                input,
+                &encoder.output(out.clone()),
+            )
         });
         let r = std::panic::catch_unwind(run).unwrap_or_else(|p| {
             Err(format!(
@@ -403,27 +411,6 @@ fn fail_all(rx: std::sync::mpsc::Receiver<Msg>, e: &str) {
             let _ = w.done.send(Err(e.to_string()));
         }
     }
-}
-
-/// Sends one output message from the executor thread.
-fn send(out: &mpsc::Sender<v1::TaskOutput>, part: Part) -> Result<(), String> {
-    out.blocking_send(v1::TaskOutput { part: Some(part) })
-        .map_err(|_| "the output stream to the coordinator closed".to_string())
-}
-
-fn send_records<T: bytemuck::Pod>(
-    out: &mpsc::Sender<v1::TaskOutput>,
-    kind: RecordKind,
-    recs: &[T],
-) -> Result<(), String> {
-    send(
-        out,
-        Part::Records(v1::RecordChunk {
-            kind: kind as i32,
-            data: encode(recs),
-            held: None,
-        }),
-    )
 }
 
 /// A task's input records, kept here or received.
@@ -659,7 +646,7 @@ fn run_task<R: Real>(
     ctx: &mut TaskCtx<'_>,
     task: &v1::Task,
     input: Input,
-    out: &mpsc::Sender<v1::TaskOutput>,
+    out: &Output<'_>,
 ) -> Result<Option<Kept>, String> {
     let (eye, eye_rays, rt) = (ctx.eye, ctx.eye_rays, ctx.rt);
     let t0 = Instant::now();
@@ -741,7 +728,7 @@ fn run_task<R: Real>(
                         rgb,
                     });
                     if buf.len() == per {
-                        if let Err(e) = send_records(out, RecordKind::Contributions, &buf) {
+                        if let Err(e) = out.records(RecordKind::Contributions, &buf) {
                             send_err = Some(e);
                         }
                         buf.clear();
@@ -762,7 +749,7 @@ fn run_task<R: Real>(
                 return Err(e);
             }
             if !buf.is_empty() {
-                send_records(out, RecordKind::Contributions, &buf)?;
+                out.records(RecordKind::Contributions, &buf)?;
             }
             let per = records_per_chunk::<RayRec>();
             let kept_rays = match next.into_vec() {
@@ -771,7 +758,7 @@ fn run_task<R: Real>(
                 // the tracer for the next task's sort).
                 Ok(v) => {
                     for chunk in v.chunks(per) {
-                        send_records(out, RecordKind::Rays, chunk)?;
+                        out.records(RecordKind::Rays, chunk)?;
                     }
                     if ctx.keep {
                         Some(keep_vec(tracer, ctx, v, "kept-rays", |t, v| {
@@ -795,7 +782,7 @@ fn run_task<R: Real>(
                             rbuf.push(r);
                         }
                         if rbuf.len() == per || (r.is_none() && !rbuf.is_empty()) {
-                            send_records(out, RecordKind::Rays, &rbuf)?;
+                            out.records(RecordKind::Rays, &rbuf)?;
                             if let Some(w) = &mut keep {
                                 w.extend(&rbuf).map_err(io)?;
                             }
@@ -833,7 +820,7 @@ fn run_task<R: Real>(
         seconds = summary.seconds,
         "task run"
     );
-    send(out, Part::Summary(summary))?;
+    out.part(Part::Summary(summary))?;
     Ok(kept)
 }
 
@@ -844,7 +831,7 @@ fn send_results<R: Real>(
     tracer: &mut Tracer<R>,
     ctx: &mut TaskCtx<'_>,
     mut results: ResultReader,
-    out: &mpsc::Sender<v1::TaskOutput>,
+    out: &Output<'_>,
 ) -> Result<Option<ResultSlice>, String> {
     let io = |e: sray_engine::Error| e.to_string();
     let per = records_per_chunk::<ResultRec>();
@@ -853,7 +840,7 @@ fn send_results<R: Real>(
         for chunk in v.chunks(per) {
             buf.clear();
             buf.extend(chunk.iter().map(|o| o.res));
-            send_records(out, RecordKind::Results, &buf)?;
+            out.records(RecordKind::Results, &buf)?;
         }
         if !ctx.keep {
             tracer.recycle(ResultReader::Dense { v, next: 0 });
@@ -875,7 +862,7 @@ fn send_results<R: Real>(
             buf.push(r);
         }
         if buf.len() == per || (r.is_none() && !buf.is_empty()) {
-            send_records(out, RecordKind::Results, &buf)?;
+            out.records(RecordKind::Results, &buf)?;
             if let Some(w) = &mut keep {
                 w.extend(&buf).map_err(io)?;
             }

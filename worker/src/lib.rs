@@ -12,6 +12,7 @@
 pub mod cache;
 pub mod exec;
 pub mod node;
+mod output;
 pub mod params;
 
 pub use node::{WorkerConfig, run};
