@@ -58,6 +58,8 @@ fn same(what: &str, img: &[u8], stats: &serde_json::Value, want: &(Vec<u8>, serd
     }
 }
 
+/// A client's render on the coordinator at `url`, in small shards (512
+/// rays) so that even small images make many tasks.
 fn render_args<'a>(
     scene: &'a str,
     url: &'a str,
@@ -65,24 +67,7 @@ fn render_args<'a>(
     out: &'a str,
     size: &'a str,
 ) -> Vec<&'a str> {
-    vec![
-        "render",
-        scene,
-        "-o",
-        out,
-        "--coordinator",
-        url,
-        "--token-file",
-        token,
-        "--width",
-        size,
-        "--height",
-        size,
-        "--shard-rays",
-        "512",
-        "--stats",
-        "cluster.json",
-    ]
+    cluster::render_args(scene, url, token, out, size, "512")
 }
 
 fn cluster_stats(dir: &Path) -> serde_json::Value {

@@ -7,7 +7,7 @@
 
 use crate::common;
 
-use common::cluster::{coordinator, coordinator_on};
+use common::cluster::{self, coordinator, coordinator_on};
 use common::{Proc, fails, json, ok};
 use sray_proto::auth::Token;
 use sray_proto::net::{Client, Target};
@@ -39,6 +39,8 @@ fn embedded(dir: &Path, scene: &str, size: &str) -> Vec<u8> {
     std::fs::read(dir.join(out)).unwrap()
 }
 
+/// A client's render on the coordinator at `url`, in small shards (256
+/// rays) so that even small images make many tasks.
 fn render_args<'a>(
     scene: &'a str,
     url: &'a str,
@@ -46,24 +48,7 @@ fn render_args<'a>(
     out: &'a str,
     size: &'a str,
 ) -> Vec<&'a str> {
-    vec![
-        "render",
-        scene,
-        "-o",
-        out,
-        "--coordinator",
-        url,
-        "--token-file",
-        token,
-        "--width",
-        size,
-        "--height",
-        size,
-        "--shard-rays",
-        "256",
-        "--stats",
-        "cluster.json",
-    ]
+    cluster::render_args(scene, url, token, out, size, "256")
 }
 
 /// A client render in the background, its tickets in `dir/tickets`.

@@ -189,6 +189,36 @@ pub mod cluster {
     use super::Proc;
     use std::path::Path;
 
+    /// The arguments of a client's render of `scene` at `size`x`size` on
+    /// the coordinator at `url`, statistics to `cluster.json`.
+    pub fn render_args<'a>(
+        scene: &'a str,
+        url: &'a str,
+        token: &'a str,
+        out: &'a str,
+        size: &'a str,
+        shard_rays: &'a str,
+    ) -> Vec<&'a str> {
+        vec![
+            "render",
+            scene,
+            "-o",
+            out,
+            "--coordinator",
+            url,
+            "--token-file",
+            token,
+            "--width",
+            size,
+            "--height",
+            size,
+            "--shard-rays",
+            shard_rays,
+            "--stats",
+            "cluster.json",
+        ]
+    }
+
     /// A coordinator listening on `listen` (`127.0.0.1:0` for a free port)
     /// with its data in `data`, fast heartbeats and a worker declared lost
     /// after 2 s of silence (unless `extra` sets `--worker-timeout`), and

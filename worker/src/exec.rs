@@ -769,33 +769,13 @@ fn run_task<R: Real>(
                         None
                     }
                 }
-                Err(mut sorted) => {
-                    let mut keep = ctx
-                        .keep
-                        .then(|| RecordWriter::<RayRec>::create(&tracer.spill, "kept-rays"))
-                        .transpose()
-                        .map_err(io)?;
-                    let mut rbuf = Vec::with_capacity(per);
-                    loop {
-                        let r = sorted.next().map_err(io)?;
-                        if let Some(r) = r {
-                            rbuf.push(r);
-                        }
-                        if rbuf.len() == per || (r.is_none() && !rbuf.is_empty()) {
-                            out.records(RecordKind::Rays, &rbuf)?;
-                            if let Some(w) = &mut keep {
-                                w.extend(&rbuf).map_err(io)?;
-                            }
-                            rbuf.clear();
-                        }
-                        if r.is_none() {
-                            break;
-                        }
-                    }
-                    keep.map(|w| w.finish().map(|f| Slice::whole(Records::File(f))))
-                        .transpose()
-                        .map_err(io)?
-                }
+                Err(mut sorted) => stream_and_keep(
+                    out,
+                    RecordKind::Rays,
+                    ctx.keep.then_some((&tracer.spill, "kept-rays")),
+                    || sorted.next(),
+                )?
+                .map(|f| Slice::whole(Records::File(f))),
             };
             if let Some(r) = kept_rays {
                 kept = Some(Kept {
@@ -833,7 +813,6 @@ fn send_results<R: Real>(
     mut results: ResultReader,
     out: &Output<'_>,
 ) -> Result<Option<ResultSlice>, String> {
-    let io = |e: sray_engine::Error| e.to_string();
     let per = records_per_chunk::<ResultRec>();
     let mut buf = Vec::with_capacity(per);
     if let ResultReader::Dense { v, .. } = results {
@@ -851,34 +830,47 @@ fn send_results<R: Real>(
         })?;
         return Ok(Some(ResultSlice::Carried(s)));
     }
-    let mut keep = ctx
-        .keep
-        .then(|| RecordWriter::<ResultRec>::create(&tracer.spill, "kept-results"))
+    let kept = stream_and_keep(
+        out,
+        RecordKind::Results,
+        ctx.keep.then_some((&tracer.spill, "kept-results")),
+        || results.next_result(),
+    )?;
+    tracer.recycle(results);
+    Ok(kept.map(|f| ResultSlice::Bare(Slice::whole(Records::File(f)))))
+}
+
+/// Sends the records `next` yields, in chunks, and writes them to a file
+/// too if `keep` names one (the spill directory and what for).
+fn stream_and_keep<T: bytemuck::Pod>(
+    out: &Output<'_>,
+    kind: RecordKind,
+    keep: Option<(&SpillDir, &str)>,
+    mut next: impl FnMut() -> Result<Option<T>, sray_engine::Error>,
+) -> Result<Option<sray_engine::spill::RecordFile<T>>, String> {
+    let io = |e: sray_engine::Error| e.to_string();
+    let per = records_per_chunk::<T>();
+    let mut w = keep
+        .map(|(spill, what)| RecordWriter::<T>::create(spill, what))
         .transpose()
         .map_err(io)?;
+    let mut buf = Vec::with_capacity(per);
     loop {
-        let r = results.next_result().map_err(io)?;
+        let r = next().map_err(io)?;
         if let Some(r) = r {
             buf.push(r);
         }
         if buf.len() == per || (r.is_none() && !buf.is_empty()) {
-            out.records(RecordKind::Results, &buf)?;
-            if let Some(w) = &mut keep {
+            out.records(kind, &buf)?;
+            if let Some(w) = &mut w {
                 w.extend(&buf).map_err(io)?;
             }
             buf.clear();
         }
         if r.is_none() {
-            break;
+            return w.map(|w| w.finish()).transpose().map_err(io);
         }
     }
-    tracer.recycle(results);
-    keep.map(|w| {
-        w.finish()
-            .map(|f| ResultSlice::Bare(Slice::whole(Records::File(f))))
-    })
-    .transpose()
-    .map_err(io)
 }
 
 /// Keeps a task's output vector: in memory if the share can pay for it
