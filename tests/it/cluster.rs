@@ -274,6 +274,54 @@ fn local_workers_render_the_embedded_image_and_stop() {
     );
 }
 
+/// Local workers share one cache, where the scene is a link to the
+/// user's own database: no worker touches the user's file (its
+/// modification time stays), and none takes another's use of the scene
+/// for a changed database (which failed tasks and had them run again).
+#[test]
+fn local_workers_leave_the_users_database_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(d, &["gen", "balls", "-s", "2", "-o", "b.sdb", "--quiet"]);
+    // An old modification time, so that a touch could not go unseen
+    // within the file system's time resolution.
+    let old = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+    std::fs::File::options()
+        .write(true)
+        .open(d.join("b.sdb"))
+        .unwrap()
+        .set_modified(old)
+        .unwrap();
+    for _ in 0..2 {
+        ok(
+            d,
+            &[
+                "render",
+                "b.sdb",
+                "-o",
+                "b.png",
+                "--local-workers",
+                "2",
+                "--width",
+                "48",
+                "--height",
+                "48",
+                "--shard-rays",
+                "256",
+                "--stats",
+                "cluster.json",
+            ],
+        );
+        let s = cluster_stats(d);
+        assert_eq!(s["tasks_requeued"], 0, "{s}");
+        let now = std::fs::metadata(d.join("b.sdb"))
+            .unwrap()
+            .modified()
+            .unwrap();
+        assert_eq!(now, old, "the user's database was touched");
+    }
+}
+
 #[test]
 fn a_job_without_workers_fails_cleanly() {
     let dir = tempfile::tempdir().unwrap();

@@ -132,14 +132,20 @@ impl SceneCache {
             t.persist(&path)
                 .with_context(|| path.display().to_string())?;
         }
-        // Last use is the file's modification time (symlinks, as a local
-        // render makes, are left alone).
+        // Last use is the file's access time, set here. Not its
+        // modification time: that is part of the database's stamp, and a
+        // worker with the file open (another worker sharing the cache)
+        // would take a new one for a changed database and fail its task.
+        // A symlink (a local render links the user's own database) is
+        // left alone: the user's file is not ours to touch.
         let written = !bad.is_empty();
         if !(touch || written) {
             return Ok((path, false));
         }
-        if let Ok(f) = OpenOptions::new().write(true).open(&path) {
-            let _ = f.set_modified(std::time::SystemTime::now());
+        let linked = std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_symlink());
+        if !linked && let Ok(f) = OpenOptions::new().write(true).open(&path) {
+            let now = std::time::SystemTime::now();
+            let _ = f.set_times(std::fs::FileTimes::new().set_accessed(now));
         }
         self.evict(hash);
         Ok((path, written))
@@ -163,7 +169,7 @@ impl SceneCache {
                 if !md.is_file() {
                     return None;
                 }
-                Some((md.modified().ok()?, md.len(), f.path()))
+                Some((md.accessed().ok()?, md.len(), f.path()))
             })
             .collect();
         let keep_size =
