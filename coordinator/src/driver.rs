@@ -427,149 +427,162 @@ async fn drive(
     let mut checkpointing: Option<tokio::task::JoinHandle<anyhow::Result<Record>>> = None;
     // Which workers hold the round's rays (none after a restart).
     let mut segments: Arc<Vec<Segment>> = Arc::default();
-    while n > 0 {
-        tot.rays_per_round.push(n);
-        let shards: Vec<(u64, u64)> = (0..n.div_ceil(job.shard_rays))
-            .map(|i| {
-                let first = i * job.shard_rays;
-                (first, job.shard_rays.min(n - first))
-            })
-            .collect();
-        tot.shards_per_round.push(shards.len() as u64);
-        let eye = rays.is_none();
-        let round_t0 = Instant::now();
-        tracing::info!(job = %entry.id, round, rays = n, shards = shards.len(), "round started");
-
-        // Intersect every shard.
-        let ts = Instant::now();
-        let inputs: Vec<Arc<TaskInput>> = shards
-            .iter()
-            .map(|&(first, _)| {
-                Arc::new(TaskInput {
-                    rays: rays.clone(),
-                    results: None,
-                    results_offset: 0,
-                    objects: job.objects,
-                    corners,
-                    held: Held {
-                        rays: segments.clone(),
-                        intersect: None,
-                        shard_first: first,
-                    },
+    // The rounds, in a block of their own: however they end (an error,
+    // a cancellation), the checkpoint being written is waited for before
+    // the job's outcome is journaled, so that it cannot overwrite it.
+    let rounds: anyhow::Result<Frame> = async {
+        let mut frame = frame;
+        while n > 0 {
+            tot.rays_per_round.push(n);
+            let shards: Vec<(u64, u64)> = (0..n.div_ceil(job.shard_rays))
+                .map(|i| {
+                    let first = i * job.shard_rays;
+                    (first, job.shard_rays.min(n - first))
                 })
-            })
-            .collect();
-        let mut stage = Stage {
-            shared,
-            entry,
-            job,
-            round,
-            stage: v1::Stage::Intersect,
-            eye,
-            shards: &shards,
-            inputs,
-            main_ids: Vec::new(),
-        };
-        let outs = stage.run(&mut tot, &mut arbiter).await?;
-        let intersect_ids = stage.main_ids.clone();
-        let mut round_passes = Vec::new();
-        let mut winners = Vec::new();
-        let results: Vec<_> = outs
-            .into_iter()
-            .map(|(o, w)| {
-                round_passes.push(passes_of(&o.summary.stats_json));
-                winners.push(w.session);
-                o.results
-                    .map(Arc::new)
-                    .context("an intersection task returned no results")
-            })
-            .collect::<anyhow::Result<_>>()?;
-        tot.passes
-            .push(round_passes.into_iter().flatten().collect());
-        tot.intersect_seconds += ts.elapsed().as_secs_f64();
+                .collect();
+            tot.shards_per_round.push(shards.len() as u64);
+            let eye = rays.is_none();
+            let round_t0 = Instant::now();
+            tracing::info!(job = %entry.id, round, rays = n, shards = shards.len(), "round started");
 
-        // Shade every shard.
-        let ts = Instant::now();
-        stage.stage = v1::Stage::Shade;
-        stage.inputs = shards
-            .iter()
-            .enumerate()
-            .map(|(i, &(first, _))| {
-                Arc::new(TaskInput {
-                    rays: rays.clone(),
-                    results: Some(results[i].clone()),
-                    results_offset: 0,
-                    objects: job.objects,
-                    corners,
-                    held: Held {
-                        rays: Arc::default(),
-                        intersect: Some((intersect_ids[i], winners[i].clone())),
-                        shard_first: first,
-                    },
+            // Intersect every shard.
+            let ts = Instant::now();
+            let inputs: Vec<Arc<TaskInput>> = shards
+                .iter()
+                .map(|&(first, _)| {
+                    Arc::new(TaskInput {
+                        rays: rays.clone(),
+                        results: None,
+                        results_offset: 0,
+                        objects: job.objects,
+                        corners,
+                        held: Held {
+                            rays: segments.clone(),
+                            intersect: None,
+                            shard_first: first,
+                        },
+                    })
                 })
-            })
-            .collect();
-        let outs = stage.run(&mut tot, &mut arbiter).await?;
-        // The next round's rays are the shards' spawned rays in shard
-        // order (each shard's keys lie below the next one's), each run
-        // held by the worker that spawned it.
-        let mut segs = Vec::with_capacity(outs.len());
-        let mut start = 0;
-        for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
-            tot.shading_scans += stat_of(&o.summary.stats_json, "db_scans").unwrap_or(0);
-            let len = o.rays.as_ref().map_or(0, |r| r.len());
-            if len > 0 {
-                segs.push(Segment {
-                    start,
-                    len,
-                    task: id,
-                    session: w.session.clone(),
-                });
+                .collect();
+            let mut stage = Stage {
+                shared,
+                entry,
+                job,
+                round,
+                stage: v1::Stage::Intersect,
+                eye,
+                shards: &shards,
+                inputs,
+                main_ids: Vec::new(),
+            };
+            let outs = stage.run(&mut tot, &mut arbiter).await?;
+            let intersect_ids = stage.main_ids.clone();
+            let mut round_passes = Vec::new();
+            let mut winners = Vec::new();
+            let results: Vec<_> = outs
+                .into_iter()
+                .map(|(o, w)| {
+                    round_passes.push(passes_of(&o.summary.stats_json));
+                    winners.push(w.session);
+                    o.results
+                        .map(Arc::new)
+                        .context("an intersection task returned no results")
+                })
+                .collect::<anyhow::Result<_>>()?;
+            tot.passes
+                .push(round_passes.into_iter().flatten().collect());
+            tot.intersect_seconds += ts.elapsed().as_secs_f64();
+
+            // Shade every shard.
+            let ts = Instant::now();
+            stage.stage = v1::Stage::Shade;
+            stage.inputs = shards
+                .iter()
+                .enumerate()
+                .map(|(i, &(first, _))| {
+                    Arc::new(TaskInput {
+                        rays: rays.clone(),
+                        results: Some(results[i].clone()),
+                        results_offset: 0,
+                        objects: job.objects,
+                        corners,
+                        held: Held {
+                            rays: Arc::default(),
+                            intersect: Some((intersect_ids[i], winners[i].clone())),
+                            shard_first: first,
+                        },
+                    })
+                })
+                .collect();
+            let outs = stage.run(&mut tot, &mut arbiter).await?;
+            // The next round's rays are the shards' spawned rays in shard
+            // order (each shard's keys lie below the next one's), each run
+            // held by the worker that spawned it.
+            let mut segs = Vec::with_capacity(outs.len());
+            let mut start = 0;
+            for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
+                tot.shading_scans += stat_of(&o.summary.stats_json, "db_scans").unwrap_or(0);
+                let len = o.rays.as_ref().map_or(0, |r| r.len());
+                if len > 0 {
+                    segs.push(Segment {
+                        start,
+                        len,
+                        task: id,
+                        session: w.session.clone(),
+                    });
+                }
+                start += len;
             }
-            start += len;
-        }
-        let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();
-        drop(stage);
-        drop(results);
-        // Colour into the frame; spawned rays in key order.
-        let (spill, share) = (shared.spill.clone(), shared.records.clone());
-        let (f, next) =
-            tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill, &share)).await??;
-        frame = f;
-        n = next.as_ref().map_or(0, |f| f.len());
-        segments = Arc::new(if start == n { segs } else { Vec::new() });
-        rays = next.map(Arc::new);
-        tot.shade_seconds += ts.elapsed().as_secs_f64();
-        round += 1;
+            let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();
+            drop(stage);
+            drop(results);
+            // Colour into the frame; spawned rays in key order.
+            let (spill, share) = (shared.spill.clone(), shared.records.clone());
+            let (f, next) =
+                tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill, &share)).await??;
+            frame = f;
+            n = next.as_ref().map_or(0, |f| f.len());
+            segments = Arc::new(if start == n { segs } else { Vec::new() });
+            rays = next.map(Arc::new);
+            tot.shade_seconds += ts.elapsed().as_secs_f64();
+            round += 1;
 
-        // Checkpoint: a restart resumes here. It is written while the
-        // next round runs (its rays are shared, its frame copied): a
-        // restart before it is complete resumes from the one before, and
-        // checkpoints are written one at a time, in order.
-        if let Some(h) = checkpointing.take() {
-            *rec = h.await??;
+            // Checkpoint: a restart resumes here. It is written while the
+            // next round runs (its rays are shared, its frame copied): a
+            // restart before it is complete resumes from the one before, and
+            // checkpoints are written one at a time, in order.
+            if let Some(h) = checkpointing.take() {
+                *rec = h.await??;
+            }
+            let e = entry.clone();
+            let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
+            let slots = frame.slots.clone();
+            let rays2 = rays.clone();
+            let totals = serde_json::to_value(&tot)?;
+            let done = round - 1;
+            checkpointing = Some(tokio::task::spawn_blocking(move || {
+                jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
+                tracing::info!(job = %e.id, round = done, "checkpoint written");
+                Ok(r2)
+            }));
+            tracing::info!(
+                job = %entry.id,
+                round = done,
+                seconds = round_t0.elapsed().as_secs_f64(),
+                next_rays = n,
+                "round done"
+            );
         }
-        let e = entry.clone();
-        let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
-        let slots = frame.slots.clone();
-        let rays2 = rays.clone();
-        let totals = serde_json::to_value(&tot)?;
-        let done = round - 1;
-        checkpointing = Some(tokio::task::spawn_blocking(move || {
-            jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
-            tracing::info!(job = %e.id, round = done, "checkpoint written");
-            Ok(r2)
-        }));
-        tracing::info!(
-            job = %entry.id,
-            round = done,
-            seconds = round_t0.elapsed().as_secs_f64(),
-            next_rays = n,
-            "round done"
-        );
+        Ok(frame)
     }
-    if let Some(h) = checkpointing.take() {
-        *rec = h.await??;
+    .await;
+    let last = match checkpointing.take() {
+        Some(h) => Some(h.await),
+        None => None,
+    };
+    let frame = rounds?;
+    if let Some(r) = last {
+        *rec = r??;
     }
     drop(arbiter);
 
