@@ -1246,7 +1246,9 @@ fn merge_shade(
                 "spawned rays out of key order across shards"
             );
         }
-        // The output's memory goes back to the share as it is copied.
+        // The output's memory goes back to the share once it is copied
+        // (the next round's rays spill if the outputs and the copy do not
+        // fit together).
         match r.as_slice() {
             Some(v) => {
                 w.extend(v)?;

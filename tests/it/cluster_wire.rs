@@ -107,6 +107,20 @@ fn kept_results_shade_without_a_pass_and_spilled_ones_by_the_join() {
     );
     eprintln!("shading scans with 2 MiB: {}", s["shading_scans"]);
     assert!(s["shading_scans"].as_u64().unwrap() > 0, "{s}");
+    // Two workers in 1 MiB: results received from the coordinator (a
+    // shard intersected by the other worker, or records dropped to make
+    // room) are too many to widen in memory and are read from a file.
+    let want = embedded(d, "spd:balls:2", "128", "emb2.png");
+    let s = local_render(
+        d,
+        "spd:balls:2",
+        "128",
+        "2",
+        "4096",
+        &["--memory", "1MiB"],
+        &want,
+    );
+    assert!(s["shading_scans"].as_u64().unwrap() > 0, "{s}");
 }
 
 /// Two local workers: still the embedded image; the traffic stays small

@@ -115,8 +115,9 @@ impl<T: bytemuck::Pod> Slice<T> {
     fn bytes(&self) -> u64 {
         self.count * std::mem::size_of::<T>() as u64
     }
-    fn in_memory(&self) -> bool {
-        self.records.memory_bytes() > 0
+    /// In memory, and held by this slice alone.
+    fn in_memory_alone(&self) -> bool {
+        self.records.memory_bytes() > 0 && Arc::strong_count(&self.records) == 1
     }
 }
 
@@ -150,10 +151,10 @@ impl ResultSlice {
             ResultSlice::Carried(s) => s.bytes(),
         }
     }
-    fn in_memory(&self) -> bool {
+    fn in_memory_alone(&self) -> bool {
         match self {
-            ResultSlice::Bare(s) => s.in_memory(),
-            ResultSlice::Carried(s) => s.in_memory(),
+            ResultSlice::Bare(s) => s.in_memory_alone(),
+            ResultSlice::Carried(s) => s.in_memory_alone(),
         }
     }
 }
@@ -188,21 +189,28 @@ impl KeptStore {
         k.rays.as_ref().map_or(0, Slice::bytes) + k.results.as_ref().map_or(0, ResultSlice::bytes)
     }
 
-    fn in_memory(k: &Kept) -> bool {
-        k.rays.as_ref().is_some_and(Slice::in_memory)
-            || k.results.as_ref().is_some_and(ResultSlice::in_memory)
+    /// Whether dropping the entry gives memory back: it holds records in
+    /// memory that nothing else holds.
+    fn frees_memory(k: &Kept) -> bool {
+        k.rays.as_ref().is_some_and(Slice::in_memory_alone)
+            || k.results.as_ref().is_some_and(ResultSlice::in_memory_alone)
     }
 
     /// Drops the oldest records held in memory until `share` has `bytes`
     /// free (or none are left): records kept longest are the least likely
     /// to be asked for, and a new task's output pays for its memory only
     /// while the share lasts (else it goes to a file).
+    /// Only records held by nothing else are dropped (a slice shared with
+    /// a task's input or another entry would stay in memory anyway).
     fn make_room(&mut self, share: &MemoryShare, bytes: u64) {
+        if bytes > share.cap() {
+            return;
+        }
         while share.available() < bytes {
             let Some(pos) = self
                 .order
                 .iter()
-                .position(|t| self.by_task.get(t).is_some_and(Self::in_memory))
+                .position(|t| self.by_task.get(t).is_some_and(Self::frees_memory))
             else {
                 break;
             };
@@ -290,7 +298,8 @@ impl Executor {
     /// The tasks whose records this executor keeps (for a TaskInput
     /// request: the coordinator sends only what is not among them).
     /// Between this call and the task's input being read nothing is
-    /// dropped: the executor drops kept records only when a task ends.
+    /// dropped: a task drops kept records only after it has read its
+    /// input, and the list is brought up to date when it ends.
     pub fn held(&self) -> Vec<u64> {
         self.held.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
@@ -387,9 +396,11 @@ fn job_thread<R: Real>(
         let r = r.map(|k| {
             if let Some(k) = k {
                 kept.insert(task.task_id, k);
-                *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
             }
         });
+        // After every task, failed or not: a task may have dropped kept
+        // records to make room before it failed.
+        *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
         let _ = done.send(r);
     }
 }
@@ -895,32 +906,98 @@ fn keep_vec<R: Real, T: bytemuck::Pod>(
     Ok(Slice::whole(Records::File(w.finish().map_err(io)?)))
 }
 
-/// A reader of a shading task's results: kept ones with their surfaces
-/// (copied into the tracer's result buffer), or bare ones, which the
-/// shading joins with the objects.
+/// A reader of a shading task's results. Kept ones carry their surfaces
+/// (no pass over the objects); bare ones are joined with the objects.
+/// They are copied into the tracer's result buffer when its budget holds
+/// them all, and else read from a file as they are needed.
 fn result_reader<R: Real>(
     tracer: &mut Tracer<R>,
     results: &ResultSlice,
 ) -> Result<ResultReader, String> {
     let io = |e: sray_engine::Error| e.to_string();
+    let fits = tracer.budget.results_resident(results.len());
     Ok(match results {
+        // Kept with their surfaces only when the intersection's results
+        // were in memory, which the same budget allows now.
         ResultSlice::Carried(s) => match s.as_slice() {
             Some(v) => tracer.dense_results(v.iter().copied()),
             None => {
                 let mut rd = s.reader().map_err(io)?;
-                let mut v = Vec::with_capacity(s.len() as usize);
-                while let Some(o) = rd.next().map_err(io)? {
-                    v.push(o);
+                let mut err = None;
+                let r = tracer.dense_results(std::iter::from_fn(|| {
+                    rd.next().unwrap_or_else(|e| {
+                        err = Some(e);
+                        None
+                    })
+                }));
+                if let Some(e) = err {
+                    return Err(io(e));
                 }
-                tracer.dense_results(v.into_iter())
+                r
             }
         },
-        ResultSlice::Bare(s) => match (s.as_slice(), &*s.records) {
-            (Some(v), _) => tracer.dense_results(v.iter().map(|&r| Outcome::bare(r))),
-            (None, Records::File(f)) => {
+        ResultSlice::Bare(s) => match (s.as_slice(), &*s.records, fits) {
+            (Some(v), _, true) => tracer.dense_results(v.iter().map(|&r| Outcome::bare(r))),
+            (Some(v), _, false) => {
+                // Too many to widen in memory: to a file, read as needed
+                // (the reader keeps the file open after its name is gone).
+                let mut w =
+                    RecordWriter::<ResultRec>::create(&tracer.spill, "in-results").map_err(io)?;
+                w.extend(v).map_err(io)?;
+                ResultReader::File(w.finish().map_err(io)?.reader().map_err(io)?)
+            }
+            (None, Records::File(f), _) => {
                 ResultReader::File(f.reader_range(s.start, s.count).map_err(io)?)
             }
-            (None, Records::Memory { .. }) => unreachable!("memory records are a slice"),
+            (None, Records::Memory { .. }, _) => unreachable!("memory records are a slice"),
         },
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bytemuck::Zeroable;
+
+    /// Bare results `n` long, in memory and paid for by `share`.
+    fn results(share: &MemoryShare, n: usize) -> Slice<ResultRec> {
+        let v = vec![ResultRec::zeroed(); n];
+        let bytes = (v.capacity() * std::mem::size_of::<ResultRec>()) as u64;
+        let lease = share.try_lease(bytes).expect("room in the share");
+        Slice::whole(Records::memory(v, lease))
+    }
+
+    fn kept(s: Slice<ResultRec>) -> Kept {
+        Kept {
+            rays: None,
+            results: Some(ResultSlice::Bare(s)),
+        }
+    }
+
+    #[test]
+    fn making_room_drops_the_oldest_records_only_they_hold() {
+        let size = std::mem::size_of::<ResultRec>() as u64;
+        let share = MemoryShare::new(30 * size);
+        let mut store = KeptStore::default();
+        let a = results(&share, 10);
+        // A task's input still holds b's records: dropping b's entry
+        // would free nothing.
+        let b = results(&share, 10);
+        let b_input = b.sub(0, 10).unwrap();
+        store.insert(1, kept(b));
+        store.insert(2, kept(a));
+        store.insert(3, kept(results(&share, 10)));
+        assert_eq!(share.available(), 0);
+        // More than the whole share: nothing is dropped for nothing.
+        store.make_room(&share, 31 * size);
+        assert_eq!(store.ids(), vec![1, 2, 3]);
+        // Room for 15: task 1 is oldest but shared, so 2 then 3 go.
+        store.make_room(&share, 15 * size);
+        assert_eq!(store.ids(), vec![1]);
+        assert_eq!(share.available(), 20 * size);
+        drop(b_input);
+        store.make_room(&share, 30 * size);
+        assert!(store.ids().is_empty());
+        assert_eq!(share.used(), 0);
+    }
 }

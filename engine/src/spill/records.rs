@@ -207,28 +207,6 @@ impl<T: Pod> RecordsWriter<T> {
         }
     }
 
-    /// Starts with `v` (emptied first) as the memory buffer, if the share
-    /// can pay for its capacity; else in a file.
-    pub fn with_buffer(
-        share: &MemoryShare,
-        spill: &SpillDir,
-        what: &'static str,
-        mut v: Vec<T>,
-    ) -> Result<RecordsWriter<T>, Error> {
-        v.clear();
-        let mut lease = share.lease();
-        if lease.grow((v.capacity() * std::mem::size_of::<T>()) as u64) {
-            Ok(RecordsWriter::Memory {
-                v,
-                lease,
-                spill: spill.clone(),
-                what,
-            })
-        } else {
-            Ok(RecordsWriter::File(RecordWriter::create(spill, what)?))
-        }
-    }
-
     pub fn len(&self) -> u64 {
         match self {
             RecordsWriter::Memory { v, .. } => v.len() as u64,
