@@ -55,12 +55,33 @@ pub struct Job {
     pub opts: RenderOptions,
     pub store: StoreNumber,
     pub shard_rays: u64,
+    /// The job left the shard size to the coordinator (see [`shard_size`]).
+    pub auto_shard: bool,
     /// The format of the image sent back.
     pub format: ImageFormat,
     pub objects: u64,
     pub eps: f64,
     pub grids: Vec<sray_engine::grid::GridStat>,
 }
+
+/// Rays per shard in a round of `n` rays on `workers` workers: the job's
+/// size, except when the job left it to the coordinator and one worker
+/// does the work. No shard then waits for another worker, and fewer,
+/// larger shards make fewer passes over the database (one local worker,
+/// balls4 512x512: 1.34 s in shards of 65,536 rays, 1.18 s in two shards
+/// per round; with two workers the smaller shards balance better); two
+/// per round keep the coordinator's handling of one beside the worker's
+/// tracing of the other.
+fn shard_size(job: &Job, n: u64, workers: usize) -> u64 {
+    if job.auto_shard && workers == 1 {
+        job.shard_rays.max(n.div_ceil(2).min(AUTO_SHARD_MAX))
+    } else {
+        job.shard_rays
+    }
+}
+
+/// The largest shard [`shard_size`] makes by itself.
+const AUTO_SHARD_MAX: u64 = 1 << 20;
 
 /// Fewest and most rays per shard a job may ask for.
 const SHARD_RAYS: std::ops::RangeInclusive<u64> = 256..=(1 << 24);
@@ -172,6 +193,7 @@ impl Job {
             opts,
             store,
             shard_rays,
+            auto_shard: spec.shard_rays == 0,
             format,
             grids,
         })
@@ -434,10 +456,11 @@ async fn drive(
         let mut frame = frame;
         while n > 0 {
             tot.rays_per_round.push(n);
-            let shards: Vec<(u64, u64)> = (0..n.div_ceil(job.shard_rays))
+            let per = shard_size(job, n, shared.worker_count());
+            let shards: Vec<(u64, u64)> = (0..n.div_ceil(per))
                 .map(|i| {
-                    let first = i * job.shard_rays;
-                    (first, job.shard_rays.min(n - first))
+                    let first = i * per;
+                    (first, per.min(n - first))
                 })
                 .collect();
             tot.shards_per_round.push(shards.len() as u64);
