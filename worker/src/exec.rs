@@ -104,6 +104,27 @@ impl<T: bytemuck::Pod> Slice<T> {
         let v = self.records.as_slice()?;
         Some(&v[self.start as usize..(self.start + self.count) as usize])
     }
+    /// The records as a vector of their own, if this slice is all of
+    /// them, in memory, and held by nothing else (their memory then leaves
+    /// the share: the caller accounts for it).
+    fn whole_vec(self) -> Result<Vec<T>, Slice<T>> {
+        if self.start != 0 || self.count != self.records.len() {
+            return Err(self);
+        }
+        let (start, count) = (self.start, self.count);
+        match Arc::try_unwrap(self.records) {
+            Ok(r) => r.into_vec().map_err(|r| Slice {
+                records: Arc::new(r),
+                start,
+                count,
+            }),
+            Err(records) => Err(Slice {
+                records,
+                start,
+                count,
+            }),
+        }
+    }
     /// Records `offset .. offset + count` of this slice.
     fn sub(&self, offset: u64, count: u64) -> Option<Slice<T>> {
         (offset.checked_add(count)? <= self.count).then(|| Slice {
@@ -237,6 +258,13 @@ impl KeptStore {
                 self.bytes -= Self::size(&old);
             }
         }
+    }
+
+    fn remove(&mut self, task: u64) -> Option<Kept> {
+        let k = self.by_task.remove(&task)?;
+        self.bytes -= Self::size(&k);
+        self.order.retain(|&t| t != task);
+        Some(k)
     }
 
     fn ids(&self) -> Vec<u64> {
@@ -562,7 +590,7 @@ impl GatherResults {
 fn read_inputs<R: Real>(
     tracer: &Tracer<R>,
     rt: &tokio::runtime::Handle,
-    kept: &KeptStore,
+    kept: &mut KeptStore,
     share: &MemoryShare,
     input: Input,
 ) -> Result<Inputs, String> {
@@ -604,11 +632,21 @@ fn read_inputs<R: Real>(
                     rays.add_kept(share, spill, "in-rays", s)?;
                 }
                 Ok(RecordKind::Results) => {
-                    let s = k
-                        .results
-                        .as_ref()
-                        .and_then(|s| s.sub(h.offset, h.count))
-                        .ok_or_else(gone)?;
+                    // A shading named an intersection's whole results
+                    // with their surfaces takes them (and drops the
+                    // intersection's entry, whose rays came first): no
+                    // task asks for them again, a retry gets them from the
+                    // coordinator, and the tracer shades from their buffer
+                    // as it is (see `result_reader`).
+                    let whole = results.is_empty()
+                        && h.offset == 0
+                        && matches!(&k.results, Some(ResultSlice::Carried(c)) if c.len() == h.count);
+                    let s = if whole {
+                        kept.remove(h.task_id).and_then(|k| k.results)
+                    } else {
+                        k.results.as_ref().and_then(|s| s.sub(h.offset, h.count))
+                    }
+                    .ok_or_else(gone)?;
                     match s {
                         ResultSlice::Carried(c) if results.is_empty() => {
                             results = GatherResults::Carried(c);
@@ -723,6 +761,7 @@ fn run_task<R: Real>(
                     results_in.len()
                 ));
             }
+            let results_in = inputs.results.take().expect("checked above");
             let mut results = result_reader(tracer, results_in)?;
             let per = records_per_chunk::<Contribution>();
             let mut buf: Vec<Contribution> = Vec::with_capacity(per);
@@ -912,29 +951,35 @@ fn keep_vec<R: Real, T: bytemuck::Pod>(
 /// them all, and else read from a file as they are needed.
 fn result_reader<R: Real>(
     tracer: &mut Tracer<R>,
-    results: &ResultSlice,
+    results: ResultSlice,
 ) -> Result<ResultReader, String> {
     let io = |e: sray_engine::Error| e.to_string();
     let fits = tracer.budget.results_resident(results.len());
     Ok(match results {
         // Kept with their surfaces only when the intersection's results
         // were in memory, which the same budget allows now.
-        ResultSlice::Carried(s) => match s.as_slice() {
-            Some(v) => tracer.dense_results(v.iter().copied()),
-            None => {
-                let mut rd = s.reader().map_err(io)?;
-                let mut err = None;
-                let r = tracer.dense_results(std::iter::from_fn(|| {
-                    rd.next().unwrap_or_else(|e| {
-                        err = Some(e);
-                        None
-                    })
-                }));
-                if let Some(e) = err {
-                    return Err(io(e));
+        ResultSlice::Carried(s) => match s.whole_vec() {
+            // Held by this task alone: shaded from where they lie, and
+            // the buffer goes back to the tracer (no copy, no fresh
+            // memory for the next intersection).
+            Ok(v) => ResultReader::Dense { v, next: 0 },
+            Err(s) => match s.as_slice() {
+                Some(v) => tracer.dense_results(v.iter().copied()),
+                None => {
+                    let mut rd = s.reader().map_err(io)?;
+                    let mut err = None;
+                    let r = tracer.dense_results(std::iter::from_fn(|| {
+                        rd.next().unwrap_or_else(|e| {
+                            err = Some(e);
+                            None
+                        })
+                    }));
+                    if let Some(e) = err {
+                        return Err(io(e));
+                    }
+                    r
                 }
-                r
-            }
+            },
         },
         ResultSlice::Bare(s) => match (s.as_slice(), &*s.records, fits) {
             (Some(v), _, true) => tracer.dense_results(v.iter().map(|&r| Outcome::bare(r))),

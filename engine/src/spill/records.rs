@@ -136,6 +136,15 @@ impl<T: Pod> Records<T> {
         }
     }
 
+    /// The vector of records in memory (their lease ends: the caller
+    /// accounts for them from now on), or the records as they are.
+    pub fn into_vec(self) -> Result<Vec<T>, Records<T>> {
+        match self {
+            Records::Memory { v, .. } => Ok(v),
+            f @ Records::File(_) => Err(f),
+        }
+    }
+
     /// The records in memory, if that is where they are.
     pub fn as_slice(&self) -> Option<&[T]> {
         match self {
