@@ -109,7 +109,9 @@ pub struct WorkerArgs {
     /// Tracer threads (default: all cores)
     #[arg(long)]
     pub threads: Option<usize>,
-    /// Memory budget of the tracer (e.g. 2GiB; default: half of the available memory)
+    /// Memory budget of the worker: its tracers take three quarters, the
+    /// records it keeps for later tasks at most a quarter (e.g. 2GiB;
+    /// default: half of the available memory)
     #[arg(long, value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub memory: Option<u64>,
     /// Where scenes are cached, by content hash
