@@ -11,6 +11,8 @@
 
 pub mod cache;
 pub mod exec;
+mod inputs;
+mod kept;
 pub mod node;
 mod output;
 pub mod params;
