@@ -89,10 +89,6 @@ impl Lease {
         self.bytes += if ok { more } else { 0 };
         ok
     }
-
-    pub fn bytes(&self) -> u64 {
-        self.bytes
-    }
 }
 
 impl Drop for Lease {
