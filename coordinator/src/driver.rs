@@ -577,17 +577,19 @@ async fn drive(
             if let Some(h) = checkpointing.take() {
                 *rec = h.await??;
             }
-            let e = entry.clone();
-            let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
-            let slots = frame.slots.clone();
-            let rays2 = rays.clone();
-            let totals = serde_json::to_value(&tot)?;
             let done = round - 1;
-            checkpointing = Some(tokio::task::spawn_blocking(move || {
-                jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
-                tracing::info!(job = %e.id, round = done, "checkpoint written");
-                Ok(r2)
-            }));
+            if shared.cfg.checkpoints {
+                let e = entry.clone();
+                let mut r2: Record = serde_json::from_value(serde_json::to_value(&*rec)?)?;
+                let slots = frame.slots.clone();
+                let rays2 = rays.clone();
+                let totals = serde_json::to_value(&tot)?;
+                checkpointing = Some(tokio::task::spawn_blocking(move || {
+                    jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
+                    tracing::info!(job = %e.id, round = done, "checkpoint written");
+                    Ok(r2)
+                }));
+            }
             tracing::info!(
                 job = %entry.id,
                 round = done,

@@ -473,11 +473,16 @@ pub fn checkpoint(
     let dir = &e.dir;
     let rays_name = format!("rays-{next_round}.bin");
     write_atomic(dir, &rays_name, |w| {
-        if let Some(rays) = rays {
-            let mut rd = rays.reader()?;
-            while let Some(r) = rd.next()? {
-                w.write_all(bytemuck::bytes_of(&r))?;
+        match rays.map(|r| (r, r.as_slice())) {
+            // In memory: written in one piece.
+            Some((_, Some(s))) => w.write_all(bytemuck::cast_slice(s))?,
+            Some((rays, None)) => {
+                let mut rd = rays.reader()?;
+                while let Some(r) = rd.next()? {
+                    w.write_all(bytemuck::bytes_of(&r))?;
+                }
             }
+            None => {}
         }
         Ok(())
     })?;

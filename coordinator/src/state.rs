@@ -105,6 +105,11 @@ pub struct Config {
     /// Memory for the records in flight (rounds' rays, tasks' outputs);
     /// beyond it they go to spill files.
     pub records_memory: u64,
+    /// Journal each round's rays and frame, so that a restarted
+    /// coordinator resumes its jobs where they were. Off where the data
+    /// directory does not outlive the process (a `--local-workers` render),
+    /// for whom a checkpoint is work no one reads.
+    pub checkpoints: bool,
     pub limits: Limits,
 }
 
@@ -134,6 +139,7 @@ impl Default for Config {
             min_worker_memory: MIN_WORKER_MEMORY,
             arbiter_memory: 256 << 20,
             records_memory: 256 << 20,
+            checkpoints: true,
             limits: Limits::default(),
         }
     }

@@ -57,6 +57,14 @@ pub async fn render(
         // The user split their own --memory among the workers.
         min_worker_memory: 0,
         records_memory,
+        // The data directory goes with this process: no restart could
+        // resume from a checkpoint.
+        checkpoints: false,
+        // The workers are this process's children, running its executable
+        // on this machine: a wrong answer of theirs would be a fault the
+        // embedded render shares, which re-tracing samples here cannot
+        // tell apart. Verification is for workers elsewhere.
+        verify_fraction: 0.0,
         ..Config::default()
     })?;
     // The workers share one cache, where the scene is already (a link to
