@@ -248,6 +248,8 @@ fn kubernetes_manifests_hold_together() {
     // Per workload: pod labels and named container ports, for the Services.
     let mut pods: Vec<(Yaml, BTreeMap<String, i64>)> = Vec::new();
     let mut roles = Vec::new();
+    // (role, token flag, secret name)
+    let mut tokens: Vec<(String, String, String)> = Vec::new();
     for (file, d) in &docs {
         if !["Deployment", "StatefulSet", "DaemonSet"].contains(&kind(d).as_str()) {
             continue;
@@ -358,19 +360,44 @@ fn kubernetes_manifests_hold_together() {
                     }
                 }
             }
-            let token = flag(&args, "--token-file").unwrap_or_else(|| panic!("{what}: no token"));
-            let (_, secret, _) = mounts
-                .iter()
-                .find(|(p, v, _)| under(token, p) && !v["secret"].is_badvalue())
-                .unwrap_or_else(|| {
-                    panic!("{what}: --token-file {token} comes from no Secret volume")
-                });
-            // Files of a secret volume belong to root and group fsGroup.
-            let mode = secret["secret"]["defaultMode"].as_i64().unwrap_or(0o644);
-            assert!(
-                mode & 0o040 != 0,
-                "{what}: the token is not readable by group fsGroup"
-            );
+            // The coordinator takes a token for the workers and another for
+            // the clients; a worker only the workers' one.
+            let token_flags: &[&str] = if role == "coordinator" {
+                assert!(
+                    flag(&args, "--token-file").is_none(),
+                    "{what}: one --token-file would serve workers and clients alike"
+                );
+                &["--worker-token-file", "--client-token-file"]
+            } else {
+                &["--token-file"]
+            };
+            let mut secret_names = Vec::new();
+            for f in token_flags {
+                let token = flag(&args, f).unwrap_or_else(|| panic!("{what}: no {f}"));
+                let (_, secret, _) = mounts
+                    .iter()
+                    .find(|(p, v, _)| under(token, p) && !v["secret"].is_badvalue())
+                    .unwrap_or_else(|| panic!("{what}: {f} {token} comes from no Secret volume"));
+                // Files of a secret volume belong to root and group fsGroup.
+                let mode = secret["secret"]["defaultMode"].as_i64().unwrap_or(0o644);
+                assert!(
+                    mode & 0o040 != 0,
+                    "{what}: the token is not readable by group fsGroup"
+                );
+                let name = str_of(&secret["secret"]["secretName"], "secretName").to_string();
+                tokens.push((role.clone(), f.to_string(), name.clone()));
+                secret_names.push(name);
+            }
+            // Secrets mounted beyond the tokens it reads: a worker must not
+            // hold the clients' token.
+            for (_, v, _) in &mounts {
+                if let Some(n) = v["secret"]["secretName"].as_str() {
+                    assert!(
+                        secret_names.iter().any(|x| x == n),
+                        "{what}: mounts secret {n}, which it does not read"
+                    );
+                }
+            }
 
             let res = &c["resources"];
             for side in ["requests", "limits"] {
@@ -473,6 +500,23 @@ fn kubernetes_manifests_hold_together() {
         ["coordinator", "worker"],
         "one coordinator and one worker workload"
     );
+    let secret_of = |role: &str, f: &str| {
+        tokens
+            .iter()
+            .find(|(r, fl, _)| r == role && fl == f)
+            .map(|(_, _, n)| n.clone())
+            .unwrap_or_else(|| panic!("{role}: no {f}"))
+    };
+    assert_eq!(
+        secret_of("worker", "--token-file"),
+        secret_of("coordinator", "--worker-token-file"),
+        "the workers read the token the coordinator expects of workers"
+    );
+    assert_ne!(
+        secret_of("coordinator", "--worker-token-file"),
+        secret_of("coordinator", "--client-token-file"),
+        "workers and clients have tokens of their own"
+    );
 
     // Services select a pod and name its ports.
     for (file, d) in docs.iter().filter(|(_, d)| kind(d) == "Service") {
@@ -557,6 +601,8 @@ fn compose_file_holds_together() {
     let c = &docs[0];
     let services = c["services"].as_hash().expect("services");
     assert!(services.len() >= 2);
+    // (role, token flag, secret)
+    let mut tokens: Vec<(String, String, String)> = Vec::new();
     for (name, secret) in c["secrets"].as_hash().expect("top-level secrets") {
         let name = str_of(name, "secret");
         assert!(
@@ -591,12 +637,23 @@ fn compose_file_holds_together() {
             }
         }
 
-        // The token as a secret the image's user can read.
-        let token = flag(&cmd, "--token-file").unwrap_or_else(|| panic!("{what}: no token"));
+        // The tokens as secrets the image's user can read: the
+        // coordinator's for workers and for clients, a worker's only the
+        // workers' one.
+        let role = cmd[0].as_str();
+        let token_flags: &[&str] = if role == "coordinator" {
+            assert!(
+                flag(&cmd, "--token-file").is_none(),
+                "{what}: one --token-file would serve workers and clients alike"
+            );
+            &["--worker-token-file", "--client-token-file"]
+        } else {
+            &["--token-file"]
+        };
         let secrets = s["secrets"]
             .as_vec()
             .unwrap_or_else(|| panic!("{what}: no secrets"));
-        let mut found = false;
+        let mut targets = Vec::new();
         for sec in secrets {
             let source = str_of(&sec["source"], "secret source");
             assert!(
@@ -604,7 +661,7 @@ fn compose_file_holds_together() {
                 "{what}: secret {source} is defined"
             );
             let target = sec["target"].as_str().unwrap_or(source);
-            found |= token == format!("/run/secrets/{target}");
+            targets.push((format!("/run/secrets/{target}"), source.to_string()));
             assert_eq!(
                 sec["uid"].as_str(),
                 Some(uid.to_string().as_str()),
@@ -621,7 +678,19 @@ fn compose_file_holds_together() {
                 "{what}: secret mode 0o400"
             );
         }
-        assert!(found, "{what}: --token-file {token} is one of its secrets");
+        for f in token_flags {
+            let token = flag(&cmd, f).unwrap_or_else(|| panic!("{what}: no {f}"));
+            let (_, source) = targets
+                .iter()
+                .find(|(t, _)| t == token)
+                .unwrap_or_else(|| panic!("{what}: {f} {token} is none of its secrets"));
+            tokens.push((role.to_string(), f.to_string(), source.clone()));
+        }
+        assert_eq!(
+            targets.len(),
+            token_flags.len(),
+            "{what}: holds only the secrets it reads (a worker must not hold the clients' token)"
+        );
 
         // A healthcheck that runs something the image has.
         let test = strings(&s["healthcheck"]["test"], "healthcheck.test");
@@ -668,6 +737,23 @@ fn compose_file_holds_together() {
             other => panic!("{what}: runs {other}"),
         }
     }
+    let secret_of = |role: &str, f: &str| {
+        tokens
+            .iter()
+            .find(|(r, fl, _)| r == role && fl == f)
+            .map(|(_, _, n)| n.clone())
+            .unwrap_or_else(|| panic!("{role}: no {f}"))
+    };
+    assert_eq!(
+        secret_of("worker", "--token-file"),
+        secret_of("coordinator", "--worker-token-file"),
+        "the workers read the token the coordinator expects of workers"
+    );
+    assert_ne!(
+        secret_of("coordinator", "--worker-token-file"),
+        secret_of("coordinator", "--client-token-file"),
+        "workers and clients have tokens of their own"
+    );
 }
 
 /// Answers one HTTP request with `status`; returns the port and the
@@ -776,6 +862,28 @@ fn systemd_units_spill_to_their_own_directories_and_verify() {
             "{what}: --tmp-dir {tmp} is in none of {owned:?}"
         );
     }
+    // Workers and clients have tokens of their own; a worker reads only
+    // the workers' one.
+    let unit_args = |name: &str| exec_start(&read(&format!("deploy/systemd/{name}")));
+    let coord = unit_args("sray-coordinator.service");
+    let worker = unit_args("sray-worker.service");
+    assert!(
+        flag(&coord, "--token-file").is_none(),
+        "coordinator: one token for all"
+    );
+    let (w, c) = (
+        flag(&coord, "--worker-token-file").expect("coordinator: --worker-token-file"),
+        flag(&coord, "--client-token-file").expect("coordinator: --client-token-file"),
+    );
+    assert_ne!(
+        w, c,
+        "coordinator: the workers' and the clients' token are one file"
+    );
+    assert_eq!(
+        flag(&worker, "--token-file"),
+        Some(w),
+        "the worker reads the token the coordinator expects of workers"
+    );
 
     let Ok(v) = Command::new("systemd-analyze").arg("--version").output() else {
         eprintln!("skipped: systemd-analyze is not installed (Debian: systemd)");
