@@ -176,10 +176,12 @@ fn shade_carried(
                 }
             })
     });
+    let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
     for (rays, c) in setup.outputs[..n_chunks].iter() {
         *counts += *c;
-        next.extend_from_slice(rays)?;
+        parts.push(rays);
     }
+    pool.install(|| next.extend_from_slices(&parts))?;
     carried.clear();
     Ok(())
 }
@@ -239,10 +241,12 @@ fn shade_set(
                     }
                 })
         });
+        let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
         for (rays, c) in setup.outputs[..n_chunks].iter() {
             *counts += *c;
-            next.extend_from_slice(rays)?;
+            parts.push(rays);
         }
+        pool.install(|| next.extend_from_slices(&parts))?;
         at = stop;
     }
     st.db_scans += 1;
