@@ -11,7 +11,7 @@ use crate::kept::KeptStore;
 pub use crate::kept::{KEPT_MEMORY_PART, Kept, ResultSlice, Slice};
 use crate::output::{Encoder, Output};
 use sray_engine::bf::{
-    BfOptions, Contribution, Outcome, RayRec, ResultReader, ResultRec, Tracer, eye_ray,
+    BfOptions, Contribution, Outcome, RayRec, RaySource, ResultReader, ResultRec, Tracer, eye_ray,
 };
 use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
@@ -285,19 +285,25 @@ fn run_task<R: Real>(
         }
         Some(f)
     };
-    let rays =
-        || -> Result<Box<dyn Iterator<Item = Result<RayRec, sray_engine::Error>> + '_>, String> {
-            Ok(match ray_slice {
-                None => Box::new((first..first + n).map(|i| Ok(eye_ray(eye, i)))),
-                Some(f) => match f.as_slice() {
-                    Some(v) => Box::new(v.iter().map(|&r| Ok(r))),
-                    None => {
-                        let mut rd = f.reader().map_err(io)?;
-                        Box::new(std::iter::from_fn(move || rd.next().transpose()))
-                    }
-                },
-            })
-        };
+    // The rays by id where that is possible (made here, or in memory):
+    // every thread of the tracer then takes its own.
+    let with_rays = |f: &mut dyn FnMut(RaySource<'_>) -> Result<(), String>| match ray_slice {
+        None => f(RaySource::Indexed {
+            len: n,
+            ray: &|i| eye_ray(eye, first + i),
+        }),
+        Some(s) => match s.as_slice() {
+            Some(v) => f(RaySource::Indexed {
+                len: v.len() as u64,
+                ray: &|i| v[i as usize],
+            }),
+            None => {
+                let mut rd = s.reader().map_err(io)?;
+                let mut it = std::iter::from_fn(move || rd.next().transpose());
+                f(RaySource::Stream(&mut it))
+            }
+        },
+    };
     let mut summary = v1::TaskSummary {
         built_grids: ctx.fresh,
         ..Default::default()
@@ -305,9 +311,16 @@ fn run_task<R: Real>(
     let mut kept = None;
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
-            let (results, ist) = tracer
-                .intersect(first, &mut *rays()?, n, false, &NoProgress)
-                .map_err(io)?;
+            let mut done = None;
+            with_rays(&mut |src| {
+                done = Some(
+                    tracer
+                        .intersect(first, src, n, false, &NoProgress)
+                        .map_err(io)?,
+                );
+                Ok(())
+            })?;
+            let (results, ist) = done.expect("set by the call above");
             let kept_results = send_results(tracer, ctx, results, out)?;
             if let Some(r) = kept_results {
                 kept = Some(Kept {
@@ -350,15 +363,16 @@ fn run_task<R: Real>(
                         buf.clear();
                     }
                 };
-                tracer
-                    .shade(
-                        first,
-                        &mut *rays()?,
-                        &mut results,
-                        &mut contribute,
-                        &mut counts,
-                    )
-                    .map_err(io)?
+                let mut done = None;
+                with_rays(&mut |src| {
+                    done = Some(
+                        tracer
+                            .shade(first, src, &mut results, &mut contribute, &mut counts)
+                            .map_err(io)?,
+                    );
+                    Ok(())
+                })?;
+                done.expect("set by the call above")
             };
             tracer.recycle(results);
             if let Some(e) = send_err {

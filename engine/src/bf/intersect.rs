@@ -271,6 +271,8 @@ struct Shard<R> {
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
     done: Vec<Outcome>,
+    /// Slots holding a ray.
+    live: usize,
     /// Store numbers of the walks registered this pass, and their number.
     store_sum: u64,
     store_walks: u64,
@@ -337,6 +339,7 @@ impl<R: Real> Slots<R> {
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
                     done: Vec::new(),
+                    live: 0,
                     store_sum: 0,
                     store_walks: 0,
                 })
@@ -382,6 +385,7 @@ impl<R: Real> Slots<R> {
             crate::math::V3::new(R::ONE, R::ZERO, R::ZERO),
         );
         for sh in self.shards.iter_mut() {
+            sh.live = 0;
             sh.hot.clear();
             sh.hot.resize(per, empty_hot());
             sh.q.resize(per, q0);
@@ -414,6 +418,7 @@ fn misses_every_grid(r: &RayRec, grids: &VoxelGrids, eps: f64) -> bool {
 
 /// Puts a ray into a slot.
 fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
+    sh.live += 1;
     let o = Vec3::from_array(r.o);
     let d = Vec3::from_array(r.d);
     let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
@@ -450,6 +455,138 @@ fn load<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
     };
 }
 
+/// Where a run's rays come from.
+pub enum RaySource<'a> {
+    /// In id order, one after the other (a file being read).
+    Stream(&'a mut dyn Iterator<Item = Result<RayRec, Error>>),
+    /// Ray `i` of the run's `len`, made or looked up on demand by any
+    /// thread (eye rays, rays in memory).
+    Indexed {
+        len: u64,
+        ray: &'a (dyn Fn(u64) -> RayRec + Sync),
+    },
+}
+
+/// Rays read in id order.
+type RayStream<'a> = &'a mut dyn Iterator<Item = Result<RayRec, Error>>;
+/// Where finished rays' results go, one by one.
+type Emit<'a> = &'a mut dyn FnMut(Outcome) -> Result<(), Error>;
+
+/// Where a run's results go.
+pub enum ResultSink<'a> {
+    /// Each finished ray's result, in completion order, misses included.
+    Each(&'a mut dyn FnMut(Outcome) -> Result<(), Error>),
+    /// Hits written at their ray's place, with `first` added to the ray
+    /// id; the buffer (one entry per ray) holds misses already.
+    Dense { v: &'a mut [Outcome], first: u64 },
+}
+
+/// Admission of rays that can be had by id (see [`intersect_rays`]): the
+/// same rays, in the same order, as filling the slots one by one from a
+/// stream, but with the rays made, looked at and loaded by all threads.
+struct ByIdFill<'a> {
+    ray: &'a (dyn Fn(u64) -> RayRec + Sync),
+    total: u64,
+    /// The first id not yet admitted or passed over.
+    next: u64,
+    /// Whether each ray of the window looked at meets no grid (reused).
+    sky: Vec<bool>,
+    /// The ids admitted this pass, in order: shard `k` loads
+    /// `ids[start[k]..start[k + 1]]` into its empty slots, in slot order.
+    ids: Vec<u64>,
+    start: Vec<usize>,
+}
+
+impl ByIdFill<'_> {
+    /// Admits up to `free[k]` rays for shard `k`, in order: the next rays
+    /// that meet some grid, as the serial fill would have given them to
+    /// the empty slots of shard 0, then shard 1, ... Returns the number
+    /// of rays passed over because they meet no grid (misses at once).
+    fn admit(
+        &mut self,
+        free: &[usize],
+        pool: &rayon::ThreadPool,
+        grids: &VoxelGrids,
+        eps: f64,
+    ) -> u64 {
+        let want: usize = free.iter().sum();
+        self.ids.clear();
+        let mut sky = 0;
+        while self.ids.len() < want && self.next < self.total {
+            // A window a little larger than what is missing: few rays are
+            // looked at twice, and a sky-heavy window is followed by
+            // another.
+            let need = want - self.ids.len();
+            let w = ((need + need / 4 + 64) as u64).min(self.total - self.next) as usize;
+            self.sky.resize(w, false);
+            let (ray, base) = (self.ray, self.next);
+            pool.install(|| {
+                self.sky[..w]
+                    .par_iter_mut()
+                    .enumerate()
+                    .with_min_len(1024)
+                    .for_each(|(i, s)| *s = misses_every_grid(&ray(base + i as u64), grids, eps))
+            });
+            let mut used = w;
+            for (i, &s) in self.sky[..w].iter().enumerate() {
+                if self.ids.len() == want {
+                    used = i;
+                    break;
+                }
+                if s {
+                    sky += 1;
+                } else {
+                    self.ids.push(base + i as u64);
+                }
+            }
+            self.next += used as u64;
+        }
+        self.start.clear();
+        let mut at = 0;
+        for &f in free {
+            self.start.push(at);
+            at = (at + f).min(self.ids.len());
+        }
+        self.start.push(at);
+        sky
+    }
+}
+
+/// Writes the finished rays' results into their places in `v` (ids count
+/// from 0; `first` is added), every thread a contiguous part of `v`. Each
+/// shard's finished rays are sorted by id, so that each part finds its own
+/// in every shard by bisection. Misses are in `v` already.
+fn put_results<R: Real>(
+    shards: &mut [Shard<R>],
+    v: &mut [Outcome],
+    first: u64,
+    pool: &rayon::ThreadPool,
+) {
+    pool.install(|| {
+        shards
+            .par_iter_mut()
+            .for_each(|sh| sh.done.sort_unstable_by_key(|o| o.res.ray));
+        let part = v.len().div_ceil(pool.current_num_threads().max(1)).max(1);
+        let shards = &*shards;
+        v.par_chunks_mut(part).enumerate().for_each(|(k, dst)| {
+            let lo = (k * part) as u64;
+            let hi = lo + dst.len() as u64;
+            for sh in shards {
+                let d = &sh.done;
+                let a = d.partition_point(|o| o.res.ray < lo);
+                let b = d.partition_point(|o| o.res.ray < hi);
+                for o in &d[a..b] {
+                    if !o.res.prim.is_none() {
+                        let at = (o.res.ray - lo) as usize;
+                        dst[at] = *o;
+                        dst[at].res.ray += first;
+                    }
+                }
+            }
+        });
+    });
+}
+
 /// Intersects every ray `rays` yields (with ids `0, 1, ...` in order),
 /// passing each ray's result to `emit` in completion order.
 #[allow(clippy::too_many_arguments)]
@@ -457,15 +594,63 @@ pub fn intersect_rays<R: Real>(
     setup: &mut IntersectSetup<'_>,
     pool: &rayon::ThreadPool,
     slots: &mut Slots<R>,
-    rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+    source: RaySource<'_>,
     total: u64,
-    emit: &mut dyn FnMut(Outcome) -> Result<(), Error>,
+    sink: ResultSink<'_>,
     progress: &dyn Progress,
 ) -> Result<IntersectStats, Error> {
     // No more slots than rays.
     slots.ensure((setup.slots as u64).min(total).max(1) as usize);
     let shards = &mut slots.shards;
     let ngrids = setup.grids.grids.len();
+    // Rays that can be had by id, with results that have a place each:
+    // every shard fills its slots from its own blocks of ids and writes
+    // its results into its own blocks of the buffer, in parallel. Else
+    // this thread fills the slots in order and passes results on.
+    let mut by_id: Option<ByIdFill<'_>> = None;
+    let mut dense: Option<(&mut [Outcome], u64)> = None;
+    let mut stream_of_indexed;
+    let mut dense_emit;
+    let (rays, emit): (RayStream<'_>, Emit<'_>) = match (source, sink) {
+        (RaySource::Indexed { len, ray }, ResultSink::Dense { v, first })
+            if len == total && v.len() as u64 == total =>
+        {
+            by_id = Some(ByIdFill {
+                ray,
+                total,
+                next: 0,
+                sky: Vec::new(),
+                ids: Vec::new(),
+                start: Vec::new(),
+            });
+            dense = Some((v, first));
+            (&mut std::iter::empty(), &mut |_| Ok(()))
+        }
+        (source, sink) => {
+            let rays: RayStream<'_> = match source {
+                RaySource::Stream(it) => it,
+                RaySource::Indexed { len, ray: f } => {
+                    stream_of_indexed = (0..len).map(move |i| Ok(f(i)));
+                    &mut stream_of_indexed
+                }
+            };
+            let emit: Emit<'_> = match sink {
+                ResultSink::Each(e) => e,
+                ResultSink::Dense { v, first } => {
+                    dense_emit = move |mut r: Outcome| {
+                        if !r.res.prim.is_none() {
+                            let i = r.res.ray as usize;
+                            r.res.ray += first;
+                            v[i] = r;
+                        }
+                        Ok(())
+                    };
+                    &mut dense_emit
+                }
+            };
+            (rays, emit)
+        }
+    };
     let mut st = IntersectStats {
         rays: total,
         ..Default::default()
@@ -476,6 +661,10 @@ pub fn intersect_rays<R: Real>(
     let mut active: u64 = 0;
     // Rays that left at once and are not yet counted in the progress.
     let mut sky: u64 = 0;
+    if by_id.is_some() {
+        // Admitted by `ByIdFill`, loaded by the shards themselves.
+        exhausted = true;
+    }
     loop {
         // Fill empty slots, in slot order. A ray that meets no grid's box
         // (the sky around a model) is a miss at once and takes no slot.
@@ -522,6 +711,13 @@ pub fn intersect_rays<R: Real>(
                 }
             }
         }
+        if let Some(fill) = by_id.as_mut() {
+            let free: Vec<usize> = shards.iter().map(|sh| sh.hot.len() - sh.live).collect();
+            let passed = fill.admit(&free, pool, setup.grids, setup.eps);
+            finished += passed;
+            sky += passed;
+            active += fill.ids.len() as u64;
+        }
         progress.inc(std::mem::take(&mut sky));
         if active == 0 {
             break;
@@ -546,14 +742,25 @@ pub fn intersect_rays<R: Real>(
         let dense_cells = setup.dense_cells;
         let share = (setup.registrations / shards.len()).max(1) as u64;
         let eps = setup.eps;
+        let admitted = by_id.as_ref().map(|f| (f.ray, &f.ids[..], &f.start[..]));
         pool.install(|| {
-            shards.par_iter_mut().for_each(|sh| {
+            shards.par_iter_mut().enumerate().for_each(|(k, sh)| {
                 let pending = std::mem::take(&mut sh.pending);
                 for (i, id, r) in &pending {
                     load(sh, *i as usize, *id, r, eps);
                 }
                 sh.pending = pending;
                 sh.pending.clear();
+                if let Some((ray, ids, start)) = admitted {
+                    let mut mine = ids[start[k]..start[k + 1]].iter();
+                    for i in 0..sh.hot.len() {
+                        if sh.hot[i].active {
+                            continue;
+                        }
+                        let Some(&id) = mine.next() else { break };
+                        load(sh, i, id, &ray(id), eps);
+                    }
+                }
                 let expect = (share as usize).clamp(1024, 1 << 20);
                 for g in 0..ngrids {
                     let cells = grids.grids[g].spec.cells();
@@ -660,14 +867,22 @@ pub fn intersect_rays<R: Real>(
                 .par_iter_mut()
                 .for_each(|sh| complete(sh, ngrids, carry))
         });
+        if let Some((v, first)) = dense.as_mut() {
+            put_results(shards, v, *first, pool);
+        }
         for sh in shards.iter_mut() {
             st.intersection_tests += sh.counts.tests;
             st.tests_skipped_mailbox += sh.counts.skipped_mailbox;
             st.tests_skipped_last_voxel += sh.counts.skipped_last_voxel;
             sh.counts = PassCounts::default();
-            finished += sh.done.len() as u64;
-            active -= sh.done.len() as u64;
-            progress.inc(sh.done.len() as u64);
+            let done = sh.done.len();
+            sh.live -= done;
+            finished += done as u64;
+            active -= done as u64;
+            progress.inc(done as u64);
+            if dense.is_some() {
+                sh.done.clear(); // in place already
+            }
             for r in sh.done.drain(..) {
                 emit(r)?;
             }

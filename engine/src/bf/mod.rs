@@ -26,7 +26,7 @@ mod tracer;
 mod voxels;
 
 pub use crate::render::Contribution;
-pub use intersect::{IntersectStats, MAX_GRIDS, Slots, StoreNumber, StorePlan};
+pub use intersect::{IntersectStats, MAX_GRIDS, RaySource, Slots, StoreNumber, StorePlan};
 pub use records::{Outcome, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
@@ -287,6 +287,30 @@ impl RoundRays {
         }
     }
 
+    /// Calls `f` with the rays as a [`RaySource`]: by id where they can be
+    /// had so (eye rays, rays in memory), which lets every thread of the
+    /// tracer take its own; else read in order.
+    fn with_source<T>(
+        &self,
+        eye: &EyeRays,
+        f: impl FnOnce(RaySource<'_>) -> Result<T, Error>,
+    ) -> Result<T, Error> {
+        match self {
+            RoundRays::Eye(n) => f(RaySource::Indexed {
+                len: *n,
+                ray: &|i| eye_ray(eye, i),
+            }),
+            RoundRays::Held(HeldRays::Memory(v)) => f(RaySource::Indexed {
+                len: v.len() as u64,
+                ray: &|i| v[i as usize],
+            }),
+            RoundRays::Held(HeldRays::File(_)) => {
+                let mut it = self.iter(eye)?;
+                f(RaySource::Stream(&mut *it))
+            }
+        }
+    }
+
     fn iter<'a>(
         &'a self,
         eye: &'a EyeRays,
@@ -434,16 +458,19 @@ fn render_in<R: Real>(
         progress.set_message(&format!("round {round}: intersecting {n} rays"));
         let in_round = Prefixed::new(progress, format!("round {round}: "));
         let resident = matches!(rays, RoundRays::Held(HeldRays::Memory(_)));
-        let (mut results, _) = tr.intersect(0, &mut rays.iter(&eye)?, n, resident, &in_round)?;
+        let (mut results, _) =
+            rays.with_source(&eye, |src| tr.intersect(0, src, n, resident, &in_round))?;
 
         progress.set_message(&format!("round {round}: shading"));
-        let (next, count, _) = tr.shade(
-            0,
-            &mut rays.iter(&eye)?,
-            &mut results,
-            &mut |corner, c| frame.add(corner, c),
-            &mut counts,
-        )?;
+        let (next, count, _) = rays.with_source(&eye, |src| {
+            tr.shade(
+                0,
+                src,
+                &mut results,
+                &mut |corner, c| frame.add(corner, c),
+                &mut counts,
+            )
+        })?;
         tr.recycle(results);
         if let RoundRays::Held(HeldRays::Memory(v)) =
             std::mem::replace(&mut rays, RoundRays::Eye(0))

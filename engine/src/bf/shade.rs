@@ -123,6 +123,151 @@ pub fn shade_round(
     Ok(st)
 }
 
+/// What one thread's chunk of a batch gives back (see [`shade_indexed`]).
+#[derive(Default)]
+pub struct ChunkOut {
+    rays: Vec<RayRec>,
+    contributions: Vec<(u32, [i64; 3])>,
+    /// Hits without a surface, for the join, in ray order.
+    joins: Vec<HitRec>,
+    counts: RayCounts,
+    hits: u64,
+    error: Option<Error>,
+}
+
+impl ChunkOut {
+    /// Bytes its buffers hold.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.rays.capacity() * size_of::<RayRec>()
+            + self.contributions.capacity() * size_of::<(u32, [i64; 3])>()
+            + self.joins.capacity() * size_of::<HitRec>()
+    }
+}
+
+/// [`shade_round`] of `results.len()` rays that can be had by id, with
+/// their results in memory: batches of rays are read, sorted out and
+/// shaded by all threads (each chunk of a batch by one), not read one by
+/// one on this thread. Colour and spawned rays are handed on in ray order
+/// chunk by chunk; hits without a surface go to the join as in
+/// [`shade_round`].
+#[allow(clippy::too_many_arguments)]
+pub fn shade_indexed(
+    setup: &mut ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    first: u64,
+    ray_at: &(dyn Fn(u64) -> RayRec + Sync),
+    results: &[Outcome],
+    chunk_outs: &mut Vec<ChunkOut>,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
+    next: &mut NextRays,
+    counts: &mut RayCounts,
+) -> Result<ShadeStats, Error> {
+    let mut st = ShadeStats::default();
+    let mut set = std::mem::take(setup.set);
+    set.clear();
+    let (materials, shade_scene) = (setup.materials, setup.shade);
+    let n = results.len();
+    // As many rays at once as hits are shaded at once on the other path.
+    let batch = setup.set_cap.clamp(1, CARRY_BATCH);
+    let chunks = pool.current_num_threads().max(1) * 4;
+    let mut start = 0;
+    while start < n {
+        let end = (start + batch).min(n);
+        let chunk = (end - start).div_ceil(chunks).max(64);
+        let n_chunks = (end - start).div_ceil(chunk);
+        if chunk_outs.len() < n_chunks {
+            chunk_outs.resize_with(n_chunks, Default::default);
+        }
+        let outs = &mut chunk_outs[..n_chunks];
+        pool.install(|| {
+            outs.par_iter_mut().enumerate().for_each(|(k, out)| {
+                out.rays.clear();
+                out.contributions.clear();
+                out.joins.clear();
+                out.counts = RayCounts::default();
+                out.hits = 0;
+                out.error = None;
+                let lo = start + k * chunk;
+                let hi = (lo + chunk).min(end);
+                for (i, res_out) in (lo..hi).zip(&results[lo..hi]) {
+                    let id = first + i as u64;
+                    let ray = ray_at(i as u64);
+                    let res = res_out.res;
+                    if res.ray != id {
+                        out.error = Some(Error::Invalid(format!(
+                            "intersection results out of order: ray {id} got the result of ray {}",
+                            res.ray
+                        )));
+                        return;
+                    }
+                    if ray.is_shadow() {
+                        if res.prim.is_none() {
+                            out.contributions.push((ray.corner, to_fixed(ray.payload)));
+                        }
+                    } else if res.prim.is_none() {
+                        let bg = shade_scene.background(ray.payload[0]);
+                        out.contributions.push((ray.corner, to_fixed(bg)));
+                    } else {
+                        if ray.kind() == RayKind::Eye {
+                            out.counts.eye_hit_rays += 1;
+                        }
+                        out.hits += 1;
+                        if res_out.has_surface != 0 {
+                            let h = Carried {
+                                ray,
+                                id,
+                                out: *res_out,
+                            };
+                            shade_one_carried(
+                                materials,
+                                shade_scene,
+                                &h,
+                                &mut out.rays,
+                                &mut out.counts,
+                            );
+                        } else {
+                            out.joins.push(HitRec {
+                                ray,
+                                id,
+                                t: res.t,
+                                prim: res.prim,
+                            });
+                        }
+                    }
+                }
+            })
+        });
+        let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
+        for out in chunk_outs[..n_chunks].iter_mut() {
+            if let Some(e) = out.error.take() {
+                return Err(e);
+            }
+            *counts += out.counts;
+            st.hits += out.hits;
+            for &(corner, c) in &out.contributions {
+                contribute(corner, c);
+            }
+            parts.push(&out.rays);
+        }
+        pool.install(|| next.extend_from_slices(&parts))?;
+        for out in chunk_outs[..n_chunks].iter() {
+            for h in &out.joins {
+                set.push(*h);
+                if set.len() >= setup.set_cap.max(1) {
+                    shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+                }
+            }
+        }
+        start = end;
+    }
+    if !set.is_empty() {
+        shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+    }
+    *setup.set = set;
+    Ok(st)
+}
+
 /// Most hits shaded together when their surfaces came with them. Such a
 /// batch needs no pass over the objects, so nothing is gained by making it
 /// as large as the budget allows; a small one stays in cache and spares
@@ -162,17 +307,7 @@ fn shade_carried(
                 out.clear();
                 *c = RayCounts::default();
                 for h in hits {
-                    let r = &h.ray;
-                    let (o, d) = (Vec3::from_array(r.o), Vec3::from_array(r.d));
-                    // The point as a primitive's `surface` computes it.
-                    let p = RayQ::from_vec3(o, d).at(h.out.res.t).into();
-                    let surf = Surface {
-                        p,
-                        ng: Vec3::from_array(h.out.ng),
-                        ns: Vec3::from_array(h.out.ns),
-                    };
-                    let mat = &materials[h.out.material as usize];
-                    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
+                    shade_one_carried(materials, shade_scene, h, out, c);
                 }
             })
     });
@@ -184,6 +319,27 @@ fn shade_carried(
     pool.install(|| next.extend_from_slices(&parts))?;
     carried.clear();
     Ok(())
+}
+
+/// Shades one hit whose surface came with it.
+fn shade_one_carried(
+    materials: &[Material],
+    shade_scene: &ShadeScene,
+    h: &Carried,
+    out: &mut Vec<RayRec>,
+    c: &mut RayCounts,
+) {
+    let r = &h.ray;
+    let (o, d) = (Vec3::from_array(r.o), Vec3::from_array(r.d));
+    // The point as a primitive's `surface` computes it.
+    let p = RayQ::from_vec3(o, d).at(h.out.res.t).into();
+    let surf = Surface {
+        p,
+        ng: Vec3::from_array(h.out.ng),
+        ns: Vec3::from_array(h.out.ns),
+    };
+    let mat = &materials[h.out.material as usize];
+    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
 }
 
 /// Sorts a set of hits by object and shades it in one scan of the objects.

@@ -9,9 +9,13 @@
 //! same results, because a ray's intersection depends only on the ray, and
 //! a ray's spawn keys only on its id in the round.
 
-use super::intersect::{IntersectSetup, IntersectStats, Slots, StorePlan, intersect_rays};
+use super::intersect::{
+    IntersectSetup, IntersectStats, RaySource, ResultSink, Slots, StorePlan, intersect_rays,
+};
 use super::records::{Outcome, RayKind, RayRec, ResultRec};
-use super::shade::{NextRays, ShadeSetup, ShadeStats, ray_key, shade_round};
+use super::shade::{
+    ChunkOut, NextRays, ShadeSetup, ShadeStats, ray_key, shade_indexed, shade_round,
+};
 use super::voxels::VoxelGrids;
 use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS};
 use crate::error::Error;
@@ -62,18 +66,6 @@ type ResultSorter = ExternalSorter<Outcome, u64, fn(&Outcome) -> u64>;
 enum Results {
     Dense { first: u64, v: Vec<Outcome> },
     Sort(ResultSorter),
-}
-
-impl Results {
-    fn put(&mut self, r: Outcome) -> Result<(), Error> {
-        match self {
-            Results::Dense { first, v } => {
-                v[(r.res.ray - *first) as usize] = r;
-                Ok(())
-            }
-            Results::Sort(s) => s.push(r),
-        }
-    }
 }
 
 /// Rays in key order, as [`Tracer::shade`] returns the ones it spawned.
@@ -170,6 +162,8 @@ pub struct Tracer<'db, R: Real> {
     set_buf: Vec<super::records::HitRec>,
     carried_buf: Vec<super::shade::Carried>,
     shade_outputs: Vec<(Vec<RayRec>, RayCounts)>,
+    /// Per-chunk outputs of the parallel shading by id, reused.
+    chunk_outs: Vec<ChunkOut>,
     radix: crate::spill::RadixScratch,
     /// Accumulated over every call.
     pub stats: BfStats,
@@ -267,6 +261,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             set_buf: Vec::new(),
             carried_buf: Vec::new(),
             shade_outputs: Vec::new(),
+            chunk_outs: Vec::new(),
             radix: Default::default(),
             stats,
             tests: KindCounts::default(),
@@ -281,14 +276,14 @@ impl<'db, R: Real> Tracer<'db, R> {
         self.grids.stats()
     }
 
-    /// Intersects the `n` rays `rays` yields, whose ids in the round are
+    /// Intersects the `n` rays of `rays`, whose ids in the round are
     /// `first, first + 1, ...`; returns their results in that order, with
     /// those ids. `rays_resident` says whether the caller keeps the rays in
     /// memory meanwhile (which leaves less for the slots).
     pub fn intersect(
         &mut self,
         first: u64,
-        rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+        rays: RaySource<'_>,
         n: u64,
         rays_resident: bool,
         progress: &dyn Progress,
@@ -337,12 +332,22 @@ impl<'db, R: Real> Tracer<'db, R> {
             eps: self.eps,
         };
         let ist = {
-            let mut emit = |mut r: Outcome| {
-                if r.res.prim.is_none() {
-                    return Ok(()); // a miss: reported without being stored
+            let mut emit_sorted;
+            let sink = match &mut results {
+                Results::Dense { first, v } => ResultSink::Dense {
+                    v: &mut v[..],
+                    first: *first,
+                },
+                Results::Sort(sorter) => {
+                    emit_sorted = move |mut r: Outcome| {
+                        if r.res.prim.is_none() {
+                            return Ok(()); // a miss: reported without being stored
+                        }
+                        r.res.ray += first;
+                        sorter.push(r)
+                    };
+                    ResultSink::Each(&mut emit_sorted)
                 }
-                r.res.ray += first;
-                results.put(r)
             };
             intersect_rays::<R>(
                 &mut setup,
@@ -350,7 +355,7 @@ impl<'db, R: Real> Tracer<'db, R> {
                 &mut self.slots,
                 rays,
                 n,
-                &mut emit,
+                sink,
                 progress,
             )?
         };
@@ -395,6 +400,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         self.set_buf = Vec::new();
         self.carried_buf = Vec::new();
         self.shade_outputs = Vec::new();
+        self.chunk_outs = Vec::new();
         self.radix = Default::default();
     }
 
@@ -432,7 +438,7 @@ impl<'db, R: Real> Tracer<'db, R> {
     pub fn shade(
         &mut self,
         first: u64,
-        rays: &mut dyn Iterator<Item = Result<RayRec, Error>>,
+        rays: RaySource<'_>,
         results: &mut ResultReader,
         contribute: &mut dyn FnMut(u32, [i64; 3]),
         counts: &mut RayCounts,
@@ -455,17 +461,50 @@ impl<'db, R: Real> Tracer<'db, R> {
             shade: &self.shade_scene,
             set_cap: self.budget.shading_set_hits(self.shade_scene.lights.len()),
         };
-        let mut next_result = || results.next_outcome();
-        let sst = shade_round(
-            &mut setup,
-            &self.pool,
-            first,
-            rays,
-            &mut next_result,
-            contribute,
-            &mut next,
-            counts,
-        )?;
+        let sst = match (rays, results) {
+            (RaySource::Indexed { len, ray: ray_at }, ResultReader::Dense { v, next: at }) => {
+                let rest = &v[(*at).min(v.len())..];
+                if rest.len() as u64 != len {
+                    return Err(Error::Invalid(format!(
+                        "{} intersection results for {len} rays",
+                        rest.len()
+                    )));
+                }
+                *at = v.len();
+                shade_indexed(
+                    &mut setup,
+                    &self.pool,
+                    first,
+                    ray_at,
+                    rest,
+                    &mut self.chunk_outs,
+                    contribute,
+                    &mut next,
+                    counts,
+                )?
+            }
+            (rays, results) => {
+                let mut stream_of_indexed;
+                let rays: &mut dyn Iterator<Item = Result<RayRec, Error>> = match rays {
+                    RaySource::Stream(it) => it,
+                    RaySource::Indexed { len, ray: f } => {
+                        stream_of_indexed = (0..len).map(move |i| Ok(f(i)));
+                        &mut stream_of_indexed
+                    }
+                };
+                let mut next_result = || results.next_outcome();
+                shade_round(
+                    &mut setup,
+                    &self.pool,
+                    first,
+                    rays,
+                    &mut next_result,
+                    contribute,
+                    &mut next,
+                    counts,
+                )?
+            }
+        };
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
         self.stats.db_blocks_skipped += sst.db_blocks_skipped;
@@ -478,11 +517,13 @@ impl<'db, R: Real> Tracer<'db, R> {
                 .iter()
                 .map(|(v, _)| v.capacity() * std::mem::size_of::<RayRec>())
                 .sum::<usize>()
+            + self.chunk_outs.iter().map(ChunkOut::bytes).sum::<usize>()
             + self.radix.bytes();
         if held as u64 > self.budget.idle_allowance() {
             self.set_buf = Vec::new();
             self.carried_buf = Vec::new();
             self.shade_outputs = Vec::new();
+            self.chunk_outs = Vec::new();
             self.radix = Default::default();
         }
         let count = next.len();
