@@ -271,6 +271,9 @@ struct Shard<R> {
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
     done: Vec<Outcome>,
+    /// The finished rays by part of the result buffer (see
+    /// [`put_results`]).
+    buckets: Vec<Vec<Outcome>>,
     /// Slots holding a ray.
     live: usize,
     /// Store numbers of the walks registered this pass, and their number.
@@ -339,6 +342,7 @@ impl<R: Real> Slots<R> {
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
                     done: Vec::new(),
+                    buckets: Vec::new(),
                     live: 0,
                     store_sum: 0,
                     store_walks: 0,
@@ -359,6 +363,7 @@ impl<R: Real> Slots<R> {
                     + sh.q.capacity() * size_of::<RayQ<R>>()
                     + sh.cold.capacity() * size_of::<Cold>()
                     + sh.done.capacity() * size_of::<Outcome>()
+                    + sh.buckets.iter().map(Vec::capacity).sum::<usize>() * size_of::<Outcome>()
                     + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
             })
             .sum::<usize>()
@@ -372,6 +377,7 @@ impl<R: Real> Slots<R> {
             sh.q = Vec::new();
             sh.cold = Vec::new();
             sh.done = Vec::new();
+            sh.buckets = Vec::new();
             sh.pending = Vec::new();
             sh.regs = Default::default();
         }
@@ -553,38 +559,55 @@ impl ByIdFill<'_> {
 }
 
 /// Writes the finished rays' results into their places in `v` (ids count
-/// from 0; `first` is added), every thread a contiguous part of `v`. Each
-/// shard's finished rays are sorted by id, so that each part finds its own
-/// in every shard by bisection. Misses are in `v` already.
+/// from 0; `first` is added), every thread a contiguous part of `v`: each
+/// shard first sorts its finished rays into one bucket per part, so that
+/// no part looks at another's rays (a sort by id cost more than the
+/// writes). Misses are in `v` already.
 fn put_results<R: Real>(
     shards: &mut [Shard<R>],
     v: &mut [Outcome],
     first: u64,
     pool: &rayon::ThreadPool,
 ) {
+    let parts = pool.current_num_threads().max(1);
+    if parts == 1 {
+        for sh in shards.iter() {
+            for o in &sh.done {
+                put(v, 0, o, first);
+            }
+        }
+        return;
+    }
+    let part = v.len().div_ceil(parts).max(1);
     pool.install(|| {
-        shards
-            .par_iter_mut()
-            .for_each(|sh| sh.done.sort_unstable_by_key(|o| o.res.ray));
-        let part = v.len().div_ceil(pool.current_num_threads().max(1)).max(1);
+        shards.par_iter_mut().for_each(|sh| {
+            sh.buckets.resize_with(parts, Vec::new);
+            for b in sh.buckets.iter_mut() {
+                b.clear();
+            }
+            for o in &sh.done {
+                sh.buckets[o.res.ray as usize / part].push(*o);
+            }
+        });
         let shards = &*shards;
         v.par_chunks_mut(part).enumerate().for_each(|(k, dst)| {
-            let lo = (k * part) as u64;
-            let hi = lo + dst.len() as u64;
             for sh in shards {
-                let d = &sh.done;
-                let a = d.partition_point(|o| o.res.ray < lo);
-                let b = d.partition_point(|o| o.res.ray < hi);
-                for o in &d[a..b] {
-                    if !o.res.prim.is_none() {
-                        let at = (o.res.ray - lo) as usize;
-                        dst[at] = *o;
-                        dst[at].res.ray += first;
-                    }
+                for o in &sh.buckets[k] {
+                    put(dst, (k * part) as u64, o, first);
                 }
             }
         });
     });
+}
+
+/// Writes a hit at its place in `dst`, which starts at id `lo`.
+#[inline]
+fn put(dst: &mut [Outcome], lo: u64, o: &Outcome, first: u64) {
+    if !o.res.prim.is_none() {
+        let at = (o.res.ray - lo) as usize;
+        dst[at] = *o;
+        dst[at].res.ray += first;
+    }
 }
 
 /// Intersects every ray `rays` yields (with ids `0, 1, ...` in order),
