@@ -263,9 +263,11 @@ struct Shard<R> {
     hot: Vec<Hot<R>>,
     q: Vec<RayQ<R>>,
     cold: Vec<Cold>,
-    /// Rays given a slot since the last pass (slot, id, ray). Filling is
-    /// serial, as rays come in order from one source; preparing a ray for
-    /// its walk and tests is not, so each shard does it for its own.
+    /// Rays given a slot since the last pass (slot, id, ray), when they
+    /// come from a stream: filling is then serial, as rays come in order
+    /// from one source; preparing a ray for its walk and tests is not, so
+    /// each shard does it for its own. (Rays that can be had by id are
+    /// loaded by their shard straight from the source.)
     pending: Vec<Pending>,
     regs: [RegMap; MAX_GRIDS],
     region: [Region; MAX_GRIDS],
@@ -627,9 +629,10 @@ pub fn intersect_rays<R: Real>(
     let shards = &mut slots.shards;
     let ngrids = setup.grids.grids.len();
     // Rays that can be had by id, with results that have a place each:
-    // every shard fills its slots from its own blocks of ids and writes
-    // its results into its own blocks of the buffer, in parallel. Else
-    // this thread fills the slots in order and passes results on.
+    // which rays a pass admits is worked out with every thread looking
+    // (`ByIdFill`), each shard loads its own, and results are written to
+    // their places by every thread (`put_results`). Else this thread
+    // fills the slots in order from the stream and passes results on.
     let mut by_id: Option<ByIdFill<'_>> = None;
     let mut dense: Option<(&mut [Outcome], u64)> = None;
     let mut stream_of_indexed;
