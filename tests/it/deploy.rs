@@ -235,6 +235,29 @@ fn dockerignore_leaves_out_target_git_and_secrets_but_not_the_sources() {
     }
 }
 
+/// Workers and clients have tokens of their own, and the workers read the
+/// one the coordinator expects of workers. `tokens` holds (role, flag,
+/// secret) for every token flag of every workload.
+fn separate_tokens(tokens: &[(String, String, String)]) {
+    let secret_of = |role: &str, f: &str| {
+        tokens
+            .iter()
+            .find(|(r, fl, _)| r == role && fl == f)
+            .map(|(_, _, n)| n.clone())
+            .unwrap_or_else(|| panic!("{role}: no {f}"))
+    };
+    assert_eq!(
+        secret_of("worker", "--token-file"),
+        secret_of("coordinator", "--worker-token-file"),
+        "the workers read the token the coordinator expects of workers"
+    );
+    assert_ne!(
+        secret_of("coordinator", "--worker-token-file"),
+        secret_of("coordinator", "--client-token-file"),
+        "workers and clients have tokens of their own"
+    );
+}
+
 #[test]
 fn kubernetes_manifests_hold_together() {
     let (uid, gid) = image_user();
@@ -500,23 +523,7 @@ fn kubernetes_manifests_hold_together() {
         ["coordinator", "worker"],
         "one coordinator and one worker workload"
     );
-    let secret_of = |role: &str, f: &str| {
-        tokens
-            .iter()
-            .find(|(r, fl, _)| r == role && fl == f)
-            .map(|(_, _, n)| n.clone())
-            .unwrap_or_else(|| panic!("{role}: no {f}"))
-    };
-    assert_eq!(
-        secret_of("worker", "--token-file"),
-        secret_of("coordinator", "--worker-token-file"),
-        "the workers read the token the coordinator expects of workers"
-    );
-    assert_ne!(
-        secret_of("coordinator", "--worker-token-file"),
-        secret_of("coordinator", "--client-token-file"),
-        "workers and clients have tokens of their own"
-    );
+    separate_tokens(&tokens);
 
     // Services select a pod and name its ports.
     for (file, d) in docs.iter().filter(|(_, d)| kind(d) == "Service") {
@@ -737,23 +744,7 @@ fn compose_file_holds_together() {
             other => panic!("{what}: runs {other}"),
         }
     }
-    let secret_of = |role: &str, f: &str| {
-        tokens
-            .iter()
-            .find(|(r, fl, _)| r == role && fl == f)
-            .map(|(_, _, n)| n.clone())
-            .unwrap_or_else(|| panic!("{role}: no {f}"))
-    };
-    assert_eq!(
-        secret_of("worker", "--token-file"),
-        secret_of("coordinator", "--worker-token-file"),
-        "the workers read the token the coordinator expects of workers"
-    );
-    assert_ne!(
-        secret_of("coordinator", "--worker-token-file"),
-        secret_of("coordinator", "--client-token-file"),
-        "workers and clients have tokens of their own"
-    );
+    separate_tokens(&tokens);
 }
 
 /// Answers one HTTP request with `status`; returns the port and the
