@@ -26,7 +26,9 @@
 //! workers, slots or memory.
 //!
 //! Slots are split into shards, one per thread; every thread scans the same
-//! decoded block for its own rays, so no ray is touched by two threads.
+//! decoded block for its own rays, so no ray is touched by two threads
+//! while it is traced (a finished ray's result is a copy, which another
+//! thread may write to its place).
 
 use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
@@ -204,12 +206,15 @@ const EMPTY_COLD: Cold = Cold {
 };
 
 /// Bytes one ray slot takes (with its place in the queue of rays loaded
-/// in parallel, see [`Shard::pending`]).
+/// in parallel, see [`Shard::pending`], and in the pass's finished rays
+/// and their order, see [`put_results`]).
 pub fn slot_bytes<R: Real>() -> usize {
     std::mem::size_of::<Hot<R>>()
         + std::mem::size_of::<Cold>()
         + std::mem::size_of::<RayQ<R>>()
         + std::mem::size_of::<Pending>()
+        + std::mem::size_of::<Outcome>()
+        + std::mem::size_of::<u32>()
 }
 
 /// Memory per registration: its key, its slot id, and its share of the
@@ -273,9 +278,10 @@ struct Shard<R> {
     region: [Region; MAX_GRIDS],
     counts: PassCounts,
     done: Vec<Outcome>,
-    /// The finished rays by part of the result buffer (see
-    /// [`put_results`]).
-    buckets: Vec<Vec<Outcome>>,
+    /// Indices of the finished hits in `done`, by part of the result
+    /// buffer, and where each part's begin (see [`put_results`]).
+    order: Vec<u32>,
+    bounds: Vec<usize>,
     /// Slots holding a ray.
     live: usize,
     /// Store numbers of the walks registered this pass, and their number.
@@ -344,7 +350,8 @@ impl<R: Real> Slots<R> {
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
                     done: Vec::new(),
-                    buckets: Vec::new(),
+                    order: Vec::new(),
+                    bounds: Vec::new(),
                     live: 0,
                     store_sum: 0,
                     store_walks: 0,
@@ -365,7 +372,7 @@ impl<R: Real> Slots<R> {
                     + sh.q.capacity() * size_of::<RayQ<R>>()
                     + sh.cold.capacity() * size_of::<Cold>()
                     + sh.done.capacity() * size_of::<Outcome>()
-                    + sh.buckets.iter().map(Vec::capacity).sum::<usize>() * size_of::<Outcome>()
+                    + sh.order.capacity() * size_of::<u32>()
                     + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
             })
             .sum::<usize>()
@@ -379,7 +386,7 @@ impl<R: Real> Slots<R> {
             sh.q = Vec::new();
             sh.cold = Vec::new();
             sh.done = Vec::new();
-            sh.buckets = Vec::new();
+            sh.order = Vec::new();
             sh.pending = Vec::new();
             sh.regs = Default::default();
         }
@@ -562,9 +569,10 @@ impl ByIdFill<'_> {
 
 /// Writes the finished rays' results into their places in `v` (ids count
 /// from 0; `first` is added), every thread a contiguous part of `v`: each
-/// shard first sorts its finished rays into one bucket per part, so that
-/// no part looks at another's rays (a sort by id cost more than the
-/// writes). Misses are in `v` already.
+/// shard first orders the indices of its finished hits by part (a
+/// counting sort, 4 bytes a hit), so that no part looks at another's (a
+/// sort of the results by id cost more than the writes). Misses are in
+/// `v` already.
 fn put_results<R: Real>(
     shards: &mut [Shard<R>],
     v: &mut [Outcome],
@@ -583,19 +591,36 @@ fn put_results<R: Real>(
     let part = v.len().div_ceil(parts).max(1);
     pool.install(|| {
         shards.par_iter_mut().for_each(|sh| {
-            sh.buckets.resize_with(parts, Vec::new);
-            for b in sh.buckets.iter_mut() {
-                b.clear();
+            let (done, order, bounds) = (&sh.done, &mut sh.order, &mut sh.bounds);
+            bounds.clear();
+            bounds.resize(parts + 1, 0);
+            for o in done.iter().filter(|o| !o.res.prim.is_none()) {
+                bounds[o.res.ray as usize / part + 1] += 1;
             }
-            for o in &sh.done {
-                sh.buckets[o.res.ray as usize / part].push(*o);
+            for k in 0..parts {
+                bounds[k + 1] += bounds[k];
             }
+            order.clear();
+            order.resize(bounds[parts], 0);
+            // bounds[k] serves as part k's cursor, ending at part k's end
+            // (the old bounds[k + 1]); shifted back by one afterwards.
+            for (j, o) in done.iter().enumerate() {
+                if !o.res.prim.is_none() {
+                    let k = o.res.ray as usize / part;
+                    order[bounds[k]] = j as u32;
+                    bounds[k] += 1;
+                }
+            }
+            for k in (0..parts).rev() {
+                bounds[k + 1] = bounds[k];
+            }
+            bounds[0] = 0;
         });
         let shards = &*shards;
         v.par_chunks_mut(part).enumerate().for_each(|(k, dst)| {
             for sh in shards {
-                for o in &sh.buckets[k] {
-                    put(dst, (k * part) as u64, o, first);
+                for &j in &sh.order[sh.bounds[k]..sh.bounds[k + 1]] {
+                    put(dst, (k * part) as u64, &sh.done[j as usize], first);
                 }
             }
         });
@@ -612,8 +637,9 @@ fn put(dst: &mut [Outcome], lo: u64, o: &Outcome, first: u64) {
     }
 }
 
-/// Intersects every ray `rays` yields (with ids `0, 1, ...` in order),
-/// passing each ray's result to `emit` in completion order.
+/// Intersects the `total` rays of `source` (ids `0, 1, ...`), giving each
+/// ray's result to `sink`: to its callback in completion order, or into
+/// its place in a dense buffer.
 #[allow(clippy::too_many_arguments)]
 pub fn intersect_rays<R: Real>(
     setup: &mut IntersectSetup<'_>,
@@ -624,6 +650,19 @@ pub fn intersect_rays<R: Real>(
     sink: ResultSink<'_>,
     progress: &dyn Progress,
 ) -> Result<IntersectStats, Error> {
+    if let RaySource::Indexed { len, .. } = &source
+        && *len != total
+    {
+        return Err(Error::Invalid(format!("{len} rays given for {total}")));
+    }
+    if let ResultSink::Dense { v, .. } = &sink
+        && v.len() as u64 != total
+    {
+        return Err(Error::Invalid(format!(
+            "a result buffer of {} for {total} rays",
+            v.len()
+        )));
+    }
     // No more slots than rays.
     slots.ensure((setup.slots as u64).min(total).max(1) as usize);
     let shards = &mut slots.shards;
@@ -638,9 +677,7 @@ pub fn intersect_rays<R: Real>(
     let mut stream_of_indexed;
     let mut dense_emit;
     let (rays, emit): (RayStream<'_>, Emit<'_>) = match (source, sink) {
-        (RaySource::Indexed { len, ray }, ResultSink::Dense { v, first })
-            if len == total && v.len() as u64 == total =>
-        {
+        (RaySource::Indexed { ray, .. }, ResultSink::Dense { v, first }) => {
             by_id = Some(ByIdFill {
                 ray,
                 total,
@@ -692,8 +729,9 @@ pub fn intersect_rays<R: Real>(
         exhausted = true;
     }
     loop {
-        // Fill empty slots, in slot order. A ray that meets no grid's box
-        // (the sky around a model) is a miss at once and takes no slot.
+        // From a stream: fill empty slots, in slot order. A ray that meets
+        // no grid's box (the sky around a model) is a miss at once and
+        // takes no slot. (Rays by id: the same, through `ByIdFill`.)
         if !exhausted {
             'fill: for sh in shards.iter_mut() {
                 for i in 0..sh.hot.len() {

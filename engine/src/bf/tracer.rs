@@ -431,7 +431,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         }
     }
 
-    /// Shades the rays `rays` yields (ids `first, first + 1, ...`) with
+    /// Shades the rays of `rays` (ids `first, first + 1, ...`) with
     /// their `results` in the same order: colour contributions go to
     /// `contribute` (pixel corner, fixed-point colour), the rays they spawn
     /// come back sorted by key, with their number.
