@@ -285,25 +285,6 @@ fn run_task<R: Real>(
         }
         Some(f)
     };
-    // The rays by id where that is possible (made here, or in memory):
-    // every thread of the tracer then takes its own.
-    let with_rays = |f: &mut dyn FnMut(RaySource<'_>) -> Result<(), String>| match ray_slice {
-        None => f(RaySource::Indexed {
-            len: n,
-            ray: &|i| eye_ray(eye, first + i),
-        }),
-        Some(s) => match s.as_slice() {
-            Some(v) => f(RaySource::Indexed {
-                len: v.len() as u64,
-                ray: &|i| v[i as usize],
-            }),
-            None => {
-                let mut rd = s.reader().map_err(io)?;
-                let mut it = std::iter::from_fn(move || rd.next().transpose());
-                f(RaySource::Stream(&mut it))
-            }
-        },
-    };
     let mut summary = v1::TaskSummary {
         built_grids: ctx.fresh,
         ..Default::default()
@@ -311,16 +292,11 @@ fn run_task<R: Real>(
     let mut kept = None;
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
-            let mut done = None;
-            with_rays(&mut |src| {
-                done = Some(
-                    tracer
-                        .intersect(first, src, n, false, &NoProgress)
-                        .map_err(io)?,
-                );
-                Ok(())
+            let (results, ist) = with_rays(eye, first, n, ray_slice, |src| {
+                tracer
+                    .intersect(first, src, n, false, &NoProgress)
+                    .map_err(io)
             })?;
-            let (results, ist) = done.expect("set by the call above");
             let kept_results = send_results(tracer, ctx, results, out)?;
             if let Some(r) = kept_results {
                 kept = Some(Kept {
@@ -363,16 +339,11 @@ fn run_task<R: Real>(
                         buf.clear();
                     }
                 };
-                let mut done = None;
-                with_rays(&mut |src| {
-                    done = Some(
-                        tracer
-                            .shade(first, src, &mut results, &mut contribute, &mut counts)
-                            .map_err(io)?,
-                    );
-                    Ok(())
-                })?;
-                done.expect("set by the call above")
+                with_rays(eye, first, n, ray_slice, |src| {
+                    tracer
+                        .shade(first, src, &mut results, &mut contribute, &mut counts)
+                        .map_err(io)
+                })?
             };
             tracer.recycle(results);
             if let Some(e) = send_err {
@@ -432,6 +403,35 @@ fn run_task<R: Real>(
     );
     out.part(Part::Summary(summary))?;
     Ok(kept)
+}
+
+/// Calls `f` with the shard's `n` rays (ids from `first`): by id where
+/// that is possible (eye rays made here, rays in memory), so that every
+/// thread of the tracer takes its own; else read in order from their file.
+fn with_rays<T>(
+    eye: &EyeRays,
+    first: u64,
+    n: u64,
+    rays: Option<&Slice<RayRec>>,
+    f: impl FnOnce(RaySource<'_>) -> Result<T, String>,
+) -> Result<T, String> {
+    match rays {
+        None => f(RaySource::Indexed {
+            len: n,
+            ray: &|i| eye_ray(eye, first + i),
+        }),
+        Some(s) => match s.as_slice() {
+            Some(v) => f(RaySource::Indexed {
+                len: v.len() as u64,
+                ray: &|i| v[i as usize],
+            }),
+            None => {
+                let mut rd = s.reader().map_err(|e| e.to_string())?;
+                let mut it = std::iter::from_fn(move || rd.next().transpose());
+                f(RaySource::Stream(&mut it))
+            }
+        },
+    }
 }
 
 /// Sends an intersection's results as they travel (ray, object, distance)
