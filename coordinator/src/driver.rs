@@ -40,7 +40,7 @@ use sray_engine::render::{
     Camera, Frame, GridRes, ImageFormat, KindCounts, RayCounts, RenderOptions, RenderStats, epsilon,
 };
 use sray_engine::sdb::Database;
-use sray_engine::spill::{MemoryShare, RecordWriter, Records, RecordsWriter, SpillDir};
+use sray_engine::spill::{RecordWriter, Records};
 use sray_proto::v1;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -79,6 +79,55 @@ fn shard_size(job: &Job, n: u64, workers: usize) -> u64 {
         job.shard_rays
     }
 }
+
+/// Shards of at most `per` rays, each within the records of one worker
+/// (records at the workers): a worker's consecutive segments joined, a
+/// segment longer than `per` cut into equal parts.
+fn held_shards(segments: &[Segment], per: u64) -> Vec<(u64, u64)> {
+    let mut shards: Vec<(u64, u64)> = Vec::new();
+    let mut open: Option<(&str, u64, u64)> = None;
+    for g in segments {
+        match &mut open {
+            Some((s, _, len)) if *s == g.session && *len + g.len <= per => *len += g.len,
+            _ => {
+                if let Some((_, first, len)) = open.take() {
+                    shards.push((first, len));
+                }
+                if g.len <= per {
+                    open = Some((&g.session, g.start, g.len));
+                } else {
+                    let k = g.len.div_ceil(per);
+                    let mut at = g.start;
+                    for i in 0..k {
+                        let len = g.len / k + u64::from(i < g.len % k);
+                        shards.push((at, len));
+                        at += len;
+                    }
+                }
+            }
+        }
+    }
+    if let Some((_, first, len)) = open {
+        shards.push((first, len));
+    }
+    shards
+}
+
+/// A task's input was only at a worker that is gone (records at the
+/// workers): the job starts again.
+#[derive(Debug)]
+struct RecordsLost(String);
+
+impl std::fmt::Display for RecordsLost {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for RecordsLost {}
+
+/// How many times a job whose records were lost starts again.
+const MAX_RESTARTS: u32 = 3;
 
 /// The largest shard [`shard_size`] makes by itself.
 const AUTO_SHARD_MAX: u64 = 1 << 20;
@@ -400,6 +449,10 @@ struct Totals {
     /// Tasks for which a worker had to build its grids.
     #[serde(default)]
     grid_builds: u64,
+    /// Times the job started again from its eye rays (records lost with
+    /// a worker).
+    #[serde(default)]
+    restarts: u32,
 }
 
 impl Totals {
@@ -449,6 +502,36 @@ async fn drive(
     let mut checkpointing: Option<tokio::task::JoinHandle<anyhow::Result<Record>>> = None;
     // Which workers hold the round's rays (none after a restart).
     let mut segments: Arc<Vec<Segment>> = Arc::default();
+    // (Checkpoints and verification need the records here.)
+    let keep = shared.cfg.records_at_workers
+        && !shared.cfg.checkpoints
+        && shared.cfg.verify_fraction == 0.0;
+    let mut restarts = 0;
+    // A stage's result; with records at the workers, a lost input starts
+    // the job again from its eye rays (a few times at most).
+    macro_rules! or_restart {
+        ($r:expr, $frame:ident) => {
+            match $r {
+                Err(e) if e.is::<RecordsLost>() && restarts < MAX_RESTARTS => {
+                    restarts += 1;
+                    entry.log(format!(
+                        "{e:#}: the job starts again from its eye rays ({restarts} of at most {MAX_RESTARTS} times)"
+                    ));
+                    $frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
+                    tot = Totals {
+                        restarts,
+                        ..Totals::default()
+                    };
+                    rays = None;
+                    n = opts.eye_rays();
+                    round = 1;
+                    segments = Arc::default();
+                    continue;
+                }
+                r => r?,
+            }
+        };
+    }
     // The rounds, in a block of their own: however they end (an error,
     // a cancellation), the checkpoint being written is waited for before
     // the job's outcome is journaled, so that it cannot overwrite it.
@@ -457,14 +540,20 @@ async fn drive(
         while n > 0 {
             tot.rays_per_round.push(n);
             let per = shard_size(job, n, shared.worker_count());
-            let shards: Vec<(u64, u64)> = (0..n.div_ceil(per))
-                .map(|i| {
-                    let first = i * per;
-                    (first, per.min(n - first))
-                })
-                .collect();
+            // The eye rays are made by the workers; later rounds' rays are
+            // at the coordinator, or only at the workers that spawned them.
+            let eye = rays.is_none() && segments.is_empty();
+            let shards: Vec<(u64, u64)> = if keep && !eye {
+                held_shards(&segments, per)
+            } else {
+                (0..n.div_ceil(per))
+                    .map(|i| {
+                        let first = i * per;
+                        (first, per.min(n - first))
+                    })
+                    .collect()
+            };
             tot.shards_per_round.push(shards.len() as u64);
-            let eye = rays.is_none();
             let round_t0 = Instant::now();
             tracing::info!(job = %entry.id, round, rays = n, shards = shards.len(), "round started");
 
@@ -483,6 +572,7 @@ async fn drive(
                             rays: segments.clone(),
                             intersect: None,
                             shard_first: first,
+                            pinned: keep && !eye,
                         },
                     })
                 })
@@ -497,19 +587,23 @@ async fn drive(
                 shards: &shards,
                 inputs,
                 main_ids: Vec::new(),
+                keep,
             };
-            let outs = stage.run(&mut tot, &mut arbiter).await?;
+            let outs = or_restart!(stage.run(&mut tot, &mut arbiter).await, frame);
             let intersect_ids = stage.main_ids.clone();
             let mut round_passes = Vec::new();
             let mut winners = Vec::new();
-            let results: Vec<_> = outs
+            let results: Vec<Option<Arc<Records<ResultRec>>>> = outs
                 .into_iter()
                 .map(|(o, w)| {
                     round_passes.push(passes_of(&o.summary.stats_json));
                     winners.push(w.session);
-                    o.results
-                        .map(Arc::new)
-                        .context("an intersection task returned no results")
+                    match (o.results, keep) {
+                        (Some(r), _) => Ok(Some(Arc::new(r))),
+                        // Kept by the worker (the receiver checked the count).
+                        (None, true) => Ok(None),
+                        (None, false) => bail!("an intersection task returned no results"),
+                    }
                 })
                 .collect::<anyhow::Result<_>>()?;
             tot.passes
@@ -525,7 +619,7 @@ async fn drive(
                 .map(|(i, &(first, _))| {
                     Arc::new(TaskInput {
                         rays: rays.clone(),
-                        results: Some(results[i].clone()),
+                        results: results[i].clone(),
                         results_offset: 0,
                         objects: job.objects,
                         corners,
@@ -533,19 +627,30 @@ async fn drive(
                             rays: Arc::default(),
                             intersect: Some((intersect_ids[i], winners[i].clone())),
                             shard_first: first,
+                            pinned: keep,
                         },
                     })
                 })
                 .collect();
-            let outs = stage.run(&mut tot, &mut arbiter).await?;
+            let outs = or_restart!(stage.run(&mut tot, &mut arbiter).await, frame);
             // The next round's rays are the shards' spawned rays in shard
             // order (each shard's keys lie below the next one's), each run
             // held by the worker that spawned it.
             let mut segs = Vec::with_capacity(outs.len());
             let mut start = 0;
+            let mut last_key: Option<u64> = None;
             for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
                 tot.shading_scans += stat_of(&o.summary.stats_json, "db_scans").unwrap_or(0);
-                let len = o.rays.as_ref().map_or(0, |r| r.len());
+                let len = o.rays.as_ref().map_or(o.kept_rays, |r| r.len());
+                if o.rays.is_none() && len > 0 {
+                    // Kept at the worker: the keys as it reports them.
+                    let (lo, hi) = (o.summary.kept_first_key, o.summary.kept_last_key);
+                    anyhow::ensure!(
+                        lo <= hi && last_key.is_none_or(|k| lo > k),
+                        "spawned rays out of key order across shards"
+                    );
+                    last_key = Some(hi);
+                }
                 if len > 0 {
                     segs.push(Segment {
                         start,
@@ -560,11 +665,13 @@ async fn drive(
             drop(stage);
             drop(results);
             // Colour into the frame; spawned rays in key order.
-            let (spill, share) = (shared.spill.clone(), shared.records.clone());
-            let (f, next) =
-                tokio::task::spawn_blocking(move || merge_shade(frame, outs, &spill, &share)).await??;
+            let (f, next) = tokio::task::spawn_blocking(move || merge_shade(frame, outs)).await??;
             frame = f;
             n = next.as_ref().map_or(0, |f| f.len());
+            if keep {
+                // The rays are the segments, at the workers alone.
+                n = start;
+            }
             segments = Arc::new(if start == n { segs } else { Vec::new() });
             rays = next.map(Arc::new);
             tot.shade_seconds += ts.elapsed().as_secs_f64();
@@ -684,6 +791,8 @@ struct Stage<'a> {
     inputs: Vec<Arc<TaskInput>>,
     /// The shards' tasks in this stage.
     main_ids: Vec<u64>,
+    /// Outputs stay at the workers ([`Config::records_at_workers`]).
+    keep: bool,
 }
 
 impl Stage<'_> {
@@ -702,6 +811,7 @@ impl Stage<'_> {
                 hash: self.job.hash.clone(),
             }),
             verification,
+            keep_output: self.keep,
         }
     }
 
@@ -833,6 +943,12 @@ impl Stage<'_> {
                         }
                         None => {}
                     },
+                    Some(TaskEvent::Lost { error, .. }) => {
+                        return Err(anyhow::Error::new(RecordsLost(format!(
+                            "a {} task of round {}: {error}",
+                            self.name(), self.round
+                        ))));
+                    }
                     Some(TaskEvent::Failed { task, error }) => match kinds.get(&task) {
                         Some(Kind::Main(_)) => bail!(
                             "a {} task of round {} failed on {} workers: {error}",
@@ -1247,65 +1363,40 @@ fn stage_name(s: v1::Stage) -> &'static str {
 /// rays into the next round's rays. The outputs come in shard order, and
 /// each shard's keys lie below the next shard's (the receiver checked
 /// each output's keys against its shard's range), so joining them in
-/// order keeps the rays sorted by key; the join checks that it does.
+/// order keeps the rays sorted by key; the join checks that it does. The
+/// rays are joined as they lie (a chain of the outputs' records), not
+/// copied.
 fn merge_shade(
     mut frame: Frame,
     outs: Vec<TaskOutput>,
-    spill: &SpillDir,
-    share: &MemoryShare,
 ) -> anyhow::Result<(Frame, Option<Records<RayRec>>)> {
-    let mut w = RecordsWriter::<RayRec>::new(share, spill, "round");
+    let mut parts = Vec::with_capacity(outs.len());
     let mut last: Option<u64> = None;
-    let mut buf = Vec::with_capacity(4096);
     for o in outs {
         if let Some(c) = o.contributions {
-            let mut rd = c.reader()?;
-            while let Some(x) = rd.next()? {
-                frame.add(x.corner, x.rgb);
-            }
+            c.for_each_slice(&mut |s| {
+                for x in s {
+                    frame.add(x.corner, x.rgb);
+                }
+                Ok(())
+            })?;
         }
         let Some(r) = o.rays else { continue };
-        if let (Some(v), Some(l)) = (r.as_slice(), last) {
-            anyhow::ensure!(
-                v.first().is_none_or(|x| x.key > l),
-                "spawned rays out of key order across shards"
-            );
+        if let (Some(first), Some(l)) = (r.get(0)?, last) {
+            anyhow::ensure!(first.key > l, "spawned rays out of key order across shards");
         }
-        // The output's memory goes back to the share once it is copied
-        // (the next round's rays spill if the outputs and the copy do not
-        // fit together).
-        match r.as_slice() {
-            Some(v) => {
-                w.extend(v)?;
-                last = v.last().map(|x| x.key).or(last);
-            }
-            None => {
-                let mut rd = r.reader()?;
-                loop {
-                    buf.clear();
-                    while buf.len() < 4096 {
-                        match rd.next()? {
-                            Some(x) => buf.push(x),
-                            None => break,
-                        }
-                    }
-                    if buf.is_empty() {
-                        break;
-                    }
-                    anyhow::ensure!(
-                        last.is_none_or(|l| buf[0].key > l),
-                        "spawned rays out of key order across shards"
-                    );
-                    last = buf.last().map(|x| x.key);
-                    w.extend(&buf)?;
-                }
-            }
+        if let Some(x) = r
+            .len()
+            .checked_sub(1)
+            .map(|i| r.get(i))
+            .transpose()?
+            .flatten()
+        {
+            last = Some(x.key);
         }
+        parts.push(r);
     }
-    if w.is_empty() {
-        return Ok((frame, None));
-    }
-    Ok((frame, Some(w.finish()?)))
+    Ok((frame, Records::chain(parts)))
 }
 
 fn passes_of(stats_json: &str) -> Option<u64> {
@@ -1356,6 +1447,7 @@ fn job_stats(
         "shading_scans": tot.shading_scans,
         "tasks": tot.tasks,
         "tasks_requeued": requeued,
+        "job_restarts": tot.restarts,
         "backup_tasks": backups.max(tot.backups),
         "worker_seconds": tot.worker_seconds,
         "grid_builds": tot.grid_builds,
@@ -1401,5 +1493,38 @@ fn job_stats(
         peak_rss_bytes: sray_engine::sys::peak_rss_bytes(),
         details: Some(cluster),
         ..Default::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Segment, held_shards};
+
+    #[test]
+    fn held_shards_keep_to_one_worker_and_cover_every_ray() {
+        let seg = |start, len, w: &str| Segment {
+            start,
+            len,
+            task: 0,
+            session: w.to_string(),
+        };
+        let segs = [
+            seg(0, 30, "a"),
+            seg(30, 40, "a"),
+            seg(70, 50, "b"),
+            seg(120, 250, "a"),
+            seg(370, 10, "a"),
+        ];
+        assert_eq!(
+            held_shards(&segs, 100),
+            vec![
+                (0, 70),
+                (70, 50),
+                (120, 84),
+                (204, 83),
+                (287, 83),
+                (370, 10)
+            ]
+        );
     }
 }

@@ -473,16 +473,12 @@ pub fn checkpoint(
     let dir = &e.dir;
     let rays_name = format!("rays-{next_round}.bin");
     write_atomic(dir, &rays_name, |w| {
-        match rays.map(|r| (r, r.as_slice())) {
-            // In memory: written in one piece.
-            Some((_, Some(s))) => w.write_all(bytemuck::cast_slice(s))?,
-            Some((rays, None)) => {
-                let mut rd = rays.reader()?;
-                while let Some(r) = rd.next()? {
-                    w.write_all(bytemuck::bytes_of(&r))?;
-                }
-            }
-            None => {}
+        // In memory: written a part at a time, as the parts lie.
+        if let Some(rays) = rays {
+            rays.for_each_slice(&mut |s| {
+                w.write_all(bytemuck::cast_slice(s))
+                    .map_err(|e| sray_engine::Error::io(&rays_name, e))
+            })?;
         }
         Ok(())
     })?;

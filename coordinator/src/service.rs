@@ -191,7 +191,14 @@ impl Coordinator for Service {
                 .as_ref()
                 .filter(|(t, s)| holds(*t, s))
                 .map(|(t, _)| *t);
-            if let (Some(rays), false) = (&input.rays, task.eye_rays) {
+            // Records that are only at the workers (`records_at_workers`)
+            // and not at this one: the task cannot run here.
+            let lost = |what: &str| {
+                let _ = tx.blocking_send(Err(Status::failed_precondition(format!(
+                    "this worker does not hold the {what} of this task, and the coordinator keeps no copy"
+                ))));
+            };
+            if !task.eye_rays && (input.rays.is_some() || input.held.pinned) {
                 if let Some(t) = by_intersect {
                     let off = first - input.held.shard_first;
                     if !send(named(v1::RecordKind::Rays, t, off, n)) {
@@ -228,6 +235,9 @@ impl Coordinator for Service {
                                 }
                             }
                             None => {
+                                let Some(rays) = &input.rays else {
+                                    return lost("rays");
+                                };
                                 let mut rd = match rays.reader_range(at, upto - at) {
                                     Ok(r) => r,
                                     Err(e) => return fail(e),
@@ -241,16 +251,20 @@ impl Coordinator for Service {
                     }
                 }
             }
-            if let Some(results) = &input.results {
-                if let Some(t) = by_intersect {
+            let shade = task.stage == v1::Stage::Shade as i32;
+            match (&input.results, by_intersect) {
+                (Some(_), Some(t)) | (None, Some(t)) if shade => {
                     send(named(v1::RecordKind::Results, t, input.results_offset, n));
-                } else {
+                }
+                (Some(results), _) => {
                     let mut rd = match results.reader_range(input.results_offset, n) {
                         Ok(r) => r,
                         Err(e) => return fail(e),
                     };
                     stream_records(&mut rd, v1::RecordKind::Results, &send, &fail);
                 }
+                (None, None) if shade && input.held.pinned => lost("results"),
+                (None, _) => {}
             }
         });
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
@@ -697,7 +711,7 @@ impl<'a> Receiver<'a> {
                     return Err("more results than rays".into());
                 }
                 Self::writer(&mut self.results, self.shared, "out-results")?;
-                self.results.as_mut().expect("made").extend(&v).map_err(io)
+                self.results.as_mut().expect("made").push_vec(v).map_err(io)
             }
             (Ok(v1::RecordKind::Contributions), false) => {
                 let v = decode::<Contribution>(&c.data, records_per_chunk::<Contribution>())
@@ -712,7 +726,7 @@ impl<'a> Receiver<'a> {
                 self.contributions
                     .as_mut()
                     .expect("made")
-                    .extend(&v)
+                    .push_vec(v)
                     .map_err(io)
             }
             (Ok(v1::RecordKind::Rays), false) => {
@@ -733,7 +747,7 @@ impl<'a> Receiver<'a> {
                     self.last_key = Some(r.key);
                 }
                 Self::writer(&mut self.rays, self.shared, "out-rays")?;
-                self.rays.as_mut().expect("made").extend(&v).map_err(io)
+                self.rays.as_mut().expect("made").push_vec(v).map_err(io)
             }
             _ => Err(format!(
                 "record kind {} does not belong in this stage's output",
@@ -744,7 +758,36 @@ impl<'a> Receiver<'a> {
 
     pub(crate) fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
-        if intersect && self.n_results != self.task.ray_count {
+        let mut kept_rays = 0;
+        let mut hits = self.hits;
+        if self.task.keep_output {
+            // Results or spawned rays stayed at the worker: their counts.
+            if self.results.is_some() || self.rays.is_some() {
+                return Err("records sent that were to be kept".into());
+            }
+            if intersect {
+                if summary.kept_records != self.task.ray_count {
+                    return Err(format!(
+                        "{} results kept for {} rays",
+                        summary.kept_records, self.task.ray_count
+                    ));
+                }
+                if summary.kept_hits > summary.kept_records {
+                    return Err("more hits than results".into());
+                }
+                hits = summary.kept_hits;
+            } else {
+                let slots = sray_engine::bf::SPAWN_SLOTS;
+                let lo = self.task.first_ray * slots;
+                let hi = (self.task.first_ray + self.task.ray_count) * slots;
+                let (a, b) = (summary.kept_first_key, summary.kept_last_key);
+                let n = summary.kept_records;
+                if n > 0 && (a < lo || b >= hi || a > b || n > b - a + 1) {
+                    return Err(format!("kept spawned rays' keys {a}..={b} out of range"));
+                }
+                kept_rays = n;
+            }
+        } else if intersect && self.n_results != self.task.ray_count {
             return Err(format!(
                 "{} results for {} rays",
                 self.n_results, self.task.ray_count
@@ -761,7 +804,8 @@ impl<'a> Receiver<'a> {
                 .transpose()
                 .map_err(err)?,
             rays: self.rays.map(|w| w.finish()).transpose().map_err(err)?,
-            hits: self.hits,
+            hits,
+            kept_rays,
             summary,
         })
     }

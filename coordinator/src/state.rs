@@ -110,6 +110,15 @@ pub struct Config {
     /// directory does not outlive the process (a `--local-workers` render),
     /// for whom a checkpoint is work no one reads.
     pub checkpoints: bool,
+    /// Records stay at the workers that made them (`Task.keep_output`):
+    /// an intersection's results, a shading's spawned rays. The
+    /// coordinator receives only their counts and the contributions, so
+    /// tasks run where their input is and nowhere else, and a job whose
+    /// worker is lost starts again from its eye rays. For workers that
+    /// live and die with the render (`--local-workers`), where sending
+    /// every record to the coordinator and back cost more than the
+    /// tracing; it needs `checkpoints` and verification off.
+    pub records_at_workers: bool,
     pub limits: Limits,
 }
 
@@ -140,6 +149,7 @@ impl Default for Config {
             arbiter_memory: 256 << 20,
             records_memory: 256 << 20,
             checkpoints: true,
+            records_at_workers: false,
             limits: Limits::default(),
         }
     }
@@ -215,6 +225,10 @@ pub struct Held {
     /// from the shard's first ray, `shard_first`, on.
     pub intersect: Option<(u64, String)>,
     pub shard_first: u64,
+    /// The input is nowhere but at the worker holding it (records at the
+    /// workers): the task runs there or, once that worker is gone, fails
+    /// as [`TaskEvent::Lost`].
+    pub pinned: bool,
 }
 
 /// Rays `start .. start + len` of a round: the output of task `task`,
@@ -258,6 +272,9 @@ pub struct TaskOutput {
     pub rays: Option<Records<RayRec>>,
     /// Results that hit something (intersection).
     pub hits: u64,
+    /// Spawned rays the worker kept instead of sending (shading, with
+    /// `Task.keep_output`).
+    pub kept_rays: u64,
     pub summary: v1::TaskSummary,
 }
 
@@ -280,6 +297,11 @@ pub enum TaskEvent {
         worker: WorkerTag,
     },
     Failed {
+        task: u64,
+        error: String,
+    },
+    /// A pinned task's input is gone with its worker.
+    Lost {
         task: u64,
         error: String,
     },
@@ -316,11 +338,30 @@ pub struct TaskEntry {
     /// The worker that holds (most of) its input, if any: it gets the
     /// task first.
     prefer: Option<String>,
+    /// Only `prefer` may run it (see [`Held::pinned`]).
+    pinned: bool,
 }
 
 impl TaskEntry {
     fn excludes(&self, w: &WorkerTag) -> bool {
-        self.excluded.contains(&w.session) || self.excluded.contains(&w.name)
+        self.excluded.contains(&w.session)
+            || self.excluded.contains(&w.name)
+            || (self.pinned && self.prefer.as_deref() != Some(w.session.as_str()))
+    }
+}
+
+/// Ends a pinned task whose input cannot be had any more (its worker is
+/// gone, or failed it): its stage hears [`TaskEvent::Lost`].
+fn lose(g: &mut Inner, id: u64, why: &str) {
+    if let Some(t) = g.tasks.get_mut(&id)
+        && t.state != TaskState::Done
+    {
+        t.state = TaskState::Done;
+        tracing::warn!(job = %t.task.job_id, task = id, why, "task input lost");
+        let _ = t.events.send(TaskEvent::Lost {
+            task: id,
+            error: why.to_string(),
+        });
     }
 }
 
@@ -598,6 +639,8 @@ impl Shared {
             task.task_id = id;
             task.attempt = 0;
             let prefer = input.held.preferred(task.first_ray, task.ray_count);
+            let pinned = input.held.pinned && prefer.is_some();
+            let holder_gone = pinned && prefer.as_ref().is_some_and(|s| !g.workers.contains_key(s));
             g.tasks.insert(
                 id,
                 TaskEntry {
@@ -617,10 +660,14 @@ impl Shared {
                     backup: false,
                     queued_at: Instant::now(),
                     prefer,
+                    pinned,
                 },
             );
             g.queue.push_back(id);
             ids.push(id);
+            if holder_gone {
+                lose(&mut g, id, "the worker holding its input is gone");
+            }
         }
         drop(g);
         self.task_ready.notify_waiters();
@@ -859,7 +906,10 @@ impl Shared {
         t.failures.push(format!("{}: {error}", worker.name));
         t.excluded.insert(worker.session.clone());
         t.excluded.insert(worker.name.clone());
-        if t.failures.len() >= max {
+        if t.pinned {
+            let why = format!("it failed where its input is: {error}");
+            lose(&mut g, r.task_id, &why);
+        } else if t.failures.len() >= max {
             t.state = TaskState::Done;
             let msg = t.failures.join("; ");
             let _ = t.events.send(TaskEvent::Failed {
@@ -974,7 +1024,8 @@ impl Shared {
             let Some(t) = g.tasks.get_mut(id) else {
                 continue;
             };
-            if t.state != TaskState::Running || t.backup {
+            // A pinned task can run nowhere else.
+            if t.state != TaskState::Running || t.backup || t.pinned {
                 continue;
             }
             let Some(oldest) = t.live.values().map(|a| a.since).min() else {
@@ -1055,6 +1106,16 @@ impl Shared {
                 }
                 requeue_if_idle(&mut g, id);
             }
+            // Tasks waiting for the records it held.
+            let waiting: Vec<u64> = g
+                .tasks
+                .iter()
+                .filter(|(_, t)| t.pinned && t.prefer.as_deref() == Some(s.as_str()))
+                .map(|(id, _)| *id)
+                .collect();
+            for id in waiting {
+                lose(&mut g, id, "the worker holding its input is gone");
+            }
         }
         drop(g);
         self.task_ready.notify_waiters();
@@ -1086,8 +1147,15 @@ pub fn describe_task(t: &v1::Task) -> String {
     )
 }
 
-/// Queues a task again if it is not done and no attempt of it is live.
+/// Queues a task again if it is not done and no attempt of it is live
+/// (a pinned task is lost instead: it could only go back where it was).
 fn requeue_if_idle(g: &mut Inner, id: u64) {
+    if g.tasks
+        .get(&id)
+        .is_some_and(|t| t.pinned && t.live.is_empty())
+    {
+        return lose(g, id, "its attempt ended where its input is");
+    }
     if let Some(t) = g.tasks.get_mut(&id)
         && t.state != TaskState::Done
         && t.live.is_empty()

@@ -81,6 +81,14 @@ pub struct CoordinatorArgs {
     /// beyond it they go to spill files under --tmp-dir
     #[arg(long, default_value = "256MiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub records_memory: u64,
+    /// Leave the tasks' results and spawned rays at the workers that made
+    /// them: only counts and colour come here, so the wire carries a few
+    /// bytes per ray. Tasks then run only where their input is, there are
+    /// no checkpoints and no verification, and a job that loses a worker
+    /// starts again from its eye rays. For a cluster whose workers are
+    /// trusted and rarely lost
+    #[arg(long)]
+    pub records_at_workers: bool,
     /// Workers with less --memory are refused at registration
     #[arg(long, default_value_t = MIN_WORKER_MEMORY, value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub min_worker_memory: u64,
@@ -206,7 +214,13 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         shard_rays: a.shard_rays.clamp(256, 1 << 24),
         data_dir: a.data_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
-        verify_fraction: a.verify_fraction,
+        verify_fraction: if a.records_at_workers {
+            0.0
+        } else {
+            a.verify_fraction
+        },
+        checkpoints: !a.records_at_workers,
+        records_at_workers: a.records_at_workers,
         deadline_factor: a.deadline_factor,
         deadline_min: seconds(a.deadline_min, "--deadline-min")?,
         task_timeout: seconds(a.task_timeout, "--task-timeout")?,

@@ -222,6 +222,71 @@ fn a_coordinator_and_three_workers() {
 }
 
 #[test]
+fn records_at_workers_a_lost_worker_starts_the_job_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "cluster-secret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--records-at-workers"]);
+    let mut workers: Vec<Proc> = ["k0", "k1"]
+        .iter()
+        .map(|n| worker(d, &url, n, "token"))
+        .collect();
+    let ids: Vec<String> = ["k0", "k1"].iter().map(|n| worker_id(&coord, n)).collect();
+    let want = embedded(d, "spd:gears:2", "128");
+
+    // 1. Results and spawned rays stay at the workers: the embedded
+    //    image, with only colour (and counts) on the wire.
+    ok(
+        d,
+        &render_args("spd:gears:2", &url, "token", "r1.png", "128"),
+    );
+    let s = cluster_stats(d);
+    same(
+        "records at the workers",
+        &std::fs::read(d.join("r1.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert_eq!(s["job_restarts"], 0, "{s}");
+    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    assert!(
+        bpr > 0.0 && bpr < 16.0,
+        "{bpr} bytes per ray: records were sent"
+    );
+
+    // 2. A worker killed once it holds a finished task's records, which
+    //    nobody else has: the job starts again on the other worker and
+    //    still gives the embedded image.
+    let mark = coord.mark();
+    let mut client = Proc::start(
+        d,
+        &render_args("spd:gears:2", &url, "token", "r2.png", "128"),
+        &[],
+    );
+    coord.wait_for_after(
+        mark,
+        &["task completed", &format!("worker={}", ids[1])],
+        60.0,
+    );
+    workers[1].child.kill().unwrap();
+    let status = client.wait(300.0);
+    assert!(status.success(), "{}", client.log());
+    let s = cluster_stats(d);
+    same(
+        "a worker lost with records",
+        &std::fs::read(d.join("r2.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert!(s["job_restarts"].as_u64().unwrap() >= 1, "{s}");
+    assert!(
+        coord.log().contains("task input lost"),
+        "the loss was not logged"
+    );
+    drop(coord);
+}
+
+#[test]
 fn local_workers_render_the_embedded_image_and_stop() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

@@ -203,9 +203,12 @@ fn job_thread<R: Real>(
                 rt: &rt,
                 kept: &mut kept,
                 share: &setup.kept_memory,
-                keep: setup.keep,
+                keep: setup.keep || task.keep_output,
                 fresh,
             };
+            if task.keep_output {
+                ctx.kept.release(&task.job_id, task.round);
+            }
             run_task(
                 &mut tracer,
                 &mut ctx,
@@ -290,6 +293,8 @@ fn run_task<R: Real>(
         ..Default::default()
     };
     let mut kept = None;
+    // Records the coordinator does not take are pinned here.
+    let pin = task.keep_output.then(|| (task.job_id.clone(), task.round));
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
             let (results, ist) = with_rays(eye, first, n, ray_slice, |src| {
@@ -297,11 +302,17 @@ fn run_task<R: Real>(
                     .intersect(first, src, n, false, &NoProgress)
                     .map_err(io)
             })?;
-            let kept_results = send_results(tracer, ctx, results, out)?;
+            let send = !task.keep_output;
+            let (kept_results, hits) = send_results(tracer, ctx, results, out, send)?;
+            if !send {
+                summary.kept_records = n;
+                summary.kept_hits = hits;
+            }
             if let Some(r) = kept_results {
                 kept = Some(Kept {
                     rays: inputs.rays.take(),
                     results: Some(r),
+                    pin: pin.clone(),
                 });
             }
             let t = ist.intersection_tests;
@@ -353,14 +364,17 @@ fn run_task<R: Real>(
                 out.records(RecordKind::Contributions, &buf)?;
             }
             let per = records_per_chunk::<RayRec>();
+            let send = !task.keep_output;
+            let mut keys = KeyRange::default();
             let kept_rays = match next.into_vec() {
                 // Sorted in memory: sent from where they lie, and kept
                 // there if the share allows (else the buffer goes back to
                 // the tracer for the next task's sort).
                 Ok(v) => {
-                    for chunk in v.chunks(per) {
+                    for chunk in v.chunks(per).filter(|_| send) {
                         out.records(RecordKind::Rays, chunk)?;
                     }
+                    v.iter().for_each(|r| keys.add(r.key));
                     if ctx.keep {
                         Some(keep_vec(tracer, ctx, v, "kept-rays", |t, v| {
                             t.recycle_rays(v)
@@ -371,17 +385,29 @@ fn run_task<R: Real>(
                     }
                 }
                 Err(mut sorted) => stream_and_keep(
-                    out,
+                    out.filter(send),
                     RecordKind::Rays,
                     ctx.keep.then_some((&tracer.spill, "kept-rays")),
-                    || sorted.next(),
+                    || {
+                        let r = sorted.next()?;
+                        if let Some(r) = &r {
+                            keys.add(r.key);
+                        }
+                        Ok(r)
+                    },
                 )?
                 .map(|f| Slice::whole(Records::File(f))),
             };
+            if !send {
+                summary.kept_records = keys.count;
+                summary.kept_first_key = keys.first;
+                summary.kept_last_key = keys.last;
+            }
             if let Some(r) = kept_rays {
                 kept = Some(Kept {
                     rays: Some(r),
                     results: None,
+                    pin: pin.clone(),
                 });
             }
             summary.eye_hit_rays = counts.eye_hit_rays;
@@ -442,38 +468,66 @@ fn send_results<R: Real>(
     ctx: &mut TaskCtx<'_>,
     mut results: ResultReader,
     out: &Output<'_>,
-) -> Result<Option<ResultSlice>, String> {
+    send: bool,
+) -> Result<(Option<ResultSlice>, u64), String> {
     let per = records_per_chunk::<ResultRec>();
     let mut buf = Vec::with_capacity(per);
     if let ResultReader::Dense { v, .. } = results {
-        for chunk in v.chunks(per) {
+        for chunk in v.chunks(per).filter(|_| send) {
             buf.clear();
             buf.extend(chunk.iter().map(|o| o.res));
             out.records(RecordKind::Results, &buf)?;
         }
+        let hits = v.iter().filter(|o| !o.res.prim.is_none()).count() as u64;
         if !ctx.keep {
             tracer.recycle(ResultReader::Dense { v, next: 0 });
-            return Ok(None);
+            return Ok((None, hits));
         }
         let s = keep_vec(tracer, ctx, v, "kept-results", |t, v| {
             t.recycle(ResultReader::Dense { v, next: 0 })
         })?;
-        return Ok(Some(ResultSlice::Carried(s)));
+        return Ok((Some(ResultSlice::Carried(s)), hits));
     }
+    let mut hits = 0;
     let kept = stream_and_keep(
-        out,
+        out.filter(send),
         RecordKind::Results,
         ctx.keep.then_some((&tracer.spill, "kept-results")),
-        || results.next_result(),
+        || {
+            let r = results.next_result()?;
+            hits += r.is_some_and(|r| !r.prim.is_none()) as u64;
+            Ok(r)
+        },
     )?;
     tracer.recycle(results);
-    Ok(kept.map(|f| ResultSlice::Bare(Slice::whole(Records::File(f)))))
+    Ok((
+        kept.map(|f| ResultSlice::Bare(Slice::whole(Records::File(f)))),
+        hits,
+    ))
+}
+
+/// The count and the first and last keys of spawned rays, in key order.
+#[derive(Default)]
+struct KeyRange {
+    count: u64,
+    first: u64,
+    last: u64,
+}
+
+impl KeyRange {
+    fn add(&mut self, key: u64) {
+        if self.count == 0 {
+            self.first = key;
+        }
+        self.last = key;
+        self.count += 1;
+    }
 }
 
 /// Sends the records `next` yields, in chunks, and writes them to a file
 /// too if `keep` names one (the spill directory and what for).
 fn stream_and_keep<T: bytemuck::Pod>(
-    out: &Output<'_>,
+    out: Option<&Output<'_>>,
     kind: RecordKind,
     keep: Option<(&SpillDir, &str)>,
     mut next: impl FnMut() -> Result<Option<T>, sray_engine::Error>,
@@ -491,7 +545,9 @@ fn stream_and_keep<T: bytemuck::Pod>(
             buf.push(r);
         }
         if buf.len() == per || (r.is_none() && !buf.is_empty()) {
-            out.records(kind, &buf)?;
+            if let Some(out) = out {
+                out.records(kind, &buf)?;
+            }
             if let Some(w) = &mut w {
                 w.extend(&buf).map_err(io)?;
             }
@@ -574,7 +630,16 @@ fn result_reader<R: Real>(
             (None, Records::File(f), _) => {
                 ResultReader::File(f.reader_range(s.start, s.count).map_err(io)?)
             }
-            (None, Records::Memory { .. }, _) => unreachable!("memory records are a slice"),
+            (None, _, _) => {
+                // In parts (a chain): to a file, read as needed.
+                let mut w =
+                    RecordWriter::<ResultRec>::create(&tracer.spill, "in-results").map_err(io)?;
+                let mut rd = s.reader().map_err(io)?;
+                while let Some(r) = rd.next().map_err(io)? {
+                    w.push(&r).map_err(io)?;
+                }
+                ResultReader::File(w.finish().map_err(io)?.reader().map_err(io)?)
+            }
         },
     })
 }

@@ -123,6 +123,11 @@ impl ResultSlice {
 pub struct Kept {
     pub rays: Option<Slice<RayRec>>,
     pub results: Option<ResultSlice>,
+    /// The job and round of a task whose output the coordinator did not
+    /// take (`Task.keep_output`): these records are nowhere else, so they
+    /// are never dropped to make room, only once their job has gone two
+    /// rounds past them (see [`KeptStore::release`]).
+    pub pin: Option<(String, u32)>,
 }
 
 /// A worker's records kept in memory (and tasks' inputs received there)
@@ -148,10 +153,31 @@ impl KeptStore {
     }
 
     /// Whether dropping the entry gives memory back: it holds records in
-    /// memory that nothing else holds.
+    /// memory that nothing else holds (and nowhere else has them).
     fn frees_memory(k: &Kept) -> bool {
-        k.rays.as_ref().is_some_and(Slice::in_memory_alone)
-            || k.results.as_ref().is_some_and(ResultSlice::in_memory_alone)
+        k.pin.is_none()
+            && (k.rays.as_ref().is_some_and(Slice::in_memory_alone)
+                || k.results.as_ref().is_some_and(ResultSlice::in_memory_alone))
+    }
+
+    /// Drops the pinned records of `job` that a task of round `round`
+    /// no longer needs: a round reads the rays the round before spawned,
+    /// and nothing older.
+    pub(crate) fn release(&mut self, job: &str, round: u32) {
+        let old: Vec<u64> = self
+            .order
+            .iter()
+            .copied()
+            .filter(|t| {
+                self.by_task[t]
+                    .pin
+                    .as_ref()
+                    .is_some_and(|(j, r)| j == job && r.saturating_add(1) < round)
+            })
+            .collect();
+        for t in old {
+            self.remove(t);
+        }
     }
 
     /// Drops the oldest records held in memory until `share` has `bytes`
@@ -188,9 +214,15 @@ impl KeptStore {
         self.by_task.insert(task, k);
         self.order.push_back(task);
         while self.bytes > KEPT_BYTES || self.order.len() > KEPT_TASKS {
-            let Some(t) = self.order.pop_front() else {
+            // The oldest that is kept elsewhere too.
+            let Some(pos) = self
+                .order
+                .iter()
+                .position(|t| self.by_task[t].pin.is_none())
+            else {
                 break;
             };
+            let t = self.order.remove(pos).expect("in range");
             if let Some(old) = self.by_task.remove(&t) {
                 self.bytes -= Self::size(&old);
             }
@@ -226,7 +258,32 @@ mod tests {
         Kept {
             rays: None,
             results: Some(ResultSlice::Bare(s)),
+            pin: None,
         }
+    }
+
+    #[test]
+    fn pinned_records_stay_until_their_job_is_two_rounds_on() {
+        let size = std::mem::size_of::<ResultRec>() as u64;
+        let share = MemoryShare::new(20 * size);
+        let mut store = KeptStore::default();
+        let pinned = |s, job: &str, round| Kept {
+            pin: Some((job.to_string(), round)),
+            ..kept(s)
+        };
+        store.insert(1, pinned(results(&share, 10), "a", 1));
+        store.insert(2, kept(results(&share, 10)));
+        // Room is made from the unpinned only.
+        store.make_room(&share, 20 * size);
+        assert_eq!(store.ids(), vec![1]);
+        store.insert(3, pinned(results(&share, 5), "a", 2));
+        store.insert(4, pinned(results(&share, 5), "b", 1));
+        store.release("a", 2);
+        assert_eq!(store.ids(), vec![1, 3, 4]);
+        // Round 3 reads round 2's records, not round 1's; other jobs'
+        // stay.
+        store.release("a", 3);
+        assert_eq!(store.ids(), vec![3, 4]);
     }
 
     #[test]

@@ -100,6 +100,11 @@ pub struct Output<'a> {
 }
 
 impl Output<'_> {
+    /// This output if `send`, else none (the records are kept instead).
+    pub fn filter(&self, send: bool) -> Option<&Self> {
+        send.then_some(self)
+    }
+
     /// Queues records for encoding and sending.
     pub fn records<T: bytemuck::Pod>(&self, kind: RecordKind, recs: &[T]) -> Result<(), String> {
         self.push(Payload::Records {

@@ -60,6 +60,10 @@ pub async fn render(
         // The data directory goes with this process: no restart could
         // resume from a checkpoint.
         checkpoints: false,
+        // The workers keep their results and spawned rays: sending them
+        // here and back cost more than the tracing. Should one die, the
+        // job starts again on those left.
+        records_at_workers: true,
         // The workers are this process's children, running its executable
         // on this machine: a wrong answer of theirs would be a fault the
         // embedded render shares, which re-tracing samples here cannot
@@ -135,6 +139,13 @@ pub async fn render(
         logs.push(log_path);
     }
 
+    // The first round is cut into shards for the workers there are (and
+    // later rounds follow its cut when records stay at the workers): the
+    // workers are given a moment to join first.
+    let joined = std::time::Instant::now();
+    while shared.worker_count() < plan.workers && joined.elapsed() < Duration::from_secs(10) {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
     let target = Target {
         url,
         token: Some(client_token),
