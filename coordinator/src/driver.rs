@@ -544,6 +544,16 @@ async fn drive(
             // at the coordinator, or only at the workers that spawned them.
             let eye = rays.is_none() && segments.is_empty();
             let shards: Vec<(u64, u64)> = if keep && !eye {
+                // A shard size of the coordinator's choosing stretches to
+                // the longest segment (within its cap): cutting a segment
+                // only a little too long makes a small shard, and a pass
+                // more.
+                let longest = segments.iter().map(|g| g.len).max().unwrap_or(0);
+                let per = if job.auto_shard {
+                    per.max(longest.min(AUTO_SHARD_MAX))
+                } else {
+                    per
+                };
                 held_shards(&segments, per)
             } else {
                 (0..n.div_ceil(per))

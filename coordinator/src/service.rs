@@ -116,7 +116,20 @@ impl Coordinator for Service {
     ) -> Result<Response<v1::HeartbeatReply>, Status> {
         require(&req, Role::Worker, "Heartbeat")?;
         let known = self.shared.beat(&req.into_inner().session);
-        Ok(Response::new(v1::HeartbeatReply { known }))
+        let running_jobs = if known {
+            self.shared
+                .jobs
+                .running()
+                .iter()
+                .map(|e| e.id.clone())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Ok(Response::new(v1::HeartbeatReply {
+            known,
+            running_jobs,
+        }))
     }
 
     async fn next_task(

@@ -7,8 +7,8 @@
 
 pub use crate::inputs::Inputs;
 use crate::inputs::read_inputs;
-use crate::kept::KeptStore;
 pub use crate::kept::{KEPT_MEMORY_PART, Kept, ResultSlice, Slice};
+use crate::kept::{KeptStore, Pin};
 use crate::output::{Encoder, Output};
 use sray_engine::bf::{
     BfOptions, Contribution, Outcome, RayRec, RaySource, ResultReader, ResultRec, Tracer, eye_ray,
@@ -50,6 +50,11 @@ enum Msg {
     Run(Box<Work>),
     /// Give back the tracer's reusable buffers (see [`Executor::trim`]).
     Trim,
+    /// The jobs running (see [`Executor::jobs_running`]).
+    JobsRunning {
+        jobs: Vec<String>,
+        asked: Instant,
+    },
 }
 
 /// One task for the executor, with its input stream (if it has input), the
@@ -141,6 +146,15 @@ impl Executor {
             .is_some_and(|tx| tx.send(Msg::Run(Box::new(w))).is_ok())
     }
 
+    /// Tells the executor which jobs run (as the coordinator answered a
+    /// question asked at `asked`): it drops the records it keeps for
+    /// jobs that have ended.
+    pub fn jobs_running(&self, jobs: Vec<String>, asked: Instant) {
+        if let Some(tx) = &self.tx {
+            let _ = tx.send(Msg::JobsRunning { jobs, asked });
+        }
+    }
+
     /// Asks the (idle) executor to give back the buffers its tracer keeps
     /// between tasks, keeping its grids: another setup's tasks run now,
     /// with the worker's whole budget.
@@ -186,6 +200,11 @@ fn job_thread<R: Real>(
             Msg::Run(w) => *w,
             Msg::Trim => {
                 tracer.trim();
+                continue;
+            }
+            Msg::JobsRunning { jobs, asked } => {
+                kept.release_ended(&jobs, asked);
+                *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
                 continue;
             }
         };
@@ -294,7 +313,11 @@ fn run_task<R: Real>(
     };
     let mut kept = None;
     // Records the coordinator does not take are pinned here.
-    let pin = task.keep_output.then(|| (task.job_id.clone(), task.round));
+    let pin = task.keep_output.then(|| Pin {
+        job: task.job_id.clone(),
+        round: task.round,
+        at: Instant::now(),
+    });
     match v1::Stage::try_from(task.stage) {
         Ok(v1::Stage::Intersect) => {
             let (results, ist) = with_rays(eye, first, n, ray_slice, |src| {

@@ -123,11 +123,19 @@ impl ResultSlice {
 pub struct Kept {
     pub rays: Option<Slice<RayRec>>,
     pub results: Option<ResultSlice>,
-    /// The job and round of a task whose output the coordinator did not
-    /// take (`Task.keep_output`): these records are nowhere else, so they
-    /// are never dropped to make room, only once their job has gone two
-    /// rounds past them (see [`KeptStore::release`]).
-    pub pin: Option<(String, u32)>,
+    /// Set for a task whose output the coordinator did not take
+    /// (`Task.keep_output`): these records are nowhere else, so they are
+    /// never dropped to make room, only once their job has gone two rounds
+    /// past them or has ended (see [`KeptStore::release`]).
+    pub pin: Option<Pin>,
+}
+
+/// The job and round of pinned records, and when they were pinned.
+#[derive(Clone, Debug)]
+pub struct Pin {
+    pub job: String,
+    pub round: u32,
+    pub at: std::time::Instant,
 }
 
 /// A worker's records kept in memory (and tasks' inputs received there)
@@ -172,10 +180,31 @@ impl KeptStore {
                 self.by_task[t]
                     .pin
                     .as_ref()
-                    .is_some_and(|(j, r)| j == job && r.saturating_add(1) < round)
+                    .is_some_and(|p| p.job == job && p.round.saturating_add(1) < round)
             })
             .collect();
         for t in old {
+            self.remove(t);
+        }
+    }
+
+    /// Drops the pinned records of jobs that have ended: those pinned
+    /// before `asked`, when the coordinator was asked which jobs run, of a
+    /// job not among `running` (a job pinned to later may be newer than
+    /// the answer).
+    pub(crate) fn release_ended(&mut self, running: &[String], asked: std::time::Instant) {
+        let ended: Vec<u64> = self
+            .order
+            .iter()
+            .copied()
+            .filter(|t| {
+                self.by_task[t]
+                    .pin
+                    .as_ref()
+                    .is_some_and(|p| p.at < asked && !running.contains(&p.job))
+            })
+            .collect();
+        for t in ended {
             self.remove(t);
         }
     }
@@ -268,7 +297,11 @@ mod tests {
         let share = MemoryShare::new(20 * size);
         let mut store = KeptStore::default();
         let pinned = |s, job: &str, round| Kept {
-            pin: Some((job.to_string(), round)),
+            pin: Some(Pin {
+                job: job.to_string(),
+                round,
+                at: std::time::Instant::now(),
+            }),
             ..kept(s)
         };
         store.insert(1, pinned(results(&share, 10), "a", 1));
@@ -284,6 +317,11 @@ mod tests {
         // stay.
         store.release("a", 3);
         assert_eq!(store.ids(), vec![3, 4]);
+        // Job b ended before the coordinator was asked, a later one not.
+        let asked = std::time::Instant::now();
+        store.insert(5, pinned(results(&share, 1), "c", 1));
+        store.release_ended(&["a".to_string()], asked);
+        assert_eq!(store.ids(), vec![3, 5]);
     }
 
     #[test]

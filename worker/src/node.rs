@@ -50,6 +50,7 @@ pub async fn run(
         cache,
         execs: Vec::new(),
         running: Arc::new(AtomicU64::new(0)),
+        jobs_running: JobsRunning::default(),
         kept_memory: MemoryShare::new(cfg_memory / KEPT_MEMORY_PART),
     };
     tokio::select! {
@@ -71,6 +72,9 @@ struct Node {
     execs: Vec<Executor>,
     /// The task being run (0: none), for heartbeats.
     running: Arc<AtomicU64>,
+    /// The jobs running, as the last heartbeat's answer said, and when it
+    /// was asked (taken by the task loop to the executors).
+    jobs_running: JobsRunning,
     /// The part of `--memory` that the executors' kept and received
     /// records may hold in memory (the tracers get the rest).
     kept_memory: MemoryShare,
@@ -93,6 +97,7 @@ impl Node {
                 beat,
                 self.running.clone(),
                 lost.clone(),
+                self.jobs_running.clone(),
             ));
             let r = self.take_tasks(&session, &lost).await;
             hb.abort();
@@ -138,6 +143,16 @@ impl Node {
         loop {
             if lost.load(Ordering::Relaxed) {
                 return Ok(());
+            }
+            let answer = self
+                .jobs_running
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .take();
+            if let Some((asked, jobs)) = answer {
+                for e in &self.execs {
+                    e.jobs_running(jobs.clone(), asked);
+                }
             }
             match self
                 .client
@@ -355,12 +370,16 @@ pub fn setup_key(scene: &str, params: &v1::RenderParams) -> String {
     h.finalize().to_hex().to_string()
 }
 
+/// The jobs running and when the coordinator was asked, once answered.
+type JobsRunning = Arc<std::sync::Mutex<Option<(std::time::Instant, Vec<String>)>>>;
+
 async fn heartbeat(
     mut client: Client,
     session: String,
     every: Duration,
     running: Arc<AtomicU64>,
     lost: Arc<AtomicBool>,
+    jobs: JobsRunning,
 ) {
     let mut tick = tokio::time::interval(every);
     loop {
@@ -370,11 +389,14 @@ async fn heartbeat(
             session: session.clone(),
             running_tasks: if t == 0 { vec![] } else { vec![t] },
         };
-        if let Ok(r) = client.heartbeat(req).await
-            && !r.into_inner().known
-        {
-            lost.store(true, Ordering::Relaxed);
-            return;
+        let asked = std::time::Instant::now();
+        if let Ok(r) = client.heartbeat(req).await {
+            let r = r.into_inner();
+            if !r.known {
+                lost.store(true, Ordering::Relaxed);
+                return;
+            }
+            *jobs.lock().unwrap_or_else(|p| p.into_inner()) = Some((asked, r.running_jobs));
         }
     }
 }
