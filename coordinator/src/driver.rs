@@ -482,7 +482,7 @@ async fn drive(
     resume: Option<Resume>,
 ) -> Outcome {
     let t0 = Instant::now();
-    let traffic0 = shared.traffic.snapshot();
+    let mut traffic0 = shared.traffic.snapshot();
     let opts = &job.opts;
     let corners = opts.frame_slots();
     let mut frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
@@ -522,6 +522,7 @@ async fn drive(
                         restarts,
                         ..Totals::default()
                     };
+                    traffic0 = shared.traffic.snapshot();
                     rays = None;
                     n = opts.eye_rays();
                     round = 1;
@@ -543,7 +544,10 @@ async fn drive(
             // The eye rays are made by the workers; later rounds' rays are
             // at the coordinator, or only at the workers that spawned them.
             let eye = rays.is_none() && segments.is_empty();
-            let shards: Vec<(u64, u64)> = if keep && !eye {
+            // Rays only at the workers (not a round resumed from a
+            // checkpoint of a run that kept them here).
+            let held_only = keep && rays.is_none() && !segments.is_empty();
+            let shards: Vec<(u64, u64)> = if held_only {
                 // A shard size of the coordinator's choosing stretches to
                 // the longest segment (within its cap): cutting a segment
                 // only a little too long makes a small shard, and a pass
@@ -554,7 +558,12 @@ async fn drive(
                 } else {
                     per
                 };
-                held_shards(&segments, per)
+                let shards = held_shards(&segments, per);
+                anyhow::ensure!(
+                    shards.iter().map(|s| s.1).sum::<u64>() == n,
+                    "internal: the held segments do not make the round's {n} rays"
+                );
+                shards
             } else {
                 (0..n.div_ceil(per))
                     .map(|i| {
@@ -582,7 +591,7 @@ async fn drive(
                             rays: segments.clone(),
                             intersect: None,
                             shard_first: first,
-                            pinned: keep && !eye,
+                            pinned: held_only,
                         },
                     })
                 })

@@ -640,7 +640,14 @@ impl Shared {
             task.attempt = 0;
             let prefer = input.held.preferred(task.first_ray, task.ray_count);
             let pinned = input.held.pinned && prefer.is_some();
-            let holder_gone = pinned && prefer.as_ref().is_some_and(|s| !g.workers.contains_key(s));
+            // Gone, or quarantined (it would not get the task in time).
+            let holder_gone = pinned
+                && prefer.as_ref().is_some_and(|s| {
+                    !g.workers.contains_key(s)
+                        || g.quarantined
+                            .get(s)
+                            .is_some_and(|q| q.until > Instant::now())
+                });
             g.tasks.insert(
                 id,
                 TaskEntry {
@@ -970,6 +977,16 @@ impl Shared {
             }
             requeue_if_idle(&mut g, id);
         }
+        // Tasks waiting for the records it holds.
+        let waiting: Vec<u64> = g
+            .tasks
+            .iter()
+            .filter(|(_, t)| t.pinned && t.prefer.as_deref() == Some(worker.session.as_str()))
+            .map(|(id, _)| *id)
+            .collect();
+        for id in waiting {
+            lose(&mut g, id, "the worker holding its input is quarantined");
+        }
         drop(g);
         self.task_ready.notify_waiters();
     }
@@ -1020,18 +1037,26 @@ impl Shared {
         };
         let now = Instant::now();
         let mut backed = Vec::new();
+        let mut stuck = Vec::new();
         for id in ids {
             let Some(t) = g.tasks.get_mut(id) else {
                 continue;
             };
-            // A pinned task can run nowhere else.
-            if t.state != TaskState::Running || t.backup || t.pinned {
+            if t.state != TaskState::Running || t.backup {
                 continue;
             }
             let Some(oldest) = t.live.values().map(|a| a.since).min() else {
                 continue;
             };
             let ran = now.duration_since(oldest);
+            // A pinned task can run nowhere else: past the task timeout,
+            // its worker is taken to be stuck and the job starts again.
+            if t.pinned {
+                if ran > self.cfg.task_timeout {
+                    stuck.push(*id);
+                }
+                continue;
+            }
             if ran > deadline {
                 t.backup = true;
                 let job = t.task.job_id.clone();
@@ -1039,6 +1064,9 @@ impl Shared {
                 g.queue.push_front(*id);
                 backed.push((*id, ran));
             }
+        }
+        for id in stuck {
+            lose(&mut g, id, "it ran past --task-timeout where its input is");
         }
         drop(g);
         if !backed.is_empty() {

@@ -23,4 +23,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// 3: random job ids with secrets, worker sessions, separate roles.
 /// 4: compressed records, held records not sent again, grid builds
 /// reported.
-pub const PROTOCOL_VERSION: u32 = 4;
+/// 5: records at the workers (`Task.keep_output`, kept counts in the
+/// summary, the jobs running in the heartbeat's answer).
+pub const PROTOCOL_VERSION: u32 = 5;

@@ -88,8 +88,23 @@ pub struct Executor {
     pub jobs: std::collections::HashSet<String>,
     tx: Option<std::sync::mpsc::Sender<Msg>>,
     thread: Option<std::thread::JoinHandle<()>>,
-    /// The ids of the tasks whose records the executor keeps.
-    held: Arc<Mutex<Vec<u64>>>,
+    /// What the executor keeps.
+    held: Arc<Mutex<Holding>>,
+}
+
+/// The ids of the tasks whose records an executor keeps, and whether any
+/// are pinned (kept nowhere else).
+#[derive(Default)]
+struct Holding {
+    ids: Vec<u64>,
+    pinned: bool,
+}
+
+fn publish(held: &Mutex<Holding>, kept: &KeptStore) {
+    *held.lock().unwrap_or_else(|p| p.into_inner()) = Holding {
+        ids: kept.ids(),
+        pinned: kept.has_pins(),
+    };
 }
 
 /// Dropping an executor ends its thread and waits for it, so that the
@@ -110,7 +125,7 @@ impl Executor {
         let (tx, rx) = std::sync::mpsc::channel::<Msg>();
         let key = setup.key.clone();
         let (scene, db_path) = (setup.scene.clone(), setup.db_path.clone());
-        let held = Arc::new(Mutex::new(Vec::new()));
+        let held = Arc::new(Mutex::new(Holding::default()));
         let h2 = held.clone();
         let thread = std::thread::Builder::new()
             .name(format!("setup-{}", &key[..key.len().min(8)]))
@@ -136,7 +151,17 @@ impl Executor {
     /// dropped: a task drops kept records only after it has read its
     /// input, and the list is brought up to date when it ends.
     pub fn held(&self) -> Vec<u64> {
-        self.held.lock().unwrap_or_else(|p| p.into_inner()).clone()
+        self.held
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .ids
+            .clone()
+    }
+
+    /// Whether it keeps records that are nowhere else (records at the
+    /// workers): dropping it would cost their job a restart.
+    pub fn holds_pins(&self) -> bool {
+        self.held.lock().unwrap_or_else(|p| p.into_inner()).pinned
     }
 
     /// Queues a task; false if the thread has ended.
@@ -169,7 +194,7 @@ fn job_thread<R: Real>(
     setup: JobSetup,
     rt: tokio::runtime::Handle,
     rx: std::sync::mpsc::Receiver<Msg>,
-    held: Arc<Mutex<Vec<u64>>>,
+    held: Arc<Mutex<Holding>>,
 ) {
     let db = match Database::open(&setup.db_path) {
         Ok(db) => db,
@@ -204,7 +229,7 @@ fn job_thread<R: Real>(
             }
             Msg::JobsRunning { jobs, asked } => {
                 kept.release_ended(&jobs, asked);
-                *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
+                publish(&held, &kept);
                 continue;
             }
         };
@@ -225,9 +250,6 @@ fn job_thread<R: Real>(
                 keep: setup.keep || task.keep_output,
                 fresh,
             };
-            if task.keep_output {
-                ctx.kept.release(&task.job_id, task.round);
-            }
             run_task(
                 &mut tracer,
                 &mut ctx,
@@ -252,7 +274,7 @@ fn job_thread<R: Real>(
         });
         // After every task, failed or not: a task may have dropped kept
         // records to make room before it failed.
-        *held.lock().unwrap_or_else(|p| p.into_inner()) = kept.ids();
+        publish(&held, &kept);
         let _ = done.send(r);
     }
 }
@@ -295,6 +317,10 @@ fn run_task<R: Real>(
         ));
     }
     let mut inputs = read_inputs(tracer, rt, ctx.kept, ctx.share, input)?;
+    if task.keep_output {
+        // Its input read, what this job's later tasks cannot ask for goes.
+        ctx.kept.release(&task.job_id, task.round);
+    }
     let t_in = t0.elapsed().as_secs_f64();
     let io = |e: sray_engine::Error| e.to_string();
     // The shard's rays: made here for the eye rays, else as received.

@@ -168,19 +168,24 @@ impl KeptStore {
                 || k.results.as_ref().is_some_and(ResultSlice::in_memory_alone))
     }
 
+    /// Whether any records are pinned.
+    pub(crate) fn has_pins(&self) -> bool {
+        self.by_task.values().any(|k| k.pin.is_some())
+    }
+
     /// Drops the pinned records of `job` that a task of round `round`
     /// no longer needs: a round reads the rays the round before spawned,
-    /// and nothing older.
+    /// and nothing older; records of a later round are from an attempt
+    /// of the job that was given up (it started again).
     pub(crate) fn release(&mut self, job: &str, round: u32) {
         let old: Vec<u64> = self
             .order
             .iter()
             .copied()
             .filter(|t| {
-                self.by_task[t]
-                    .pin
-                    .as_ref()
-                    .is_some_and(|p| p.job == job && p.round.saturating_add(1) < round)
+                self.by_task[t].pin.as_ref().is_some_and(|p| {
+                    p.job == job && (p.round.saturating_add(1) < round || p.round > round)
+                })
             })
             .collect();
         for t in old {
@@ -316,6 +321,11 @@ mod tests {
         // Round 3 reads round 2's records, not round 1's; other jobs'
         // stay.
         store.release("a", 3);
+        assert_eq!(store.ids(), vec![3, 4]);
+        // Job b started again: its round-1 task drops what the given-up
+        // attempt left from later rounds.
+        store.insert(6, pinned(results(&share, 1), "b", 3));
+        store.release("b", 1);
         assert_eq!(store.ids(), vec![3, 4]);
         // Job b ended before the coordinator was asked, a later one not.
         let asked = std::time::Instant::now();

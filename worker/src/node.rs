@@ -234,7 +234,10 @@ impl Node {
             // its own. The setup is named by content, never by job id.
             // The least recently used setup goes when too many are kept.
             while self.execs.len() >= SETUPS_KEPT {
-                self.execs.remove(0);
+                // The least recently used that keeps no records found
+                // nowhere else, if there is one.
+                let i = self.execs.iter().position(|e| !e.holds_pins()).unwrap_or(0);
+                self.execs.remove(i);
             }
             fresh = true;
             // A scene another kept setup has open is checked without
