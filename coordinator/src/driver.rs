@@ -964,8 +964,8 @@ impl Stage<'_> {
                     },
                     Some(TaskEvent::Lost { error, .. }) => {
                         return Err(anyhow::Error::new(RecordsLost(format!(
-                            "a {} task of round {}: {error}",
-                            self.name(), self.round
+                            "round {} ({}): {error}",
+                            self.round, self.name()
                         ))));
                     }
                     Some(TaskEvent::Failed { task, error }) => match kinds.get(&task) {
