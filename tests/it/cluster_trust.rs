@@ -266,6 +266,22 @@ fn a_restarted_coordinator_never_hands_out_another_scenes_image() {
 /// fetched again by job id; no spill file of the killed run is left.
 #[test]
 fn a_killed_coordinator_resumes_and_the_image_can_be_fetched_again() {
+    killed_coordinator_resumes(&[]);
+}
+
+/// A job checkpointed by a coordinator that took every record resumes on
+/// one that leaves them at the workers: the resumed round's rays are the
+/// checkpoint's, cut into shards as before (not along held segments, of
+/// which there are none).
+#[test]
+fn a_checkpoint_resumes_on_a_coordinator_with_records_at_the_workers() {
+    killed_coordinator_resumes(&["--records-at-workers"]);
+}
+
+/// Kills the coordinator once round 1 is journaled, starts it again with
+/// `restart_extra` as well, and checks the image, the spill files and a
+/// fetch after the job.
+fn killed_coordinator_resumes(restart_extra: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("token"), "s3cret\n").unwrap();
@@ -282,7 +298,8 @@ fn a_killed_coordinator_resumes_and_the_image_can_be_fetched_again() {
     coord.wait_for(&["checkpoint", "round=2"], 120.0);
     let before: Vec<_> = walk(&tmp);
     drop(coord);
-    let (coord, _) = coordinator_on(d, &port(&url), &extra);
+    let again: Vec<&str> = extra.iter().chain(restart_extra).copied().collect();
+    let (coord, _) = coordinator_on(d, &port(&url), &again);
     coord.wait_for(&["resuming at round"], 30.0);
     for f in &before {
         assert!(

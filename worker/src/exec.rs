@@ -318,8 +318,19 @@ fn run_task<R: Real>(
     }
     let mut inputs = read_inputs(tracer, rt, ctx.kept, ctx.share, input)?;
     if task.keep_output {
-        // Its input read, what this job's later tasks cannot ask for goes.
-        ctx.kept.release(&task.job_id, task.round);
+        // Its input read, what this job's later tasks cannot ask for goes,
+        // its buffers back to the tracer (fresh memory for every round's
+        // results and spawned rays cost a page fault per 4 KiB).
+        for k in ctx.kept.release(&task.job_id, task.round) {
+            if let Some(Ok(v)) = k.rays.map(Slice::whole_vec) {
+                tracer.recycle_rays(v);
+            }
+            if let Some(ResultSlice::Carried(s)) = k.results
+                && let Ok(v) = s.whole_vec()
+            {
+                tracer.recycle(ResultReader::Dense { v, next: 0 });
+            }
+        }
     }
     let t_in = t0.elapsed().as_secs_f64();
     let io = |e: sray_engine::Error| e.to_string();

@@ -176,8 +176,9 @@ impl KeptStore {
     /// Drops the pinned records of `job` that a task of round `round`
     /// no longer needs: a round reads the rays the round before spawned,
     /// and nothing older; records of a later round are from an attempt
-    /// of the job that was given up (it started again).
-    pub(crate) fn release(&mut self, job: &str, round: u32) {
+    /// of the job that was given up (it started again). Returns what it
+    /// dropped (its buffers may serve again).
+    pub(crate) fn release(&mut self, job: &str, round: u32) -> Vec<Kept> {
         let old: Vec<u64> = self
             .order
             .iter()
@@ -188,9 +189,7 @@ impl KeptStore {
                 })
             })
             .collect();
-        for t in old {
-            self.remove(t);
-        }
+        old.into_iter().filter_map(|t| self.remove(t)).collect()
     }
 
     /// Drops the pinned records of jobs that have ended: those pinned
