@@ -350,6 +350,20 @@ impl TaskEntry {
     }
 }
 
+/// Loses every task pinned to the worker `session` (its records can no
+/// longer be had).
+fn lose_pinned_to(g: &mut Inner, session: &str, why: &str) {
+    let waiting: Vec<u64> = g
+        .tasks
+        .iter()
+        .filter(|(_, t)| t.pinned && t.prefer.as_deref() == Some(session))
+        .map(|(id, _)| *id)
+        .collect();
+    for id in waiting {
+        lose(g, id, why);
+    }
+}
+
 /// Ends a pinned task whose input cannot be had any more (its worker is
 /// gone, or failed it): its stage hears [`TaskEvent::Lost`].
 fn lose(g: &mut Inner, id: u64, why: &str) {
@@ -977,16 +991,11 @@ impl Shared {
             }
             requeue_if_idle(&mut g, id);
         }
-        // Tasks waiting for the records it holds.
-        let waiting: Vec<u64> = g
-            .tasks
-            .iter()
-            .filter(|(_, t)| t.pinned && t.prefer.as_deref() == Some(worker.session.as_str()))
-            .map(|(id, _)| *id)
-            .collect();
-        for id in waiting {
-            lose(&mut g, id, "the worker holding its input is quarantined");
-        }
+        lose_pinned_to(
+            &mut g,
+            &worker.session,
+            "the worker holding its input is quarantined",
+        );
         drop(g);
         self.task_ready.notify_waiters();
     }
@@ -1134,16 +1143,7 @@ impl Shared {
                 }
                 requeue_if_idle(&mut g, id);
             }
-            // Tasks waiting for the records it held.
-            let waiting: Vec<u64> = g
-                .tasks
-                .iter()
-                .filter(|(_, t)| t.pinned && t.prefer.as_deref() == Some(s.as_str()))
-                .map(|(id, _)| *id)
-                .collect();
-            for id in waiting {
-                lose(&mut g, id, "the worker holding its input is gone");
-            }
+            lose_pinned_to(&mut g, &s, "the worker holding its input is gone");
         }
         drop(g);
         self.task_ready.notify_waiters();
