@@ -80,6 +80,32 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     assert_eq!(s["grid_builds"], 1, "{s}");
 }
 
+/// The same goal where every record travels: a coordinator that keeps
+/// no records at the workers (the default for a cluster) and one worker.
+/// The records are compact on the wire, and a worker that holds a task's
+/// input is sent its name, not the records.
+#[test]
+fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "wire-secret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "64", "emb.png");
+    let (coord, url) = cluster::coordinator(d, &["--token-file", "token"]);
+    let _w = cluster::worker(d, &url, "w0", Some("token"), &[]);
+    coord.wait_for(&["worker registered", "worker=w0 "], 30.0);
+    ok(
+        d,
+        &cluster::render_args("spd:balls:2", &url, "token", "c.png", "64", "1024"),
+    );
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+    let s = stats(d, "cluster.json");
+    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    eprintln!("every record sent: {bpr:.1} bytes per ray");
+    // More than records at the workers send (colour only, about 2).
+    assert!(bpr > 8.0 && bpr <= 64.0, "{bpr} bytes per ray: {s}");
+    drop(coord);
+}
+
 /// A worker keeps each shard's results in memory with the surfaces it
 /// found with them, so shading them makes no pass over the objects. When
 /// its memory cannot hold them they go to a file without surfaces and the
@@ -124,7 +150,7 @@ fn kept_results_shade_without_a_pass_and_spilled_ones_by_the_join() {
 }
 
 /// Two local workers: still the embedded image; the traffic stays small
-/// (verification samples cross between the workers in full).
+/// (their records stay with them; only colour and counts travel).
 #[test]
 fn two_workers_same_image_small_traffic() {
     let dir = tempfile::tempdir().unwrap();
