@@ -61,7 +61,9 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
          shared between the workers. Throughput counts every ray traced (eye, shadow, reflection, \
          refraction) per second of wall time, start-up included. Traffic counts the records \
          exchanged with the workers (rays, results, contributions), not the scene's one-time \
-         distribution, which the local workers skip (they share the database file).",
+         distribution, which the local workers skip (they share the database file). Local \
+         workers keep their results and spawned rays (records at the workers): what travels is \
+         colour and counts.",
         ctx.runs
     ));
     let mut rows = Vec::new();
