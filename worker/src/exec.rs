@@ -455,7 +455,12 @@ fn run_task<R: Real>(
                     for chunk in v.chunks(per).filter(|_| send) {
                         out.records(RecordKind::Rays, chunk)?;
                     }
-                    v.iter().for_each(|r| keys.add(r.key));
+                    // Sorted: the first and last keys are the range.
+                    keys = KeyRange {
+                        count: v.len() as u64,
+                        first: v.first().map_or(0, |r| r.key),
+                        last: v.last().map_or(0, |r| r.key),
+                    };
                     if ctx.keep {
                         Some(keep_vec(tracer, ctx, v, "kept-rays", |t, v| {
                             t.recycle_rays(v)
@@ -559,7 +564,12 @@ fn send_results<R: Real>(
             buf.extend(chunk.iter().map(|o| o.res));
             out.records(RecordKind::Results, &buf)?;
         }
-        let hits = v.iter().filter(|o| !o.res.prim.is_none()).count() as u64;
+        // Counted for the coordinator only when it does not see them.
+        let hits = if send {
+            0
+        } else {
+            v.iter().filter(|o| !o.res.prim.is_none()).count() as u64
+        };
         if !ctx.keep {
             tracer.recycle(ResultReader::Dense { v, next: 0 });
             return Ok((None, hits));

@@ -92,20 +92,13 @@ fn copy_into<S: bytemuck::Pod, T: bytemuck::Pod>(
     f: impl Fn(S) -> T,
 ) -> Result<(), sray_engine::Error> {
     let mut rd = s.reader()?;
-    let mut buf = Vec::with_capacity(4096);
-    loop {
+    let (mut src, mut buf) = (Vec::with_capacity(4096), Vec::with_capacity(4096));
+    while rd.next_chunk(&mut src, 4096)? {
         buf.clear();
-        while buf.len() < 4096 {
-            match rd.next()? {
-                Some(r) => buf.push(f(r)),
-                None => break,
-            }
-        }
-        if buf.is_empty() {
-            return Ok(());
-        }
+        buf.extend(src.iter().map(|&r| f(r)));
         w.extend(&buf)?;
     }
+    Ok(())
 }
 
 /// A task's results as they are gathered: the kept results with their

@@ -179,17 +179,7 @@ impl KeptStore {
     /// of the job that was given up (it started again). Returns what it
     /// dropped (its buffers may serve again).
     pub(crate) fn release(&mut self, job: &str, round: u32) -> Vec<Kept> {
-        let old: Vec<u64> = self
-            .order
-            .iter()
-            .copied()
-            .filter(|t| {
-                self.by_task[t].pin.as_ref().is_some_and(|p| {
-                    p.job == job && (p.round.saturating_add(1) < round || p.round > round)
-                })
-            })
-            .collect();
-        old.into_iter().filter_map(|t| self.remove(t)).collect()
+        self.unpin(|p| p.job == job && (p.round.saturating_add(1) < round || p.round > round))
     }
 
     /// Drops the pinned records of jobs that have ended: those pinned
@@ -197,20 +187,19 @@ impl KeptStore {
     /// job not among `running` (a job pinned to later may be newer than
     /// the answer).
     pub(crate) fn release_ended(&mut self, running: &[String], asked: std::time::Instant) {
-        let ended: Vec<u64> = self
+        self.unpin(|p| p.at < asked && !running.contains(&p.job));
+    }
+
+    /// Drops the pinned entries whose pin `done` says are done with, and
+    /// returns them.
+    fn unpin(&mut self, done: impl Fn(&Pin) -> bool) -> Vec<Kept> {
+        let old: Vec<u64> = self
             .order
             .iter()
             .copied()
-            .filter(|t| {
-                self.by_task[t]
-                    .pin
-                    .as_ref()
-                    .is_some_and(|p| p.at < asked && !running.contains(&p.job))
-            })
+            .filter(|t| self.by_task[t].pin.as_ref().is_some_and(&done))
             .collect();
-        for t in ended {
-            self.remove(t);
-        }
+        old.into_iter().filter_map(|t| self.remove(t)).collect()
     }
 
     /// Drops the oldest records held in memory until `share` has `bytes`

@@ -193,21 +193,12 @@ impl<T: Pod> Records<T> {
             Records::Memory { v, .. } => f(v),
             Records::Chain { parts, .. } => parts.iter().try_for_each(|p| p.for_each_slice(f)),
             Records::File(file) => {
-                let mut rd = file.reader()?;
+                let mut rd = RecordsReader::File(file.reader()?);
                 let mut buf = Vec::with_capacity(4096);
-                loop {
-                    buf.clear();
-                    while buf.len() < 4096 {
-                        match rd.next()? {
-                            Some(x) => buf.push(x),
-                            None => break,
-                        }
-                    }
-                    if buf.is_empty() {
-                        return Ok(());
-                    }
+                while rd.next_chunk(&mut buf, 4096)? {
                     f(&buf)?;
                 }
+                Ok(())
             }
         }
     }
@@ -262,6 +253,19 @@ pub enum RecordsReader<'a, T: Pod> {
 }
 
 impl<T: Pod> RecordsReader<'_, T> {
+    /// Refills `buf` with the next records, at most `max`; false once
+    /// there are none left.
+    pub fn next_chunk(&mut self, buf: &mut Vec<T>, max: usize) -> Result<bool, Error> {
+        buf.clear();
+        while buf.len() < max {
+            match self.next()? {
+                Some(x) => buf.push(x),
+                None => break,
+            }
+        }
+        Ok(!buf.is_empty())
+    }
+
     pub fn remaining(&self) -> u64 {
         match self {
             RecordsReader::Memory(it) => it.len() as u64,
