@@ -33,7 +33,7 @@ pub struct ShadeSetup<'a> {
     /// Hits with their surfaces, waiting to be shaded in order.
     pub carried: &'a mut Vec<Carried>,
     /// Per-chunk outputs of the parallel shading, reused.
-    pub outputs: &'a mut Vec<(Vec<RayRec>, RayCounts)>,
+    pub outputs: &'a mut Vec<SetOutput>,
     pub radix: &'a mut crate::spill::RadixScratch,
     pub materials: &'a [Material],
     pub shade: &'a ShadeScene,
@@ -123,7 +123,21 @@ pub fn shade_round(
     Ok(st)
 }
 
+/// What one chunk of a shading set spawned, and its counts: on cache
+/// lines of its own, as [`ChunkOut`].
+#[repr(align(128))]
+#[derive(Default)]
+pub struct SetOutput {
+    pub rays: Vec<RayRec>,
+    pub counts: RayCounts,
+}
+
 /// What one thread's chunk of a batch gives back (see [`shade_indexed`]).
+/// On cache lines of its own (two, as lines are prefetched in pairs):
+/// neighbouring chunks are filled by different threads at once, and each
+/// push writes the vectors' lengths and the counts here; sharing a line,
+/// they would bounce between the cores at every ray (false sharing).
+#[repr(align(128))]
 #[derive(Default)]
 pub struct ChunkOut {
     rays: Vec<RayRec>,
@@ -303,16 +317,16 @@ fn shade_carried(
         carried
             .par_chunks(chunk)
             .zip(outputs.par_iter_mut())
-            .for_each(|(hits, (out, c))| {
-                out.clear();
-                *c = RayCounts::default();
+            .for_each(|(hits, o)| {
+                o.rays.clear();
+                o.counts = RayCounts::default();
                 for h in hits {
-                    shade_one_carried(materials, shade_scene, h, out, c);
+                    shade_one_carried(materials, shade_scene, h, &mut o.rays, &mut o.counts);
                 }
             })
     });
     let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
-    for (rays, c) in setup.outputs[..n_chunks].iter() {
+    for SetOutput { rays, counts: c } in setup.outputs[..n_chunks].iter() {
         *counts += *c;
         parts.push(rays);
     }
@@ -388,17 +402,17 @@ fn shade_set(
             set[at..stop]
                 .par_chunks(chunk)
                 .zip(outputs.par_iter_mut())
-                .for_each(|(hits, (out, c))| {
-                    out.clear();
-                    *c = RayCounts::default();
+                .for_each(|(hits, o)| {
+                    o.rays.clear();
+                    o.counts = RayCounts::default();
                     for h in hits {
                         let obj = &objs[(h.prim.0 - first) as usize];
-                        shade_hit(materials, shade_scene, h, obj, out, c);
+                        shade_hit(materials, shade_scene, h, obj, &mut o.rays, &mut o.counts);
                     }
                 })
         });
         let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
-        for (rays, c) in setup.outputs[..n_chunks].iter() {
+        for SetOutput { rays, counts: c } in setup.outputs[..n_chunks].iter() {
             *counts += *c;
             parts.push(rays);
         }

@@ -161,7 +161,7 @@ pub struct Tracer<'db, R: Real> {
     spare_rays: Vec<RayRec>,
     set_buf: Vec<super::records::HitRec>,
     carried_buf: Vec<super::shade::Carried>,
-    shade_outputs: Vec<(Vec<RayRec>, RayCounts)>,
+    shade_outputs: Vec<super::shade::SetOutput>,
     /// Per-chunk outputs of the parallel shading by id, reused.
     chunk_outs: Vec<ChunkOut>,
     radix: crate::spill::RadixScratch,
@@ -515,7 +515,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             + self
                 .shade_outputs
                 .iter()
-                .map(|(v, _)| v.capacity() * std::mem::size_of::<RayRec>())
+                .map(|o| o.rays.capacity() * std::mem::size_of::<RayRec>())
                 .sum::<usize>()
             + self.chunk_outs.iter().map(ChunkOut::bytes).sum::<usize>()
             + self.radix.bytes();
