@@ -1207,6 +1207,9 @@ impl Arbiter {
                         keep: false,
                         // Its inputs are files already.
                         kept_memory: sray_engine::spill::MemoryShare::new(0),
+                        // Its output stays in this process: nothing to
+                        // compress.
+                        raw_records: true,
                     },
                     tokio::runtime::Handle::current(),
                 ))

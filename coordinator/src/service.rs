@@ -13,7 +13,7 @@ use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::RecordsWriter;
 use sray_proto::auth::{Role, require};
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
-use sray_proto::wire::{SCENE_CHUNK_BYTES, decode, encode, records_per_chunk};
+use sray_proto::wire::{SCENE_CHUNK_BYTES, decode_chunk, encode, records_per_chunk};
 use std::io::Write;
 use std::pin::Pin;
 use std::sync::Arc;
@@ -196,6 +196,7 @@ impl Coordinator for Service {
                         offset,
                         count,
                     }),
+                    raw: false,
                 };
             let (first, n) = (task.first_ray, task.ray_count);
             let by_intersect = input
@@ -631,6 +632,7 @@ fn stream_records<T: bytemuck::Pod>(
         kind: kind as i32,
         data: encode(buf),
         held: None,
+        raw: false,
     };
     loop {
         match rd.next() {
@@ -704,7 +706,7 @@ impl<'a> Receiver<'a> {
         let io = |e: sray_engine::Error| e.to_string();
         match (v1::RecordKind::try_from(c.kind), intersect) {
             (Ok(v1::RecordKind::Results), true) => {
-                let v = decode::<ResultRec>(&c.data, records_per_chunk::<ResultRec>())
+                let v = decode_chunk::<ResultRec>(&c.data, c.raw, records_per_chunk::<ResultRec>())
                     .map_err(|e| e.to_string())?;
                 for r in &v {
                     let want = self.task.first_ray + self.n_results;
@@ -727,8 +729,12 @@ impl<'a> Receiver<'a> {
                 self.results.as_mut().expect("made").push_vec(v).map_err(io)
             }
             (Ok(v1::RecordKind::Contributions), false) => {
-                let v = decode::<Contribution>(&c.data, records_per_chunk::<Contribution>())
-                    .map_err(|e| e.to_string())?;
+                let v = decode_chunk::<Contribution>(
+                    &c.data,
+                    c.raw,
+                    records_per_chunk::<Contribution>(),
+                )
+                .map_err(|e| e.to_string())?;
                 if let Some(bad) = v.iter().find(|x| x.corner as u64 >= self.input.corners) {
                     return Err(format!(
                         "a contribution to pixel corner {} of {}",
@@ -743,7 +749,7 @@ impl<'a> Receiver<'a> {
                     .map_err(io)
             }
             (Ok(v1::RecordKind::Rays), false) => {
-                let v = decode::<RayRec>(&c.data, records_per_chunk::<RayRec>())
+                let v = decode_chunk::<RayRec>(&c.data, c.raw, records_per_chunk::<RayRec>())
                     .map_err(|e| e.to_string())?;
                 let slots = sray_engine::bf::SPAWN_SLOTS;
                 let lo = self.task.first_ray * slots;

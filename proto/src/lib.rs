@@ -25,4 +25,4 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// reported.
 /// 5: records at the workers (`Task.keep_output`, kept counts in the
 /// summary, the jobs running in the heartbeat's answer).
-pub const PROTOCOL_VERSION: u32 = 5;
+pub const PROTOCOL_VERSION: u32 = 6;

@@ -155,6 +155,19 @@ pub fn encode_bytes(bytes: &[u8], size: usize) -> Vec<u8> {
     .expect("compressing into a buffer of the bound's size cannot fail")
 }
 
+/// The records of a chunk as it came: `raw` (the records as they lie in
+/// memory, see `RecordChunk.raw`) or [`encode`]d; at most `max` of them.
+pub fn decode_chunk<T: Pod>(data: &[u8], raw: bool, max: usize) -> Result<Vec<T>, WireError> {
+    if !raw {
+        return decode(data, max);
+    }
+    let size = std::mem::size_of::<T>();
+    if data.len() / size > max {
+        return Err(WireError::Malformed("too many records".into()));
+    }
+    unpack(data)
+}
+
 /// The records of an [`encode`]d chunk; at most `max` of them (a bound
 /// on what a malformed chunk may make the receiver allocate).
 pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
@@ -209,6 +222,23 @@ pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn raw_chunks_are_the_records_as_they_lie() {
+        let v: Vec<[u64; 3]> = (0..100u64).map(|i| [i, i * 7, u64::MAX - i]).collect();
+        let raw = pack(&v);
+        assert_eq!(decode_chunk::<[u64; 3]>(&raw, true, 100).unwrap(), v);
+        // More than the bound, a part of a record, or a raw chunk read as
+        // an encoded one: refused.
+        assert!(decode_chunk::<[u64; 3]>(&raw, true, 99).is_err());
+        assert!(decode_chunk::<[u64; 3]>(&raw[..raw.len() - 1], true, 100).is_err());
+        assert!(decode_chunk::<[u64; 3]>(&raw, false, 100).is_err());
+        // An encoded chunk still decodes when it says it is one.
+        assert_eq!(
+            decode_chunk::<[u64; 3]>(&encode(&v), false, 100).unwrap(),
+            v
+        );
+    }
 
     #[test]
     fn encoded_records_round_trip_exactly() {

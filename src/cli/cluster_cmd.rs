@@ -146,6 +146,12 @@ pub struct WorkerArgs {
     /// Name shown in the coordinator's log (default: host name and process id)
     #[arg(long)]
     pub name: Option<String>,
+    /// Send records uncompressed: only for a coordinator on this machine
+    /// (`sray render --local-workers` starts its workers so), where
+    /// compressing costs more time than the bytes save; never across a
+    /// network or a tunnel
+    #[arg(long)]
+    pub raw_records: bool,
 }
 
 fn init_logs() {
@@ -317,6 +323,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
         cache_dir: a.cache_dir.clone(),
         cache_max: a.cache_max,
         tmp_dir: a.tmp_dir.clone(),
+        raw_records: a.raw_records,
     };
     runtime()?.block_on(sray_worker::run(cfg, stop_signal()))
 }

@@ -166,6 +166,7 @@ async fn lie(c: &mut Client, session: &str, t: &v1::Task, seed: &mut u64) -> boo
                     kind: v1::RecordKind::Results as i32,
                     data: sray_proto::wire::encode(chunk),
                     held: None,
+                    raw: false,
                 })),
             });
         }

@@ -106,6 +106,32 @@ fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
     drop(coord);
 }
 
+/// A worker on the coordinator's machine may send its records raw
+/// (`--raw-records`, as `--local-workers` starts them): rays, results and
+/// contributions all arrive as they are, and the image is the same. Raw
+/// records are the bigger ones on the wire (those compressed stay under
+/// 64 bytes per ray, above), which shows that they were sent raw.
+#[test]
+fn raw_records_from_a_worker_give_the_same_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "wire-secret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "64", "emb.png");
+    let (coord, url) = cluster::coordinator(d, &["--token-file", "token"]);
+    let _w = cluster::worker(d, &url, "w0", Some("token"), &["--raw-records"]);
+    coord.wait_for(&["worker registered", "worker=w0 "], 30.0);
+    ok(
+        d,
+        &cluster::render_args("spd:balls:2", &url, "token", "c.png", "64", "1024"),
+    );
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
+    let s = stats(d, "cluster.json");
+    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    eprintln!("raw records: {bpr:.1} bytes per ray");
+    assert!(bpr > 64.0, "{bpr} bytes per ray: {s}");
+    drop(coord);
+}
+
 /// A worker keeps each shard's results in memory with the surfaces it
 /// found with them, so shading them makes no pass over the objects. When
 /// its memory cannot hold them they go to a file without surfaces and the

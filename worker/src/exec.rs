@@ -43,6 +43,9 @@ pub struct JobSetup {
     /// What kept and received records may take of memory (shared by a
     /// node's executors); beyond it they go to spill files.
     pub kept_memory: MemoryShare,
+    /// Send records as they lie in memory, not encoded (the coordinator
+    /// is on this machine).
+    pub raw_records: bool,
 }
 
 /// What an executor's thread is asked to do.
@@ -219,7 +222,7 @@ fn job_thread<R: Real>(
     );
     let eye_rays = eye.count();
     let mut kept = KeptStore::default();
-    let encoder = Encoder::start();
+    let encoder = Encoder::start(setup.raw_records);
     for m in rx {
         let w = match m {
             Msg::Run(w) => *w,

@@ -8,7 +8,7 @@ use sray_engine::bf::{Outcome, RayRec, ResultRec, Tracer};
 use sray_engine::math::Real;
 use sray_engine::spill::{MemoryShare, RecordsWriter, SpillDir};
 use sray_proto::v1::RecordKind;
-use sray_proto::wire::{decode, records_per_chunk};
+use sray_proto::wire::{decode_chunk, records_per_chunk};
 
 /// A task's input records, kept here or received.
 #[derive(Default)]
@@ -220,13 +220,18 @@ pub(crate) fn read_inputs<R: Real>(
         }
         match kind {
             Ok(RecordKind::Rays) => {
-                let v = decode::<RayRec>(&chunk.data, records_per_chunk::<RayRec>())
-                    .map_err(|e| e.to_string())?;
+                let v =
+                    decode_chunk::<RayRec>(&chunk.data, chunk.raw, records_per_chunk::<RayRec>())
+                        .map_err(|e| e.to_string())?;
                 rays.add(share, spill, "in-rays", &v)?
             }
             Ok(RecordKind::Results) => {
-                let v = decode::<ResultRec>(&chunk.data, records_per_chunk::<ResultRec>())
-                    .map_err(|e| e.to_string())?;
+                let v = decode_chunk::<ResultRec>(
+                    &chunk.data,
+                    chunk.raw,
+                    records_per_chunk::<ResultRec>(),
+                )
+                .map_err(|e| e.to_string())?;
                 results
                     .bare(share, spill)?
                     .add(share, spill, "in-results", &v)?

@@ -32,6 +32,9 @@ pub struct WorkerConfig {
     pub cache_max: u64,
     /// Where spilled rays go (default: the system's temp dir).
     pub tmp_dir: Option<PathBuf>,
+    /// Send records as they lie in memory, not encoded (a coordinator on
+    /// this machine).
+    pub raw_records: bool,
 }
 
 /// Runs a worker until `shutdown` completes, or a fatal error (a refused
@@ -272,6 +275,7 @@ impl Node {
                     },
                     keep: true,
                     kept_memory: self.kept_memory.clone(),
+                    raw_records: self.cfg.raw_records,
                 },
                 tokio::runtime::Handle::current(),
             ));

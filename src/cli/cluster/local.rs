@@ -124,6 +124,9 @@ pub async fn render(
             .args(["--threads", &each_threads.to_string()])
             .args(["--memory", &each_memory.to_string()])
             .args(["--name", &format!("local-{i}")])
+            // The coordinator is this process: compressing records costs
+            // more than sending them raw over loopback.
+            .arg("--raw-records")
             .args(
                 plan.tmp_dir
                     .iter()
