@@ -63,7 +63,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
          exchanged with the workers (rays, results, contributions), not the scene's one-time \
          distribution, which the local workers skip (they share the database file). Local \
          workers keep their results and spawned rays (records at the workers): what travels is \
-         colour and counts.",
+         colour and counts, sent raw (on one machine compressing costs more than it saves).",
         ctx.runs
     ));
     let mut rows = Vec::new();
