@@ -80,18 +80,17 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     assert_eq!(s["grid_builds"], 1, "{s}");
 }
 
-/// The same goal where every record travels: a coordinator that keeps
-/// no records at the workers (the default for a cluster) and one worker.
-/// The records are compact on the wire, and a worker that holds a task's
-/// input is sent its name, not the records.
-#[test]
-fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
+/// balls2 at 64x64 on a default coordinator (every record sent to it)
+/// with one worker started with `worker_args`: checks the image equals
+/// the embedded one and returns the bytes per ray on the wire and the
+/// render's statistics.
+fn one_worker_bytes_per_ray(worker_args: &[&str]) -> (f64, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("token"), "wire-secret\n").unwrap();
     let want = embedded(d, "spd:balls:2", "64", "emb.png");
     let (coord, url) = cluster::coordinator(d, &["--token-file", "token"]);
-    let _w = cluster::worker(d, &url, "w0", Some("token"), &[]);
+    let _w = cluster::worker(d, &url, "w0", Some("token"), worker_args);
     coord.wait_for(&["worker registered", "worker=w0 "], 30.0);
     ok(
         d,
@@ -99,11 +98,19 @@ fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
     );
     assert!(std::fs::read(d.join("c.png")).unwrap() == want);
     let s = stats(d, "cluster.json");
-    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    (s["bytes_per_ray"].as_f64().unwrap(), s)
+}
+
+/// The same goal where every record travels: a coordinator that keeps
+/// no records at the workers (the default for a cluster) and one worker.
+/// The records are compact on the wire, and a worker that holds a task's
+/// input is sent its name, not the records.
+#[test]
+fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
+    let (bpr, s) = one_worker_bytes_per_ray(&[]);
     eprintln!("every record sent: {bpr:.1} bytes per ray");
     // More than records at the workers send (colour only, about 2).
     assert!(bpr > 8.0 && bpr <= 64.0, "{bpr} bytes per ray: {s}");
-    drop(coord);
 }
 
 /// A worker on the coordinator's machine may send its records raw
@@ -113,23 +120,9 @@ fn records_sent_to_the_coordinator_stay_under_64_bytes_per_ray() {
 /// 64 bytes per ray, above), which shows that they were sent raw.
 #[test]
 fn raw_records_from_a_worker_give_the_same_image() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    std::fs::write(d.join("token"), "wire-secret\n").unwrap();
-    let want = embedded(d, "spd:balls:2", "64", "emb.png");
-    let (coord, url) = cluster::coordinator(d, &["--token-file", "token"]);
-    let _w = cluster::worker(d, &url, "w0", Some("token"), &["--raw-records"]);
-    coord.wait_for(&["worker registered", "worker=w0 "], 30.0);
-    ok(
-        d,
-        &cluster::render_args("spd:balls:2", &url, "token", "c.png", "64", "1024"),
-    );
-    assert!(std::fs::read(d.join("c.png")).unwrap() == want);
-    let s = stats(d, "cluster.json");
-    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    let (bpr, s) = one_worker_bytes_per_ray(&["--raw-records"]);
     eprintln!("raw records: {bpr:.1} bytes per ray");
     assert!(bpr > 64.0, "{bpr} bytes per ray: {s}");
-    drop(coord);
 }
 
 /// A worker keeps each shard's results in memory with the surfaces it
