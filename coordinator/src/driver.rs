@@ -742,6 +742,7 @@ async fn drive(
         None => None,
     };
     let frame = rounds?;
+    shared.traced.send_modify(|n| *n += 1);
     if let Some(r) = last {
         *rec = r??;
     }
@@ -1377,6 +1378,7 @@ fn same_sample(
 fn contribution_key(c: &Contribution) -> [u8; 32] {
     let mut k = [0u8; 32];
     k[..4].copy_from_slice(&c.corner.to_le_bytes());
+    k[4..8].copy_from_slice(&c.run.to_le_bytes());
     for (j, v) in c.rgb.iter().enumerate() {
         k[8 + 8 * j..16 + 8 * j].copy_from_slice(&v.to_le_bytes());
     }
@@ -1408,7 +1410,7 @@ fn merge_shade(
         if let Some(c) = o.contributions {
             c.for_each_slice(&mut |s| {
                 for x in s {
-                    frame.add(x.corner, x.rgb);
+                    frame.add_contribution(x);
                 }
                 Ok(())
             })?;

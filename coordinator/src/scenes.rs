@@ -7,10 +7,10 @@
 //! a hash is 64 hex digits and nothing else.
 
 use anyhow::{Context, bail};
+use sray_proto::scene_hash::hash_scene;
 use sray_proto::wire::SCENE_CHUNK_BYTES;
 use std::collections::HashMap;
 use std::fs::File;
-use std::io::Read;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -56,33 +56,9 @@ pub fn valid_hash(hash: &str) -> bool {
 
 /// Hashes a file: the whole and each chunk.
 pub fn hash_file(path: &Path) -> anyhow::Result<(String, u64, Vec<[u8; 32]>)> {
-    let mut f = File::open(path).with_context(|| path.display().to_string())?;
-    let mut whole = blake3::Hasher::new();
-    let mut chunks = Vec::new();
-    let mut buf = vec![0u8; SCENE_CHUNK_BYTES];
-    let mut size = 0u64;
-    loop {
-        let mut got = 0;
-        while got < buf.len() {
-            let n = f
-                .read(&mut buf[got..])
-                .with_context(|| path.display().to_string())?;
-            if n == 0 {
-                break;
-            }
-            got += n;
-        }
-        if got == 0 {
-            break;
-        }
-        size += got as u64;
-        whole.update(&buf[..got]);
-        chunks.push(*blake3::hash(&buf[..got]).as_bytes());
-        if got < buf.len() {
-            break;
-        }
-    }
-    Ok((whole.finalize().to_hex().to_string(), size, chunks))
+    let f = File::open(path).with_context(|| path.display().to_string())?;
+    let h = hash_scene(f, SCENE_CHUNK_BYTES).with_context(|| path.display().to_string())?;
+    Ok((h.hex, h.size, h.chunks))
 }
 
 impl SceneStore {

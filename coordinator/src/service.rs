@@ -735,10 +735,12 @@ impl<'a> Receiver<'a> {
                     records_per_chunk::<Contribution>(),
                 )
                 .map_err(|e| e.to_string())?;
-                if let Some(bad) = v.iter().find(|x| x.corner as u64 >= self.input.corners) {
+                if let Some(bad) = v.iter().find(|x| x.end() > self.input.corners) {
                     return Err(format!(
-                        "a contribution to pixel corner {} of {}",
-                        bad.corner, self.input.corners
+                        "a contribution to pixel corners {}..{} of {}",
+                        bad.corner,
+                        bad.end(),
+                        self.input.corners
                     ));
                 }
                 Self::writer(&mut self.contributions, self.shared, "out-contrib")?;

@@ -429,6 +429,10 @@ pub struct Shared {
     started: Instant,
     stopping: AtomicBool,
     pub stop: Notify,
+    /// Jobs whose tracing has ended, counted as each one's last round
+    /// finishes (before its image is encoded and kept): `sray render
+    /// --local-workers` stops its workers then, while the image is made.
+    pub traced: tokio::sync::watch::Sender<u64>,
     /// The spill directory's parent (removed when the coordinator ends).
     spill_parent: PathBuf,
 }
@@ -466,6 +470,7 @@ impl Shared {
             started: Instant::now(),
             stopping: AtomicBool::new(false),
             stop: Notify::new(),
+            traced: tokio::sync::watch::Sender::new(0),
             spill_parent,
         }))
     }

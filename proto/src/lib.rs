@@ -1,11 +1,12 @@
 //! The gRPC contract between sray's coordinator, its workers and its
 //! clients (`sray.proto`, compiled at build time without a system
 //! `protoc`), and the small pieces every side shares: record packing,
-//! message limits, the token checks and roles, random ids, TLS settings.
+//! message limits, scene hashes, the token checks and roles, random ids, TLS settings.
 
 pub mod auth;
 pub mod ids;
 pub mod net;
+pub mod scene_hash;
 pub mod wire;
 
 /// The generated messages and services.
@@ -25,4 +26,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// reported.
 /// 5: records at the workers (`Task.keep_output`, kept counts in the
 /// summary, the jobs running in the heartbeat's answer).
-pub const PROTOCOL_VERSION: u32 = 6;
+/// 6: raw record chunks (`RecordChunk.raw`).
+/// 7: a contribution's `run` (its colour goes to the slots after it too).
+pub const PROTOCOL_VERSION: u32 = 7;

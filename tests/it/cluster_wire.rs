@@ -80,6 +80,26 @@ fn at_most_64_bytes_per_ray_and_one_grid_build() {
     assert_eq!(s["grid_builds"], 1, "{s}");
 }
 
+/// Most of tetra's eye rays miss: their background colour goes to the
+/// coordinator as runs (one record for a row of misses), not one 32-byte
+/// contribution per pixel corner, which took 26 bytes per ray here, and
+/// the image is the embedded one bit for bit.
+#[test]
+fn rows_of_misses_travel_as_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let want = embedded(d, "spd:tetra:3", "64", "emb.png");
+    let s = local_render(d, "spd:tetra:3", "64", "1", "65536", &[], &want);
+    let (eye, hits) = (
+        s["eye_rays"].as_u64().unwrap(),
+        s["eye_hit_rays"].as_u64().unwrap(),
+    );
+    assert!(eye - hits > eye / 2, "most eye rays miss: {s}");
+    let bpr = s["bytes_per_ray"].as_f64().unwrap();
+    eprintln!("tetra3: {bpr:.1} bytes per ray");
+    assert!(bpr < 12.0, "{bpr} bytes per ray: {s}");
+}
+
 /// balls2 at 64x64 on a default coordinator (every record sent to it)
 /// with one worker started with `worker_args`: checks the image equals
 /// the embedded one and returns the bytes per ray on the wire and the

@@ -5,9 +5,9 @@
 
 use anyhow::{Context, bail};
 use sray_proto::net::Client;
+use sray_proto::scene_hash::hash_scene;
 use sray_proto::v1;
 use std::fs::{File, OpenOptions};
-use std::io::Read;
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -265,27 +265,14 @@ async fn verify(path: &Path, m: &Manifest, hash: &str) -> anyhow::Result<(Vec<us
     let hashes = m.hashes.clone();
     let want = hash.to_string();
     tokio::task::spawn_blocking(move || -> anyhow::Result<(Vec<usize>, bool)> {
-        let mut f = File::open(&path).with_context(|| path.display().to_string())?;
-        let mut whole = blake3::Hasher::new();
-        let mut buf = vec![0u8; chunk];
-        let mut bad = Vec::new();
-        for (i, h) in hashes.iter().enumerate() {
-            let mut got = 0;
-            while got < chunk {
-                let n = f
-                    .read(&mut buf[got..])
-                    .with_context(|| path.display().to_string())?;
-                if n == 0 {
-                    break;
-                }
-                got += n;
-            }
-            whole.update(&buf[..got]);
-            if blake3::hash(&buf[..got]).as_bytes() != h {
-                bad.push(i);
-            }
-        }
-        Ok((bad, whole.finalize().to_hex().as_str() == want))
+        let f = File::open(&path).with_context(|| path.display().to_string())?;
+        // The file's size matched the manifest's before this was called;
+        // a piece missing now (the file shrank meanwhile) counts as bad.
+        let got = hash_scene(f, chunk).with_context(|| path.display().to_string())?;
+        let bad = (0..hashes.len())
+            .filter(|&i| got.chunks.get(i) != Some(&hashes[i]))
+            .collect();
+        Ok((bad, got.hex == want))
     })
     .await?
 }

@@ -399,10 +399,12 @@ fn run_task<R: Real>(
             // With records kept here, verification is off and nothing
             // compares contributions one by one: a contribution to the
             // same frame slot as the one before (a hit's shadow rays, one
-            // per light) is added to it instead of sent on its own. Sums
-            // of integers far from the frame's saturation are exact in
-            // any order; colours beyond 2^30 (in fixed point, 2^62) are
-            // sent apart, as the frame adds them saturating.
+            // per light) is added to it instead of sent on its own, and
+            // one of the same colour to the next slot (a row of eye rays
+            // that missed) lengthens its run. Sums of integers far from
+            // the frame's saturation are exact in any order; colours
+            // beyond 2^30 (in fixed point, 2^62) are sent apart, as the
+            // frame adds them saturating.
             let merge = task.keep_output;
             let small = |c: &[i64; 3]| c.iter().all(|x| x.unsigned_abs() < 1 << 62);
             let (next, _count, sst) = {
@@ -410,21 +412,23 @@ fn run_task<R: Real>(
                     if send_err.is_some() {
                         return;
                     }
-                    if merge
-                        && small(&rgb)
-                        && let Some(last) = buf.last_mut()
-                        && last.corner == corner
-                        && small(&last.rgb)
-                    {
-                        // Both below 2^62: the sum fits.
-                        for (a, b) in last.rgb.iter_mut().zip(rgb) {
-                            *a += b;
+                    if merge && let Some(last) = buf.last_mut() {
+                        if last.run == 0 && last.corner == corner && small(&rgb) && small(&last.rgb)
+                        {
+                            // Both below 2^62: the sum fits.
+                            for (a, b) in last.rgb.iter_mut().zip(rgb) {
+                                *a += b;
+                            }
+                            return;
                         }
-                        return;
+                        if last.rgb == rgb && last.end() == corner as u64 {
+                            last.run += 1;
+                            return;
+                        }
                     }
                     buf.push(Contribution {
                         corner,
-                        _pad: 0,
+                        run: 0,
                         rgb,
                     });
                     if buf.len() == per {

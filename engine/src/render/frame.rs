@@ -22,8 +22,18 @@ use std::path::Path;
 #[repr(C)]
 pub struct Contribution {
     pub corner: u32,
-    pub _pad: u32,
+    /// The same colour goes to the `run` slots after `corner` too: a
+    /// worker sends a row of eye rays that all missed (the background) as
+    /// one record. 0 in a spilled frame, which adds slot by slot.
+    pub run: u32,
     pub rgb: [i64; 3],
+}
+
+impl Contribution {
+    /// One past the last slot this adds to.
+    pub fn end(&self) -> u64 {
+        self.corner as u64 + self.run as u64 + 1
+    }
 }
 
 type ContributionSorter = ExternalSorter<Contribution, u32, fn(&Contribution) -> u32>;
@@ -133,7 +143,7 @@ impl Frame {
                 && sp.error.is_none()
                 && let Err(e) = sp.sorter.push(Contribution {
                     corner: slot,
-                    _pad: 0,
+                    run: 0,
                     rgb: c,
                 })
             {
@@ -144,6 +154,13 @@ impl Frame {
         let s = &mut self.slots[slot as usize];
         for k in 0..3 {
             s[k] = s[k].saturating_add(c[k]);
+        }
+    }
+
+    /// Adds a contribution to each of its slots.
+    pub fn add_contribution(&mut self, c: &Contribution) {
+        for slot in c.corner as u64..c.end() {
+            self.add(slot as u32, c.rgb);
         }
     }
 
@@ -489,6 +506,24 @@ mod tests {
         // Second pixel: corners 1, 2, 4, 5 = (1 + 2 + 1 + 0) / 4 = 1 -> 255.
         assert_eq!(rgb[3], 255);
         assert_eq!(rgb[4], 64);
+    }
+
+    #[test]
+    fn a_run_adds_its_colour_to_each_of_its_slots() {
+        let mut a = Frame::new(3, 1);
+        let mut b = Frame::new(3, 1);
+        let c = to_fixed([0.25, 0.5, 1.0]);
+        a.add_contribution(&Contribution {
+            corner: 1,
+            run: 2,
+            rgb: c,
+        });
+        for slot in 1..=3 {
+            b.add(slot, c);
+        }
+        assert_eq!(a.slots, b.slots);
+        assert_eq!(a.slots[0], [0; 3]);
+        assert_eq!(a.slots[4], [0; 3]);
     }
 
     #[test]

@@ -134,13 +134,15 @@ pub async fn render(
     format: ImageFormat,
     progress: &dyn Progress,
 ) -> anyhow::Result<JobResult> {
-    render_with(target, db, params, shard_rays, format, progress, true).await
+    render_with(target, db, None, params, shard_rays, format, progress, true).await
 }
 
-/// As [`render`]; `keep_ticket`: write the job's ticket for `sray fetch`.
+/// As [`render`]; `hash`: the database's scene hash if known (else it is
+/// computed here); `keep_ticket`: write the job's ticket for `sray fetch`.
 pub async fn render_with(
     target: &Target,
     db: &Path,
+    hash: Option<String>,
     params: v1::RenderParams,
     shard_rays: u64,
     format: ImageFormat,
@@ -148,9 +150,16 @@ pub async fn render_with(
     keep_ticket: bool,
 ) -> anyhow::Result<JobResult> {
     let mut client = target.connect().await.map_err(anyhow::Error::msg)?;
-    progress.set_message("hashing the scene");
-    let path = db.to_path_buf();
-    let (hash, size, _) = tokio::task::spawn_blocking(move || hash_file(&path)).await??;
+    let hash = match hash {
+        Some(h) => h,
+        None => {
+            progress.set_message("hashing the scene");
+            let path = db.to_path_buf();
+            tokio::task::spawn_blocking(move || hash_file(&path))
+                .await??
+                .0
+        }
+    };
     let present = client
         .has_scene(v1::SceneRef { hash: hash.clone() })
         .await
@@ -158,6 +167,9 @@ pub async fn render_with(
         .into_inner()
         .present;
     if !present {
+        let size = std::fs::metadata(db)
+            .with_context(|| db.display().to_string())?
+            .len();
         progress.set_message(&format!("uploading the scene ({} MiB)", size >> 20));
         upload(&mut client, db, &hash, size).await?;
     }

@@ -71,17 +71,11 @@ pub async fn render(
         verify_fraction: 0.0,
         ..Config::default()
     })?;
-    // The workers share one cache, where the scene is already (a link to
-    // the database), so that they verify it instead of fetching it.
-    let hash = {
-        let shared = shared.clone();
-        let db = db.to_path_buf();
-        tokio::task::spawn_blocking(move || shared.scenes.add_file(&db)).await??
-    };
+    // The workers share one cache, where the scene is put (a link to the
+    // database) once hashed, so that they verify it instead of fetching it.
     let cache = dir.path().join("cache");
     std::fs::create_dir_all(&cache)?;
     let abs = std::fs::canonicalize(db)?;
-    std::os::unix::fs::symlink(&abs, cache.join(format!("{hash}.sdb")))?;
 
     let listener = TcpListener::bind("127.0.0.1:0")
         .await
@@ -142,6 +136,14 @@ pub async fn render(
         logs.push(log_path);
     }
 
+    // The scene is hashed while the workers start: they need it only when
+    // the job comes.
+    let hash = {
+        let shared = shared.clone();
+        let abs = abs.clone();
+        tokio::task::spawn_blocking(move || shared.scenes.add_file(&abs)).await??
+    };
+    std::os::unix::fs::symlink(&abs, cache.join(format!("{hash}.sdb")))?;
     // The first round is cut into shards for the workers there are (and
     // later rounds follow its cut when records stay at the workers): the
     // workers are given a moment to join first.
@@ -155,18 +157,34 @@ pub async fn render(
         ca: None,
         identity: None,
     };
-    let job = client::render_with(&target, db, params, shard_rays, format, progress, false);
-    let all_exited = async {
-        for c in children.iter_mut() {
-            let _ = c.wait().await;
+    let job = client::render_with(
+        &target,
+        db,
+        Some(hash),
+        params,
+        shard_rays,
+        format,
+        progress,
+        false,
+    );
+    let mut traced = shared.traced.subscribe();
+    // A worker exiting before the job's tracing ends fails the render; once
+    // it has ended, the workers are asked to stop while the coordinator
+    // encodes and keeps the image (their exit takes as long).
+    let supervise = async {
+        tokio::select! {
+            _ = wait_all(&mut children) => {
+                let tail = logs.iter().filter_map(|p| std::fs::read_to_string(p).ok()).filter_map(|s| s.lines().last().map(String::from)).collect::<Vec<_>>().join("\n");
+                return anyhow::anyhow!("every local worker exited:\n{tail}");
+            }
+            _ = traced.wait_for(|&n| n > 0) => {}
         }
+        terminate(&children);
+        std::future::pending().await
     };
     let r = tokio::select! {
         r = job => r,
-        _ = all_exited => {
-            let tail = logs.iter().filter_map(|p| std::fs::read_to_string(p).ok()).filter_map(|s| s.lines().last().map(String::from)).collect::<Vec<_>>().join("\n");
-            Err(anyhow::anyhow!("every local worker exited:\n{tail}"))
-        }
+        e = supervise => Err(e),
     };
     stop_all(&mut children).await;
     let _ = stop_tx.send(());
@@ -174,20 +192,33 @@ pub async fn render(
     r
 }
 
-/// Asks the workers to stop (SIGTERM: they finish cleaning up their spill
-/// files), and kills those still running after a grace period.
-async fn stop_all(children: &mut [Child]) {
-    for c in children.iter() {
+async fn wait_all(children: &mut [Child]) {
+    for c in children.iter_mut() {
+        let _ = c.wait().await;
+    }
+}
+
+/// Asks the workers still running to stop (SIGTERM: they finish cleaning
+/// up their spill files).
+fn terminate(children: &[Child]) {
+    for c in children {
+        // `id` is none once the child has been reaped.
         if let Some(pid) = c.id() {
             // SAFETY: kill(2) takes two integers and touches no memory of
-            // ours. `pid` is the id of our own child, which we have not
-            // reaped (we still hold its handle), so it cannot have been
-            // reused for another process.
+            // ours. `pid` is the id of our own child, which has not been
+            // reaped (`id` said so), so it cannot have been reused for
+            // another process.
             unsafe {
                 libc::kill(pid as libc::pid_t, libc::SIGTERM);
             }
         }
     }
+}
+
+/// Asks the workers to stop, and kills those still running after a grace
+/// period.
+async fn stop_all(children: &mut [Child]) {
+    terminate(children);
     for c in children.iter_mut() {
         if tokio::time::timeout(Duration::from_secs(5), c.wait())
             .await
