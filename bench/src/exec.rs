@@ -129,9 +129,13 @@ pub fn median_of(
     for _ in 0..runs.max(1) {
         all.push(f()?);
     }
-    all.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
-    let mid = all[all.len() / 2].clone();
-    Ok(Median { median: mid, all })
+    Ok(Median::of(all))
+}
+
+/// The median of a list of numbers (NaN for none).
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 #[derive(Clone, Debug)]
@@ -141,6 +145,13 @@ pub struct Median {
 }
 
 impl Median {
+    /// The median of runs already made (at least one).
+    pub fn of(mut all: Vec<Measured>) -> Median {
+        all.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
+        let median = all[all.len() / 2].clone();
+        Median { median, all }
+    }
+
     pub fn seconds(&self) -> f64 {
         self.median.seconds
     }
