@@ -5,7 +5,7 @@
 
 use anyhow::{Context, bail};
 use sray_proto::net::Client;
-use sray_proto::scene_hash::hash_scene;
+use sray_proto::scene_hash::{hash_scene, scene_hash};
 use sray_proto::v1;
 use std::fs::{File, OpenOptions};
 use std::os::unix::fs::FileExt;
@@ -80,6 +80,11 @@ impl SceneCache {
             .with_context(|| format!("scene {hash}: manifest"))?
             .into_inner();
         let manifest = check_manifest(&m)?;
+        // The scene hash is the hash of the manifest: one that does not
+        // match it is refused before any chunk is trusted or fetched.
+        if scene_hash(manifest.size, manifest.chunk, &manifest.hashes) != hash {
+            bail!("scene {hash}: the coordinator's manifest does not match the scene's hash");
+        }
         let path = self.dir.join(format!("{hash}.sdb"));
         let existing = std::fs::metadata(&path)
             .map(|md| md.len() == manifest.size)
@@ -103,10 +108,7 @@ impl SceneCache {
             .as_ref()
             .map_or(path.clone(), |t| t.path().to_path_buf());
         let bad = if existing {
-            let (bad, whole) = verify(&work, &manifest, hash).await?;
-            if bad.is_empty() && !whole {
-                bail!("scene {hash}: every chunk matches its manifest but the whole file does not");
-            }
+            let bad = verify(&work, &manifest).await?;
             if !bad.is_empty() {
                 tracing::warn!(scene = hash, chunks = ?bad, "cached scene is corrupt: fetching those chunks again");
             }
@@ -121,8 +123,8 @@ impl SceneCache {
             }
         }
         if !bad.is_empty() {
-            let (still, whole) = verify(&work, &manifest, hash).await?;
-            if !still.is_empty() || !whole {
+            let still = verify(&work, &manifest).await?;
+            if !still.is_empty() {
                 bail!(
                     "scene {hash}: chunks {still:?} still do not match after fetching them again"
                 );
@@ -257,22 +259,19 @@ fn check_manifest(m: &v1::SceneManifestReply) -> anyhow::Result<Manifest> {
     })
 }
 
-/// Reads the file once: the chunks that do not match the manifest, and
-/// whether the whole file has the expected hash.
-async fn verify(path: &Path, m: &Manifest, hash: &str) -> anyhow::Result<(Vec<usize>, bool)> {
+/// Reads the file once: the chunks that do not match the manifest.
+async fn verify(path: &Path, m: &Manifest) -> anyhow::Result<Vec<usize>> {
     let path = path.to_path_buf();
     let chunk = m.chunk as usize;
     let hashes = m.hashes.clone();
-    let want = hash.to_string();
-    tokio::task::spawn_blocking(move || -> anyhow::Result<(Vec<usize>, bool)> {
+    tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<usize>> {
         let f = File::open(&path).with_context(|| path.display().to_string())?;
         // The file's size matched the manifest's before this was called;
         // a piece missing now (the file shrank meanwhile) counts as bad.
         let got = hash_scene(f, chunk).with_context(|| path.display().to_string())?;
-        let bad = (0..hashes.len())
+        Ok((0..hashes.len())
             .filter(|&i| got.chunks.get(i) != Some(&hashes[i]))
-            .collect();
-        Ok((bad, got.hex == want))
+            .collect())
     })
     .await?
 }
