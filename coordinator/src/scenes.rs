@@ -1,5 +1,6 @@
 //! The coordinator's scenes: object databases it serves to workers by
-//! content hash (BLAKE3), in chunks each with its own hash, so that a
+//! scene hash (the hash of their chunks' BLAKE3 hashes, see
+//! `sray_proto::scene_hash`), in chunks each with its own hash, so that a
 //! worker can check every chunk and fetch again only what is damaged.
 //!
 //! Uploaded scenes live in the data directory as `HASH.sdb`; a local
@@ -54,7 +55,7 @@ pub fn valid_hash(hash: &str) -> bool {
             .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
 }
 
-/// Hashes a file: the whole and each chunk.
+/// Hashes a file: its scene hash, size and chunk hashes.
 pub fn hash_file(path: &Path) -> anyhow::Result<(String, u64, Vec<[u8; 32]>)> {
     let f = File::open(path).with_context(|| path.display().to_string())?;
     let h = hash_scene(f, SCENE_CHUNK_BYTES).with_context(|| path.display().to_string())?;

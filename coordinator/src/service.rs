@@ -666,6 +666,8 @@ pub(crate) struct Receiver<'a> {
     n_results: u64,
     hits: u64,
     last_key: Option<u64>,
+    /// Frame slots the contributions so far add to, runs counted whole.
+    slots_added: u64,
 }
 
 impl<'a> Receiver<'a> {
@@ -684,6 +686,7 @@ impl<'a> Receiver<'a> {
             n_results: 0,
             hits: 0,
             last_key: None,
+            slots_added: 0,
         }
     }
 
@@ -741,6 +744,21 @@ impl<'a> Receiver<'a> {
                         bad.corner,
                         bad.end(),
                         self.input.corners
+                    ));
+                }
+                // Runs come only from a worker that keeps its records
+                // (nothing compares its contributions one by one), and a
+                // ray adds its colour to one slot at most: a shard's
+                // contributions cover no more slots than it has rays, so
+                // a few bytes can never ask for unbounded work here.
+                if !self.task.keep_output && v.iter().any(|x| x.run != 0) {
+                    return Err("a run of contributions from a task whose output is checked".into());
+                }
+                self.slots_added += v.iter().map(|x| x.run as u64 + 1).sum::<u64>();
+                if self.slots_added > self.task.ray_count {
+                    return Err(format!(
+                        "contributions to {} frame slots from a shard of {} rays",
+                        self.slots_added, self.task.ray_count
                     ));
                 }
                 Self::writer(&mut self.contributions, self.shared, "out-contrib")?;

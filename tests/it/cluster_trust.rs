@@ -234,6 +234,96 @@ fn a_lying_worker_is_caught_and_the_image_is_right() {
     drop(rt);
 }
 
+/// Sends a shading output of `recs` contributions; the coordinator's
+/// answer (an error's message, or whether it accepted the output).
+async fn contribute(
+    c: &mut Client,
+    session: &str,
+    t: &v1::Task,
+    recs: &[sray_engine::bf::Contribution],
+) -> Result<bool, String> {
+    use v1::task_output::Part;
+    let msgs = vec![
+        v1::TaskOutput {
+            part: Some(Part::Header(tref(session, t))),
+        },
+        v1::TaskOutput {
+            part: Some(Part::Records(v1::RecordChunk {
+                kind: v1::RecordKind::Contributions as i32,
+                data: sray_proto::wire::encode(recs),
+                held: None,
+                raw: false,
+            })),
+        },
+        v1::TaskOutput {
+            part: Some(Part::Summary(v1::TaskSummary::default())),
+        },
+    ];
+    c.complete_task(tokio_stream::iter(msgs))
+        .await
+        .map(|r| r.into_inner().accepted)
+        .map_err(|s| s.message().to_string())
+}
+
+/// A run of contributions (one record for a row of frame slots) is taken
+/// only from a worker that keeps its records, and no shard's
+/// contributions may cover more slots than it has rays: a few bytes from
+/// a worker can never ask the coordinator for unbounded work.
+#[test]
+fn contributions_cover_no_more_slots_than_their_rays() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--verify-fraction", "0"]);
+    let _render = client(d, &render_args("spd:balls:1", &url, "token", "c.png", "32"));
+    let rt = rt();
+    let answers = rt.block_on(async {
+        let mut c = connect(&url, &d.join("token")).await;
+        let session = register(&mut c, "greedy").await;
+        keep_beating(&c, &session);
+        let mut seed = 11u64;
+        let mut answers = Vec::new();
+        let t0 = Instant::now();
+        while answers.len() < 2 && t0.elapsed() < Duration::from_secs(60) {
+            let Some(t) = next(&mut c, &session).await else {
+                continue;
+            };
+            if t.stage == v1::Stage::Intersect as i32 {
+                lie(&mut c, &session, &t, &mut seed).await;
+                continue;
+            }
+            let one = |corner: u32, run: u32| sray_engine::bf::Contribution {
+                corner,
+                run,
+                rgb: [1, 2, 3],
+            };
+            let recs: Vec<_> = if answers.is_empty() {
+                // A run of four slots, where runs are not taken.
+                vec![one(0, 3)]
+            } else {
+                // One slot more than the shard has rays.
+                (0..=t.ray_count)
+                    .map(|i| one((i % 100) as u32, 0))
+                    .collect()
+            };
+            answers.push(contribute(&mut c, &session, &t, &recs).await);
+        }
+        answers
+    });
+    drop(rt);
+    drop(coord);
+    assert_eq!(answers.len(), 2, "{answers:?}");
+    let msg = |a: &Result<bool, String>| a.clone().err().unwrap_or_default();
+    assert!(
+        msg(&answers[0]).contains("a run of contributions"),
+        "{answers:?}"
+    );
+    assert!(
+        msg(&answers[1]).contains("frame slots from a shard of"),
+        "{answers:?}"
+    );
+}
+
 /// Item 1: job ids are random and workers key their caches by content:
 /// after a coordinator restart with the same worker up, a render of
 /// another scene gives that scene's image, not the cached one's.

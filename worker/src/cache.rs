@@ -262,13 +262,20 @@ fn check_manifest(m: &v1::SceneManifestReply) -> anyhow::Result<Manifest> {
 /// Reads the file once: the chunks that do not match the manifest.
 async fn verify(path: &Path, m: &Manifest) -> anyhow::Result<Vec<usize>> {
     let path = path.to_path_buf();
-    let chunk = m.chunk as usize;
+    let (chunk, size) = (m.chunk as usize, m.size);
     let hashes = m.hashes.clone();
     tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<usize>> {
         let f = File::open(&path).with_context(|| path.display().to_string())?;
-        // The file's size matched the manifest's before this was called;
-        // a piece missing now (the file shrank meanwhile) counts as bad.
         let got = hash_scene(f, chunk).with_context(|| path.display().to_string())?;
+        if got.size != size {
+            // It changed since its size was checked (a local render's link
+            // to a database being rewritten): no chunk can be trusted.
+            bail!(
+                "{}: {} bytes where the scene has {size}: the file changed while it was checked",
+                path.display(),
+                got.size
+            );
+        }
         Ok((0..hashes.len())
             .filter(|&i| got.chunks.get(i) != Some(&hashes[i]))
             .collect())

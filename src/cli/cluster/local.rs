@@ -76,6 +76,9 @@ pub async fn render(
     let cache = dir.path().join("cache");
     std::fs::create_dir_all(&cache)?;
     let abs = std::fs::canonicalize(db)?;
+    // A database that cannot be opened fails here, before any worker
+    // starts (it is hashed while they do).
+    sray_engine::sdb::Database::open(&abs)?;
 
     let listener = TcpListener::bind("127.0.0.1:0")
         .await
@@ -138,12 +141,27 @@ pub async fn render(
 
     // The scene is hashed while the workers start: they need it only when
     // the job comes.
-    let hash = {
+    let hashed = {
         let shared = shared.clone();
-        let abs = abs.clone();
-        tokio::task::spawn_blocking(move || shared.scenes.add_file(&abs)).await??
+        let file = abs.clone();
+        tokio::task::spawn_blocking(move || shared.scenes.add_file(&file))
+            .await
+            .map_err(anyhow::Error::from)
+            .and_then(|r| r)
+            .and_then(|hash| {
+                std::os::unix::fs::symlink(&abs, cache.join(format!("{hash}.sdb")))?;
+                Ok(hash)
+            })
     };
-    std::os::unix::fs::symlink(&abs, cache.join(format!("{hash}.sdb")))?;
+    let hash = match hashed {
+        Ok(h) => h,
+        Err(e) => {
+            stop_all(&mut children).await;
+            let _ = stop_tx.send(());
+            let _ = server.await;
+            return Err(e);
+        }
+    };
     // The first round is cut into shards for the workers there are (and
     // later rounds follow its cut when records stay at the workers): the
     // workers are given a moment to join first.
