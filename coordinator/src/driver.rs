@@ -237,6 +237,8 @@ impl Job {
                     resolution: s.res,
                     lo: s.lo,
                     hi: s.hi,
+                    nested_voxels: 0,
+                    nested_objects: 0,
                 })
                 .collect();
             Ok((db.object_count(), epsilon(&db.bbox(), o.precision), grids))

@@ -101,6 +101,8 @@ impl VoxelGrids {
                 resolution: g.spec.res,
                 lo: g.spec.lo,
                 hi: g.spec.hi,
+                nested_voxels: 0,
+                nested_objects: 0,
             })
             .collect()
     }

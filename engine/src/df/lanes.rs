@@ -109,6 +109,33 @@ impl<R: Copy> Rays<R> {
 }
 
 impl<R> Rays<R> {
+    /// The lanes of `m` whose rays may meet box `b` grown by `pad` between
+    /// their `t_min` and `limit`. Conservative: an axis where the
+    /// arithmetic gives NaN (a zero direction exactly on a face) rules
+    /// nothing out.
+    #[inline(always)]
+    pub fn meeting(&self, m: Mask, b: &Aabb, pad: f64, limit: &[f64; LANES]) -> Mask {
+        let lo: [f64; 3] = std::array::from_fn(|a| b.min[a] as f64 - pad);
+        let hi: [f64; 3] = std::array::from_fn(|a| b.max[a] as f64 + pad);
+        // Lane-parallel, with no short cuts, so that it vectorises.
+        let mut inside = [false; LANES];
+        for i in 0..width(m) {
+            let (mut t0, mut t1) = (self.t_min[i], limit[i]);
+            for a in 0..3 {
+                let x = (lo[a] - self.o[a][i]) * self.inv[a][i];
+                let y = (hi[a] - self.o[a][i]) * self.inv[a][i];
+                t0 = t0.max(x.min(y));
+                t1 = t1.min(x.max(y));
+            }
+            inside[i] = t0 <= t1;
+        }
+        let mut out = 0;
+        for (i, &x) in inside.iter().enumerate().take(width(m)) {
+            out |= (x as Mask) << i;
+        }
+        out & m
+    }
+
     /// Every lane in use.
     #[inline]
     pub fn all(&self) -> Mask {

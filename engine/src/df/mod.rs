@@ -4,6 +4,7 @@
 //! fast path for scenes that fit in memory.
 
 mod lanes;
+mod nested;
 mod object_grid;
 mod packet;
 mod polygon;
@@ -152,9 +153,13 @@ impl<'t> DfScene<'t> {
                 (0, GridRes::Fixed(r)) => r,
                 _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
-            grids.push(ObjectGrid::build(&bboxes, bounds, res, |b| {
-                plan.partition.group(b) == g
-            })?);
+            grids.push(ObjectGrid::build(
+                &bboxes,
+                bounds,
+                res,
+                trace::thread_count(opts),
+                |b| plan.partition.group(b) == g,
+            )?);
         }
         let header = db.scene();
         let eps = epsilon(&db.bbox(), opts.precision);
@@ -218,6 +223,8 @@ impl<'t> DfScene<'t> {
                 resolution: g.spec.res,
                 lo: g.spec.lo,
                 hi: g.spec.hi,
+                nested_voxels: g.nested_voxels,
+                nested_objects: g.nested_entries,
             })
             .collect()
     }

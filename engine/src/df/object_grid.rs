@@ -1,15 +1,23 @@
+use super::nested::{Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use crate::error::Error;
 use crate::grid::GridSpec;
 use crate::scene::Aabb;
+use rayon::prelude::*;
 
 /// A uniform grid listing, per voxel, the objects whose bounding box
 /// overlaps it: one flat array of object ids and the start of each voxel's
-/// run (count, prefix-sum, fill), in object id order within a voxel.
+/// run (count, prefix-sum, fill), in object id order within a voxel. A
+/// voxel listing more than [`MIN_OBJECTS`] objects lists instead one entry
+/// tagged [`NESTED`], a hierarchy of boxes over them (see [`super::nested`]).
 pub struct ObjectGrid {
     pub spec: GridSpec,
     pub start: Vec<u32>,
     pub items: Vec<u32>,
     pub objects: u64,
+    nested: Hierarchies,
+    /// Voxels with a hierarchy, and the object entries they replace.
+    pub nested_voxels: u64,
+    pub nested_entries: u64,
 }
 
 impl ObjectGrid {
@@ -18,6 +26,7 @@ impl ObjectGrid {
         bboxes: &[Aabb],
         bounds: &Aabb,
         res: [u32; 3],
+        threads: usize,
         member: impl Fn(&Aabb) -> bool,
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
@@ -70,12 +79,75 @@ impl ObjectGrid {
                 n += 1;
             }
         });
-        Ok(ObjectGrid {
+        let mut grid = ObjectGrid {
             spec,
             start: count,
             items,
             objects: n,
-        })
+            nested: Hierarchies::default(),
+            nested_voxels: 0,
+            nested_entries: 0,
+        };
+        grid.nest(bboxes, threads)?;
+        Ok(grid)
+    }
+
+    /// Gives each voxel of more than [`MIN_OBJECTS`] objects a hierarchy,
+    /// the voxels shared out among `threads` threads.
+    fn nest(&mut self, bboxes: &[Aabb], threads: usize) -> Result<(), Error> {
+        let cells = self.start.len() - 1;
+        let crowded: Vec<usize> = (0..cells)
+            .filter(|&c| self.cell(c).len() > MIN_OBJECTS)
+            .collect();
+        if crowded.is_empty() {
+            return Ok(());
+        }
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
+        let (start, items) = (&self.start, &self.items);
+        let built: Vec<Hierarchies> = pool.install(|| {
+            crowded
+                .par_iter()
+                .map(|&c| {
+                    let ids = &items[start[c] as usize..start[c + 1] as usize];
+                    let mut h = Hierarchies::default();
+                    h.build(ids, bboxes);
+                    h
+                })
+                .collect()
+        });
+        let mut entries = Vec::with_capacity(built.len());
+        for h in &built {
+            entries.push(self.nested.append(h));
+            self.nested_entries += h.len() as u64;
+        }
+        drop(built);
+        self.nested_voxels = crowded.len() as u64;
+        // Each crowded voxel's list shrinks to its one entry: compact the
+        // lists in place, front to back (nothing is written past what has
+        // been read), moving the runs between crowded voxels whole.
+        let (mut removed, mut moved_to, mut shifted) = (0usize, 0usize, 0usize);
+        for (&k, &e) in crowded.iter().zip(&entries) {
+            let (a, b) = (self.start[k] as usize, self.start[k + 1] as usize);
+            for s in &mut self.start[shifted..=k] {
+                *s -= removed as u32;
+            }
+            shifted = k + 1;
+            self.items.copy_within(moved_to..a, moved_to - removed);
+            self.items[a - removed] = e;
+            removed += b - a - 1;
+            moved_to = b;
+        }
+        for s in &mut self.start[shifted..] {
+            *s -= removed as u32;
+        }
+        let n = self.items.len();
+        self.items.copy_within(moved_to..n, moved_to - removed);
+        self.items.truncate(n - removed);
+        self.items.shrink_to_fit();
+        Ok(())
     }
 
     #[inline(always)]
@@ -83,8 +155,34 @@ impl ObjectGrid {
         self.start.len() == 2
     }
 
+    /// The entries of voxel `index`: object ids, and hierarchies tagged
+    /// [`NESTED`] (see [`ObjectGrid::visit`]).
     #[inline(always)]
     pub fn cell(&self, index: usize) -> &[u32] {
         &self.items[self.start[index] as usize..self.start[index + 1] as usize]
+    }
+
+    /// Gives `f` the objects of voxel `index`: listed ones directly; those
+    /// of a hierarchy as [`Hierarchies::visit`] does (`f` decides which
+    /// boxes to descend into; `high_first` orders the children). Returns
+    /// `false` if `f` stopped it.
+    #[inline(always)]
+    pub fn visit(
+        &self,
+        index: usize,
+        high_first: u8,
+        f: &mut impl FnMut(Entry<'_>) -> bool,
+    ) -> bool {
+        for &e in self.cell(index) {
+            let go = if e & NESTED == 0 {
+                f(Entry::Object(e))
+            } else {
+                self.nested.visit(e, high_first, f)
+            };
+            if !go {
+                return false;
+            }
+        }
+        true
     }
 }

@@ -16,6 +16,7 @@
 
 use super::DfScene;
 use super::lanes::{LaneTests, Rays, width};
+use super::nested::{Entry, high_first};
 use super::trace::Scratch;
 use crate::grid::GridSpec;
 use crate::hit::{Hit, PrimId};
@@ -595,16 +596,21 @@ pub fn nearest<R: Real>(
     best: &mut Hits<R>,
 ) {
     let stamp = sc.next_stamp();
+    let hf = high_first(rays.d((m.trailing_zeros() as usize).min(LANES - 1)));
     // The large objects' grid first: one ground polygon found early prunes
     // the walk through the main grid.
     for g in s.grids.iter().rev() {
         if g.single_cell() {
-            for &id in g.cell(0) {
-                if sc.mail[id as usize] != stamp {
-                    sc.mail[id as usize] = stamp;
-                    LaneTests::new(s, id).nearest(rays, m, best, &mut sc.tests);
+            g.visit(0, hf, &mut |e| match e {
+                Entry::Box(b) => rays.meeting(m, b, s.slack, &best.t) != 0,
+                Entry::Object(id) => {
+                    if sc.mail[id as usize] != stamp {
+                        sc.mail[id as usize] = stamp;
+                        LaneTests::new(s, id).nearest(rays, m, best, &mut sc.tests);
+                    }
+                    true
                 }
-            }
+            });
             continue;
         }
         let Some(mut w) = SlabWalk::new(&g.spec, plan) else {
@@ -615,17 +621,26 @@ pub fn nearest<R: Real>(
         loop {
             let mut found = 0;
             let c_far = w.voxels(|cell, slab| {
-                for &id in g.cell(cell) {
-                    let i = id as usize;
-                    if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
-                        continue;
+                g.visit(cell, hf, &mut |e| match e {
+                    Entry::Box(b) => {
+                        slab.meets(b) && {
+                            let lm = live & plan.lanes_meeting(b);
+                            lm != 0 && rays.meeting(lm, b, s.slack, &best.t) != 0
+                        }
                     }
-                    sc.mail[i] = stamp;
-                    let lm = live & plan.lanes_meeting(&s.bboxes[i]);
-                    if lm != 0 {
-                        found |= LaneTests::new(s, id).nearest(rays, lm, best, &mut sc.tests);
+                    Entry::Object(id) => {
+                        let i = id as usize;
+                        if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
+                            return true;
+                        }
+                        sc.mail[i] = stamp;
+                        let lm = live & plan.lanes_meeting(&s.bboxes[i]);
+                        if lm != 0 {
+                            found |= LaneTests::new(s, id).nearest(rays, lm, best, &mut sc.tests);
+                        }
+                        true
                     }
-                }
+                });
                 true
             });
             if found != 0 {
@@ -665,6 +680,7 @@ pub fn occluded<R: Real>(
     last: &mut u32,
 ) {
     let stamp = sc.next_stamp();
+    let hf = high_first(rays.d((m.trailing_zeros() as usize).min(LANES - 1)));
     if tested != super::trace::NO_OBJECT {
         sc.mail[tested as usize] = stamp;
     }
@@ -673,14 +689,18 @@ pub fn occluded<R: Real>(
             return;
         }
         if g.single_cell() {
-            for &id in g.cell(0) {
-                if sc.mail[id as usize] != stamp {
-                    sc.mail[id as usize] = stamp;
-                    if LaneTests::new(s, id).blocks(rays, m, &mut sc.tests) {
-                        *last = id;
+            g.visit(0, hf, &mut |e| match e {
+                Entry::Box(b) => rays.meeting(*m, b, s.slack, &rays.t_max) != 0,
+                Entry::Object(id) => {
+                    if sc.mail[id as usize] != stamp {
+                        sc.mail[id as usize] = stamp;
+                        if LaneTests::new(s, id).blocks(rays, m, &mut sc.tests) {
+                            *last = id;
+                        }
                     }
+                    *m != 0
                 }
-            }
+            });
             continue;
         }
         let Some(mut w) = SlabWalk::new(&g.spec, plan) else {
@@ -692,27 +712,32 @@ pub fn occluded<R: Real>(
         loop {
             let start = live;
             let c_far = w.voxels(|cell, slab| {
-                for &id in g.cell(cell) {
-                    let i = id as usize;
-                    if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
-                        continue;
-                    }
-                    sc.mail[i] = stamp;
-                    let mut lm = live & plan.lanes_meeting(&s.bboxes[i]);
-                    if lm == 0 {
-                        continue;
-                    }
-                    let before = lm;
-                    if LaneTests::new(s, id).blocks(rays, &mut lm, &mut sc.tests) {
-                        *last = id;
-                        live &= !(before & !lm);
-                        blocked |= before & !lm;
-                        if live == 0 {
-                            return false;
+                g.visit(cell, hf, &mut |e| match e {
+                    Entry::Box(b) => {
+                        slab.meets(b) && {
+                            let lm = live & plan.lanes_meeting(b);
+                            lm != 0 && rays.meeting(lm, b, s.slack, &rays.t_max) != 0
                         }
                     }
-                }
-                true
+                    Entry::Object(id) => {
+                        let i = id as usize;
+                        if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
+                            return true;
+                        }
+                        sc.mail[i] = stamp;
+                        let mut lm = live & plan.lanes_meeting(&s.bboxes[i]);
+                        if lm == 0 {
+                            return true;
+                        }
+                        let before = lm;
+                        if LaneTests::new(s, id).blocks(rays, &mut lm, &mut sc.tests) {
+                            *last = id;
+                            live &= !(before & !lm);
+                            blocked |= before & !lm;
+                        }
+                        live != 0
+                    }
+                })
             });
             if live == 0 {
                 break;

@@ -1,9 +1,10 @@
 //! One ray at a time: the 3D-DDA walk (Amanatides and Woo) with mailboxes
 //! and early termination, for rays too incoherent to walk as a packet.
 
-use super::DfScene;
+use super::nested::{Entry, high_first, ray_meets};
 use super::packet::Hits;
 use super::trace::{NO_OBJECT, Scratch};
+use super::{DfScene, ObjectGrid};
 use crate::grid::Dda;
 use crate::intersect::RayQ;
 use crate::math::{Real, Vec3};
@@ -26,23 +27,31 @@ pub fn nearest<R: Real>(
 ) {
     let stamp = sc.next_stamp();
     let rmin = R::from_f64(t_min);
+    let (hf, pad) = (high_first(d), s.slack);
+    // Each voxel's objects; in a crowded voxel's hierarchy, only the boxes
+    // the ray may meet before its best hit so far.
+    let visit = |sc: &mut Scratch<R>, best: &mut Hits<R>, g: &ObjectGrid, cell: usize| {
+        g.visit(cell, hf, &mut |e| match e {
+            Entry::Box(b) => ray_meets(o, inv, t_min, best.upper[lane].to_f64(), b, pad),
+            Entry::Object(id) => {
+                test_nearest(s, sc, stamp, q, rmin, id, best, lane);
+                true
+            }
+        });
+    };
     // The large objects' grid first: one ground polygon found early prunes
     // the walk through the main grid.
     for g in s.grids.iter().rev() {
         if g.single_cell() {
             // A one-voxel grid (a few large objects): no walk needed.
-            for &id in g.cell(0) {
-                test_nearest(s, sc, stamp, q, rmin, id, best, lane);
-            }
+            visit(sc, best, g, 0);
             continue;
         }
         let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.t[lane].next_up()) else {
             continue;
         };
         loop {
-            for &id in g.cell(w.index) {
-                test_nearest(s, sc, stamp, q, rmin, id, best, lane);
-            }
+            visit(sc, best, g, w.index);
             if (best.hit(lane).is_some() && best.t[lane] < w.t_exit()) || !w.advance() {
                 break;
             }
@@ -100,13 +109,28 @@ pub fn occluded<R: Real>(
     if cached != NO_OBJECT && blocks(s, sc, stamp, q, rmin, rmax, cached) {
         return true;
     }
+    let (hf, pad) = (high_first(d), s.slack);
+    // The first blocker among a voxel's objects (in a crowded voxel's
+    // hierarchy, among the boxes the segment meets).
+    let blocker = |sc: &mut Scratch<R>, g: &ObjectGrid, cell: usize| {
+        let mut found = NO_OBJECT;
+        g.visit(cell, hf, &mut |e| match e {
+            Entry::Box(b) => ray_meets(o, inv, t_min, t_max, b, pad),
+            Entry::Object(id) => {
+                if blocks(s, sc, stamp, q, rmin, rmax, id) {
+                    found = id;
+                }
+                found == NO_OBJECT
+            }
+        });
+        found
+    };
     for g in s.grids.iter().rev() {
         if g.single_cell() {
-            for &id in g.cell(0) {
-                if blocks(s, sc, stamp, q, rmin, rmax, id) {
-                    sc.shadow_cache[slot] = id;
-                    return true;
-                }
+            let id = blocker(sc, g, 0);
+            if id != NO_OBJECT {
+                sc.shadow_cache[slot] = id;
+                return true;
             }
             continue;
         }
@@ -114,11 +138,10 @@ pub fn occluded<R: Real>(
             continue;
         };
         loop {
-            for &id in g.cell(w.index) {
-                if blocks(s, sc, stamp, q, rmin, rmax, id) {
-                    sc.shadow_cache[slot] = id;
-                    return true;
-                }
+            let id = blocker(sc, g, w.index);
+            if id != NO_OBJECT {
+                sc.shadow_cache[slot] = id;
+                return true;
             }
             if !w.advance() {
                 break;

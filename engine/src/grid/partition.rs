@@ -151,4 +151,15 @@ pub struct GridStat {
     pub resolution: [u32; 3],
     pub lo: [f64; 3],
     pub hi: [f64; 3],
+    /// Depth-first: voxels crowded enough to hold a hierarchy of their
+    /// objects instead of a list, and the objects those list (counted
+    /// once per voxel).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub nested_voxels: u64,
+    #[serde(skip_serializing_if = "is_zero")]
+    pub nested_objects: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }

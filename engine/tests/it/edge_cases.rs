@@ -47,7 +47,10 @@ fn opts(side: u32, grid: GridRes, threads: usize, grids: bool) -> RenderOptions 
 }
 
 /// Renders `nff` every way; all must agree with the one-voxel depth-first
-/// render, which is returned.
+/// render, which is returned. (Past 64 objects the depth-first tracer
+/// gives a voxel a hierarchy of its objects; the one-voxel breadth-first
+/// render among the others stays brute force, every ray against every
+/// object.)
 fn all_agree(what: &str, nff: &str, side: u32, fixed: [u32; 3]) -> Render {
     let s = scene(nff);
     let one = GridRes::Fixed([1, 1, 1]);
@@ -108,7 +111,7 @@ fn all_agree(what: &str, nff: &str, side: u32, fixed: [u32; 3]) -> Render {
         let differing = r.0.iter().zip(&reference.0).filter(|(a, b)| a != b).count();
         assert!(
             differing == 0,
-            "{what} ({how}): {differing} channel values differ from brute force"
+            "{what} ({how}): {differing} channel values differ from the one-voxel render"
         );
         assert_eq!(r.1.rays, reference.1.rays, "{what} ({how}): counts differ");
     }

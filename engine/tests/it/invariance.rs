@@ -207,7 +207,8 @@ fn breadth_first_knobs_change_nothing() {
 #[test]
 fn grid_resolution_changes_nothing() {
     for s in scenes() {
-        // One voxel is a brute-force tracer: every ray against every object.
+        // One voxel: breadth-first, a brute-force tracer (every ray against
+        // every object); depth-first, one hierarchy over all the objects.
         for res in [[1, 1, 1], [2, 3, 5], [7, 7, 7], [31, 1, 17], [64, 64, 64]] {
             let o = RenderOptions {
                 grid_res: GridRes::Fixed(res),

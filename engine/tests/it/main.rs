@@ -16,6 +16,7 @@
 mod common;
 
 mod breadth_first;
+mod crowded_voxels;
 mod database;
 mod edge_cases;
 mod invariance;

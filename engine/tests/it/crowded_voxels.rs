@@ -1,0 +1,135 @@
+//! A dense model in a sparse world: thousands of small triangles in a unit
+//! box on a wide floor strewn with spheres. The automatic grid, sized for
+//! the whole floor, puts the model into a few voxels; the depth-first
+//! tracer gives those voxels a hierarchy of their objects instead of a
+//! list. The image must be the breadth-first tracer's (which keeps the
+//! plain lists), bit for bit, in both precisions and at any thread count,
+//! including where hits tie (triangles repeated under larger ids).
+
+use sray_engine::bf::StoreNumber;
+use sray_engine::nff::read_nff_from;
+use sray_engine::progress::NoProgress;
+use sray_engine::render::{GridRes, Precision, RenderOptions};
+use sray_engine::sdb::{Compression, Database, DbWriter};
+use std::fmt::Write;
+use std::path::Path;
+
+use crate::common::{Render, bf_render, df_render};
+
+/// A small deterministic generator (64-bit LCG), so the scene is the same
+/// everywhere.
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+fn crowd_nff(triangles: usize, spheres: usize) -> String {
+    let mut r = Lcg(2026);
+    let mut s = String::new();
+    s.push_str(
+        "v\nfrom 1.6 1.2 2.0\nat 0 0.4 0\nup 0 1 0\nangle 35\nhither 0.001\nresolution 48 48\n",
+    );
+    s.push_str("b 0.1 0.1 0.2\nl 3 8 4 0.9 0.9 0.9\nl -4 5 1 0.5 0.5 0.5\n");
+    s.push_str("f 0.6 0.6 0.6 1 0 0 0 1\np 4\n-50 0 -50\n-50 0 50\n50 0 50\n50 0 -50\n");
+    s.push_str("f 0.9 0.3 0.2 0.6 0.4 20 0 1\n");
+    for _ in 0..spheres {
+        let (x, z) = (r.range(-50.0, 50.0), r.range(-50.0, 50.0));
+        if x.abs() < 2.0 && z.abs() < 2.0 {
+            continue;
+        }
+        writeln!(s, "s {x:.4} 0.2 {z:.4} 0.2").unwrap();
+    }
+    s.push_str("f 0.8 0.8 0.7 0.7 0.3 30 0 1\n");
+    let mut tris = Vec::new();
+    for _ in 0..triangles {
+        let c = [r.range(-0.5, 0.5), r.range(0.0, 1.0), r.range(-0.5, 0.5)];
+        let v: Vec<[f64; 3]> = (0..3)
+            .map(|_| std::array::from_fn(|i| c[i] + r.range(-0.06, 0.06)))
+            .collect();
+        tris.push(v);
+    }
+    // Every tenth triangle again, later in the file: exact ties, which
+    // the smaller id must win whichever is tested first.
+    let again: Vec<_> = tris.iter().step_by(10).cloned().collect();
+    for t in tris.iter().chain(&again) {
+        s.push_str("p 3\n");
+        for v in t {
+            writeln!(s, "{} {} {}", v[0], v[1], v[2]).unwrap();
+        }
+    }
+    s
+}
+
+fn database(nff: &str, dir: &Path) -> Database {
+    let path = dir.join("crowd.sdb");
+    let mut w = DbWriter::create(&path, Compression::None).unwrap();
+    read_nff_from(nff.as_bytes(), Path::new("crowd.nff"), &mut w, &NoProgress).unwrap();
+    w.finish().unwrap();
+    Database::open(&path).unwrap()
+}
+
+fn opts(threads: usize, precision: Precision) -> RenderOptions {
+    RenderOptions {
+        width: 48,
+        height: 48,
+        max_depth: 3,
+        threads,
+        precision,
+        ..Default::default()
+    }
+}
+
+fn assert_same(what: &str, want: &Render, got: &Render) {
+    let differing = want.0.iter().zip(&got.0).filter(|(a, b)| a != b).count();
+    assert_eq!(differing, 0, "{what}: {differing} channel values differ");
+    assert_eq!(want.1.rays, got.1.rays, "{what}: ray counts differ");
+}
+
+#[test]
+fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = database(&crowd_nff(6000, 3000), dir.path());
+    for precision in [Precision::Double, Precision::Single] {
+        let bf = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 1 << 30);
+        let df = df_render(&db, &opts(2, precision));
+        let nested: u64 = df.1.grids.iter().map(|g| g.nested_voxels).sum();
+        assert!(
+            nested > 0,
+            "the model should crowd some voxel: {:?}",
+            df.1.grids
+        );
+        assert!(
+            df.1.rays.eye_hit_rays > 48 * 48 / 2,
+            "the view should be mostly model and floor"
+        );
+        assert_same(&format!("{precision:?}: df against bf"), &bf, &df);
+        assert_same(
+            &format!("{precision:?}: df, one thread"),
+            &bf,
+            &df_render(&db, &opts(1, precision)),
+        );
+        // Finer grids leave fewer voxels crowded, and one voxel puts every
+        // object in a single hierarchy.
+        for res in [[1, 1, 1], [3, 2, 3], [40, 2, 40]] {
+            let o = RenderOptions {
+                grid_res: GridRes::Fixed(res),
+                ..opts(2, precision)
+            };
+            assert_same(
+                &format!("{precision:?}: df, grid {res:?}"),
+                &bf,
+                &df_render(&db, &o),
+            );
+        }
+    }
+}
