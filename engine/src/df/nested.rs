@@ -30,8 +30,8 @@ pub const NESTED: u32 = 1 << 31;
 /// the voxels of the SPD scenes keep their lists (their fullest hold a
 /// few dozen objects) and only crowds pay the descent.
 pub const MIN_OBJECTS: usize = 64;
-/// Most objects in a leaf.
-const LEAF: usize = 4;
+/// Most objects in a leaf (4 and 16 were slower on the dragon).
+const LEAF: usize = 8;
 
 /// `count` of an interior node: this bit, and its split axis below it.
 const INTERIOR: u32 = 1 << 31;
@@ -46,10 +46,12 @@ struct Node {
     count: u32,
 }
 
-/// What a traversal meets: a box to descend into or not, or an object.
-pub enum Entry<'a> {
-    Box(&'a Aabb),
-    Object(u32),
+/// What a traversal meets, with the state (say, the lanes of a packet
+/// still in the running) it reached it with: a box to descend into or not,
+/// or an object.
+pub enum Entry<'a, S> {
+    Box(&'a Aabb, S),
+    Object(u32, S),
 }
 
 /// The hierarchies of one grid's crowded voxels, in two flat arrays.
@@ -147,25 +149,32 @@ impl Hierarchies {
         self.split(left + 1, hi);
     }
 
-    /// Walks the hierarchy of voxel entry `entry` (tagged [`NESTED`]):
-    /// `f` is asked of each box whether to descend into it, and is given
-    /// each object of the leaves it reaches, returning `false` to stop.
-    /// `high_first` has bit `axis` set where the upper child along that
-    /// axis should be visited first (toward where the rays go). Returns
-    /// `false` if `f` stopped it.
+    /// Walks the hierarchy of voxel entry `entry` (tagged [`NESTED`]),
+    /// starting in state `state`: `f` is given each box with its parent's
+    /// state and returns the state to descend with (`None`: pass over the
+    /// box), and each object of the leaves it reaches with the leaf's
+    /// state, returning `None` to stop the walk. `high_first` has bit
+    /// `axis` set where the upper child along that axis should be visited
+    /// first (toward where the rays go). Returns `false` if `f` stopped it.
     #[inline]
-    pub fn visit(&self, entry: u32, high_first: u8, f: &mut impl FnMut(Entry<'_>) -> bool) -> bool {
+    pub fn visit<S: Copy>(
+        &self,
+        entry: u32,
+        high_first: u8,
+        state: S,
+        f: &mut impl FnMut(Entry<'_, S>) -> Option<S>,
+    ) -> bool {
         // Median splits halve the objects at each level: depth < 64.
-        let mut stack = [0u32; 64];
+        let mut stack = [(0u32, state); 64];
         let mut sp = 0;
-        let mut n = (entry & !NESTED) as usize;
+        let (mut n, mut st) = ((entry & !NESTED) as usize, state);
         loop {
             let node = &self.nodes[n];
-            if f(Entry::Box(&node.bbox)) {
+            if let Some(inner) = f(Entry::Box(&node.bbox, st)) {
                 if node.count & INTERIOR == 0 {
                     let first = node.first as usize;
                     for &id in &self.objects[first..first + node.count as usize] {
-                        if !f(Entry::Object(id)) {
+                        if f(Entry::Object(id, inner)).is_none() {
                             return false;
                         }
                     }
@@ -176,9 +185,9 @@ impl Hierarchies {
                     } else {
                         (node.first, node.first + 1)
                     };
-                    stack[sp] = far;
+                    stack[sp] = (far, inner);
                     sp += 1;
-                    n = near as usize;
+                    (n, st) = (near as usize, inner);
                     continue;
                 }
             }
@@ -186,7 +195,8 @@ impl Hierarchies {
                 return true;
             }
             sp -= 1;
-            n = stack[sp] as usize;
+            let (k, s) = stack[sp];
+            (n, st) = (k as usize, s);
         }
     }
 }
@@ -252,23 +262,27 @@ mod tests {
         let e = h.build(&ids, &boxes);
         assert_ne!(e & NESTED, 0);
         let mut seen = vec![0u32; 1000];
-        let mut path: Vec<Aabb> = Vec::new();
-        // Descend everywhere; every object must lie in the last box entered.
-        h.visit(e, 0, &mut |x| {
-            match x {
-                Entry::Box(b) => path.push(*b),
-                Entry::Object(id) => {
-                    let b = boxes[id as usize];
-                    assert!(
-                        path.iter()
-                            .rev()
-                            .take(1)
-                            .all(|p| (0..3).all(|i| p.min[i] <= b.min[i] && p.max[i] >= b.max[i]))
-                    );
-                    seen[id as usize] += 1;
-                }
+        // Descend everywhere, carrying the box entered last: each object
+        // must lie inside its leaf's box, which must lie inside its parent.
+        let everything = Aabb {
+            min: [-1e9; 3],
+            max: [1e9; 3],
+        };
+        let inside =
+            |a: &Aabb, b: &Aabb| (0..3).all(|i| b.min[i] <= a.min[i] && b.max[i] >= a.max[i]);
+        h.visit(e, 0, everything, &mut |x| match x {
+            Entry::Box(b, parent) => {
+                assert!(inside(b, &parent), "a box inside its parent");
+                Some(*b)
             }
-            true
+            Entry::Object(id, leaf) => {
+                assert!(
+                    inside(&boxes[id as usize], &leaf),
+                    "an object inside its leaf"
+                );
+                seen[id as usize] += 1;
+                Some(leaf)
+            }
         });
         assert!(seen.iter().all(|&c| c == 1), "each object once");
         assert!(h.nodes.len() < 1000, "leaves hold several objects");
@@ -284,13 +298,13 @@ mod tests {
         let d = Vec3::new(1.0, 0.0, 0.0);
         let inv = Vec3::new(1.0, f64::INFINITY, f64::INFINITY);
         let mut found = Vec::new();
-        h.visit(e, high_first(d), &mut |x| match x {
-            Entry::Box(b) => ray_meets(o, inv, 0.0, f64::INFINITY, b, 0.0),
-            Entry::Object(id) => {
+        h.visit(e, high_first(d), (), &mut |x| match x {
+            Entry::Box(b, ()) => ray_meets(o, inv, 0.0, f64::INFINITY, b, 0.0).then_some(()),
+            Entry::Object(id, ()) => {
                 if ray_meets(o, inv, 0.0, f64::INFINITY, &boxes[id as usize], 0.0) {
                     found.push(id);
                 }
-                true
+                Some(())
             }
         });
         let mut expect: Vec<u32> = (0..1000u32)
@@ -315,11 +329,11 @@ mod tests {
         let mut h = Hierarchies::default();
         let e = h.build(&ids, &boxes);
         let mut n = 0;
-        h.visit(e, 0, &mut |x| {
-            if let Entry::Object(_) = x {
+        h.visit(e, 0, (), &mut |x| {
+            if let Entry::Object(..) = x {
                 n += 1;
             }
-            true
+            Some(())
         });
         assert_eq!(n, 100);
         assert_eq!(h.nodes.len(), 1);

@@ -162,22 +162,24 @@ impl ObjectGrid {
         &self.items[self.start[index] as usize..self.start[index + 1] as usize]
     }
 
-    /// Gives `f` the objects of voxel `index`: listed ones directly; those
-    /// of a hierarchy as [`Hierarchies::visit`] does (`f` decides which
-    /// boxes to descend into; `high_first` orders the children). Returns
-    /// `false` if `f` stopped it.
+    /// Gives `f` the objects of voxel `index` with state `state`: listed
+    /// ones directly; those of a hierarchy as [`Hierarchies::visit`] does
+    /// (`f` decides which boxes to descend into and with what state;
+    /// `high_first` orders the children). Returns `false` if `f` stopped
+    /// it (returned `None` for an object).
     #[inline(always)]
-    pub fn visit(
+    pub fn visit<S: Copy>(
         &self,
         index: usize,
         high_first: u8,
-        f: &mut impl FnMut(Entry<'_>) -> bool,
+        state: S,
+        f: &mut impl FnMut(Entry<'_, S>) -> Option<S>,
     ) -> bool {
         for &e in self.cell(index) {
             let go = if e & NESTED == 0 {
-                f(Entry::Object(e))
+                f(Entry::Object(e, state)).is_some()
             } else {
-                self.nested.visit(e, high_first, f)
+                self.nested.visit(e, high_first, state, f)
             };
             if !go {
                 return false;

@@ -601,14 +601,18 @@ pub fn nearest<R: Real>(
     // the walk through the main grid.
     for g in s.grids.iter().rev() {
         if g.single_cell() {
-            g.visit(0, hf, &mut |e| match e {
-                Entry::Box(b) => rays.meeting(m, b, s.slack, &best.t) != 0,
-                Entry::Object(id) => {
+            // Inside a hierarchy, each box is tested for the lanes that met
+            // its parent, and a leaf's objects for those that met the leaf.
+            g.visit(0, hf, m, &mut |e| match e {
+                Entry::Box(b, lm) => {
+                    Some(rays.meeting(lm, b, s.slack, &best.t)).filter(|&x| x != 0)
+                }
+                Entry::Object(id, lm) => {
                     if sc.mail[id as usize] != stamp {
                         sc.mail[id as usize] = stamp;
-                        LaneTests::new(s, id).nearest(rays, m, best, &mut sc.tests);
+                        LaneTests::new(s, id).nearest(rays, lm, best, &mut sc.tests);
                     }
-                    true
+                    Some(lm)
                 }
             });
             continue;
@@ -621,24 +625,27 @@ pub fn nearest<R: Real>(
         loop {
             let mut found = 0;
             let c_far = w.voxels(|cell, slab| {
-                g.visit(cell, hf, &mut |e| match e {
-                    Entry::Box(b) => {
-                        slab.meets(b) && {
-                            let lm = live & plan.lanes_meeting(b);
-                            lm != 0 && rays.meeting(lm, b, s.slack, &best.t) != 0
-                        }
-                    }
-                    Entry::Object(id) => {
+                g.visit(cell, hf, live, &mut |e| match e {
+                    // Inside a hierarchy, each box is tested for the lanes
+                    // that met its parent (their segments up to their best
+                    // hits; the slopes test of `lanes_meeting` costs more
+                    // than it saves there), and a leaf's objects for those
+                    // that met the leaf.
+                    Entry::Box(b, lm) => Some(lm)
+                        .filter(|_| slab.meets(b))
+                        .map(|lm| rays.meeting(lm, b, s.slack, &best.t))
+                        .filter(|&lm| lm != 0),
+                    Entry::Object(id, lm) => {
                         let i = id as usize;
                         if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
-                            return true;
+                            return Some(lm);
                         }
                         sc.mail[i] = stamp;
-                        let lm = live & plan.lanes_meeting(&s.bboxes[i]);
-                        if lm != 0 {
-                            found |= LaneTests::new(s, id).nearest(rays, lm, best, &mut sc.tests);
+                        let t = lm & plan.lanes_meeting(&s.bboxes[i]);
+                        if t != 0 {
+                            found |= LaneTests::new(s, id).nearest(rays, t, best, &mut sc.tests);
                         }
-                        true
+                        Some(lm)
                     }
                 });
                 true
@@ -689,16 +696,21 @@ pub fn occluded<R: Real>(
             return;
         }
         if g.single_cell() {
-            g.visit(0, hf, &mut |e| match e {
-                Entry::Box(b) => rays.meeting(*m, b, s.slack, &rays.t_max) != 0,
-                Entry::Object(id) => {
+            g.visit(0, hf, *m, &mut |e| match e {
+                Entry::Box(b, lm) => {
+                    Some(rays.meeting(lm & *m, b, s.slack, &rays.t_max)).filter(|&x| x != 0)
+                }
+                Entry::Object(id, lm) => {
                     if sc.mail[id as usize] != stamp {
                         sc.mail[id as usize] = stamp;
-                        if LaneTests::new(s, id).blocks(rays, m, &mut sc.tests) {
+                        let mut t = lm & *m;
+                        let before = t;
+                        if LaneTests::new(s, id).blocks(rays, &mut t, &mut sc.tests) {
                             *last = id;
+                            *m &= !(before & !t);
                         }
                     }
-                    *m != 0
+                    Some(lm).filter(|_| *m != 0)
                 }
             });
             continue;
@@ -712,30 +724,28 @@ pub fn occluded<R: Real>(
         loop {
             let start = live;
             let c_far = w.voxels(|cell, slab| {
-                g.visit(cell, hf, &mut |e| match e {
-                    Entry::Box(b) => {
-                        slab.meets(b) && {
-                            let lm = live & plan.lanes_meeting(b);
-                            lm != 0 && rays.meeting(lm, b, s.slack, &rays.t_max) != 0
-                        }
-                    }
-                    Entry::Object(id) => {
+                g.visit(cell, hf, live, &mut |e| match e {
+                    Entry::Box(b, lm) => Some(lm & live)
+                        .filter(|&lm| lm != 0 && slab.meets(b))
+                        .map(|lm| rays.meeting(lm, b, s.slack, &rays.t_max))
+                        .filter(|&lm| lm != 0),
+                    Entry::Object(id, lm) => {
                         let i = id as usize;
                         if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
-                            return true;
+                            return Some(lm);
                         }
                         sc.mail[i] = stamp;
-                        let mut lm = live & plan.lanes_meeting(&s.bboxes[i]);
-                        if lm == 0 {
-                            return true;
+                        let mut t = lm & live & plan.lanes_meeting(&s.bboxes[i]);
+                        if t == 0 {
+                            return Some(lm);
                         }
-                        let before = lm;
-                        if LaneTests::new(s, id).blocks(rays, &mut lm, &mut sc.tests) {
+                        let before = t;
+                        if LaneTests::new(s, id).blocks(rays, &mut t, &mut sc.tests) {
                             *last = id;
-                            live &= !(before & !lm);
-                            blocked |= before & !lm;
+                            live &= !(before & !t);
+                            blocked |= before & !t;
                         }
-                        live != 0
+                        Some(lm).filter(|_| live != 0)
                     }
                 })
             });

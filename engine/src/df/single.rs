@@ -31,11 +31,13 @@ pub fn nearest<R: Real>(
     // Each voxel's objects; in a crowded voxel's hierarchy, only the boxes
     // the ray may meet before its best hit so far.
     let visit = |sc: &mut Scratch<R>, best: &mut Hits<R>, g: &ObjectGrid, cell: usize| {
-        g.visit(cell, hf, &mut |e| match e {
-            Entry::Box(b) => ray_meets(o, inv, t_min, best.upper[lane].to_f64(), b, pad),
-            Entry::Object(id) => {
+        g.visit(cell, hf, (), &mut |e| match e {
+            Entry::Box(b, ()) => {
+                ray_meets(o, inv, t_min, best.upper[lane].to_f64(), b, pad).then_some(())
+            }
+            Entry::Object(id, ()) => {
                 test_nearest(s, sc, stamp, q, rmin, id, best, lane);
-                true
+                Some(())
             }
         });
     };
@@ -114,13 +116,13 @@ pub fn occluded<R: Real>(
     // hierarchy, among the boxes the segment meets).
     let blocker = |sc: &mut Scratch<R>, g: &ObjectGrid, cell: usize| {
         let mut found = NO_OBJECT;
-        g.visit(cell, hf, &mut |e| match e {
-            Entry::Box(b) => ray_meets(o, inv, t_min, t_max, b, pad),
-            Entry::Object(id) => {
+        g.visit(cell, hf, (), &mut |e| match e {
+            Entry::Box(b, ()) => ray_meets(o, inv, t_min, t_max, b, pad).then_some(()),
+            Entry::Object(id, ()) => {
                 if blocks(s, sc, stamp, q, rmin, rmax, id) {
                     found = id;
                 }
-                found == NO_OBJECT
+                (found == NO_OBJECT).then_some(())
             }
         });
         found
