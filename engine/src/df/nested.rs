@@ -85,68 +85,87 @@ impl Hierarchies {
     }
 
     /// Builds a hierarchy over the objects `ids`, returning its voxel
-    /// entry.
+    /// entry. The objects are put in order along a Morton curve through
+    /// their centres and halved recursively in that order (a balanced tree
+    /// of nearby objects), and the boxes are gathered bottom-up: a sort
+    /// and one pass, where splitting by the widest spread of centres at
+    /// each level moved every object once per level (and cost the dragon
+    /// scene twice the build time for the same number of tests).
     pub fn build(&mut self, ids: &[u32], bboxes: &[Aabb]) -> u32 {
+        let mut centres = Aabb::EMPTY;
+        for &id in ids {
+            centres.add_point(centre(&bboxes[id as usize]));
+        }
+        let scale: [f32; 3] = std::array::from_fn(|i| {
+            let e = centres.max[i] - centres.min[i];
+            if e > 0.0 { 1023.0 / e } else { 0.0 }
+        });
+        let mut order: Vec<(u32, u32)> = ids
+            .iter()
+            .map(|&id| {
+                let c = centre(&bboxes[id as usize]);
+                let q: [u32; 3] = std::array::from_fn(|i| {
+                    (((c[i] - centres.min[i]) * scale[i]) as u32).min(1023)
+                });
+                (morton(q), id)
+            })
+            .collect();
+        // By code, then id: the same tree on every run.
+        order.sort_unstable();
         let root = self.nodes.len();
         self.nodes.push(Node {
             bbox: Aabb::EMPTY,
             first: 0,
             count: 0,
         });
-        // The objects' boxes copied beside their ids: the splits reorder
-        // them many times, and the scene's table is far larger than cache.
-        let mut items: Vec<Item> = ids
-            .iter()
-            .map(|&id| Item {
-                bbox: bboxes[id as usize],
-                id,
-            })
-            .collect();
-        self.split(root, &mut items);
+        self.split(root, &order, bboxes);
         NESTED | root as u32
     }
 
-    fn split(&mut self, node: usize, items: &mut [Item]) {
-        let mut bbox = Aabb::EMPTY;
-        let mut centres = Aabb::EMPTY;
-        for it in items.iter() {
-            bbox.union(&it.bbox);
-            centres.add_point(centre(&it.bbox));
-        }
-        let extent: [f32; 3] = std::array::from_fn(|i| centres.max[i] - centres.min[i]);
-        let axis = (0..3)
-            .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
-            .unwrap_or(0);
-        // A leaf when small, or when every centre is the same point (no
-        // split would part them).
-        if items.len() <= LEAF || !(extent[axis] > 0.0) {
+    /// Makes `node` the tree of `items` (in curve order); returns its box.
+    fn split(&mut self, node: usize, items: &[(u32, u32)], bboxes: &[Aabb]) -> Aabb {
+        if items.len() <= LEAF {
+            let mut bbox = Aabb::EMPTY;
+            for &(_, id) in items {
+                bbox.union(&bboxes[id as usize]);
+            }
             self.nodes[node] = Node {
                 bbox,
                 first: self.objects.len() as u32,
                 count: items.len() as u32,
             };
-            self.objects.extend(items.iter().map(|it| it.id));
-            return;
+            self.objects.extend(items.iter().map(|&(_, id)| id));
+            return bbox;
         }
-        // The median along the widest spread of centres. (Binned surface
-        // area splits tested a few percent fewer objects on the dragon and
-        // took half again as long to build.)
-        let mid = items.len() / 2;
-        items.select_nth_unstable_by(mid, |a, b| {
-            centre(&a.bbox)[axis].total_cmp(&centre(&b.bbox)[axis])
-        });
+        // Where the codes' highest differing bit turns on (the curve's
+        // cut through space); the middle when all codes are equal.
+        let (first, last) = (items[0].0, items[items.len() - 1].0);
+        let mid = if first == last {
+            items.len() / 2
+        } else {
+            let bit = 31 - (first ^ last).leading_zeros();
+            items.partition_point(|&(c, _)| c & (1 << bit) == 0)
+        };
         let left = self.nodes.len();
         let blank = self.nodes[node];
         self.nodes.push(blank);
         self.nodes.push(blank);
+        let a = self.split(left, &items[..mid], bboxes);
+        let b = self.split(left + 1, &items[mid..], bboxes);
+        let mut bbox = a;
+        bbox.union(&b);
+        // The axis along which the children lie furthest apart orders
+        // them for the walk.
+        let apart = |i: usize| ((b.min[i] + b.max[i]) - (a.min[i] + a.max[i])).abs();
+        let axis = (0..3)
+            .max_by(|&x, &y| apart(x).total_cmp(&apart(y)))
+            .unwrap_or(0);
         self.nodes[node] = Node {
             bbox,
             first: left as u32,
             count: INTERIOR | axis as u32,
         };
-        let (lo, hi) = items.split_at_mut(mid);
-        self.split(left, lo);
-        self.split(left + 1, hi);
+        bbox
     }
 
     /// Walks the hierarchy of voxel entry `entry` (tagged [`NESTED`]),
@@ -164,7 +183,8 @@ impl Hierarchies {
         state: S,
         f: &mut impl FnMut(Entry<'_, S>) -> Option<S>,
     ) -> bool {
-        // Median splits halve the objects at each level: depth < 64.
+        // Each level splits on a bit of the 30-bit codes below the
+        // parent's, or halves the objects: depth < 30 + 32.
         let mut stack = [(0u32, state); 64];
         let mut sp = 0;
         let (mut n, mut st) = ((entry & !NESTED) as usize, state);
@@ -201,11 +221,17 @@ impl Hierarchies {
     }
 }
 
-/// An object and its box, while a hierarchy is built.
-#[derive(Clone, Copy)]
-struct Item {
-    bbox: Aabb,
-    id: u32,
+/// The Morton code of a point quantized to 10 bits per axis.
+fn morton(q: [u32; 3]) -> u32 {
+    let spread = |mut x: u32| {
+        x &= 0x3ff;
+        x = (x | x << 16) & 0x0300_00ff;
+        x = (x | x << 8) & 0x0300_f00f;
+        x = (x | x << 4) & 0x030c_30c3;
+        x = (x | x << 2) & 0x0924_9249;
+        x
+    };
+    spread(q[0]) | spread(q[1]) << 1 | spread(q[2]) << 2
 }
 
 #[inline(always)]
@@ -317,7 +343,16 @@ mod tests {
     }
 
     #[test]
-    fn identical_boxes_make_one_leaf() {
+    fn morton_codes_interleave_the_axes() {
+        assert_eq!(morton([1, 0, 0]), 1);
+        assert_eq!(morton([0, 1, 0]), 2);
+        assert_eq!(morton([0, 0, 1]), 4);
+        assert_eq!(morton([3, 0, 0]), 0b1001);
+        assert_eq!(morton([1023, 1023, 1023]), (1 << 30) - 1);
+    }
+
+    #[test]
+    fn identical_boxes_are_all_found() {
         let boxes = vec![
             Aabb {
                 min: [0.0; 3],
@@ -336,6 +371,5 @@ mod tests {
             Some(())
         });
         assert_eq!(n, 100);
-        assert_eq!(h.nodes.len(), 1);
     }
 }
