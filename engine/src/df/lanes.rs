@@ -110,9 +110,9 @@ impl<R: Copy> Rays<R> {
 
 impl<R> Rays<R> {
     /// The lanes of `m` whose rays may meet box `b` grown by `pad` between
-    /// their `t_min` and `limit`. Conservative: an axis where the
-    /// arithmetic gives NaN (a zero direction exactly on a face) rules
-    /// nothing out.
+    /// their `t_min` and `limit`. Conservative: a zero direction rules a
+    /// box out only when the origin lies outside its slab (see
+    /// [`super::nested::slab`]).
     #[inline(always)]
     pub fn meeting(&self, m: Mask, b: &Aabb, pad: f64, limit: &[f64; LANES]) -> Mask {
         let lo: [f64; 3] = std::array::from_fn(|a| b.min[a] as f64 - pad);
@@ -124,8 +124,9 @@ impl<R> Rays<R> {
             for a in 0..3 {
                 let x = (lo[a] - self.o[a][i]) * self.inv[a][i];
                 let y = (hi[a] - self.o[a][i]) * self.inv[a][i];
-                t0 = t0.max(x.min(y));
-                t1 = t1.min(x.max(y));
+                let (near, far) = super::nested::slab(x, y);
+                t0 = t0.max(near);
+                t1 = t1.min(far);
             }
             inside[i] = t0 <= t1;
         }
@@ -260,5 +261,44 @@ impl<'a, 't> LaneTests<'a, 't> {
         }
         *m &= !hit;
         hit != 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lanes_along_a_face_meet_the_box() {
+        let b = Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let mut rays = Rays::<f64>::new();
+        // In the face planes y = 0 and y = 1, then just outside y = 0,
+        // then an ordinary ray through the box, then one that passes by.
+        rays.push(Vec3::new(-1.0, 0.0, 0.5), Vec3::X, 0.0, f64::INFINITY);
+        rays.push(Vec3::new(-1.0, 1.0, 0.5), Vec3::X, 0.0, f64::INFINITY);
+        rays.push(Vec3::new(-1.0, -1e-9, 0.5), Vec3::X, 0.0, f64::INFINITY);
+        rays.push(
+            Vec3::new(-1.0, -1.0, 0.5),
+            Vec3::new(1.0, 1.0, 0.0),
+            0.0,
+            f64::INFINITY,
+        );
+        rays.push(
+            Vec3::new(-1.0, -1.0, 0.5),
+            Vec3::new(1.0, -1.0, 0.0),
+            0.0,
+            f64::INFINITY,
+        );
+        rays.pad();
+        let limit = [f64::INFINITY; LANES];
+        assert_eq!(rays.meeting(rays.all(), &b, 0.0, &limit), 0b01011);
+        assert_eq!(rays.meeting(rays.all(), &b, 1e-8, &limit), 0b01111);
+        // A limit before the box rules the ordinary ray out.
+        let mut short = limit;
+        short[3] = 0.5;
+        assert_eq!(rays.meeting(0b01000, &b, 0.0, &short), 0);
     }
 }

@@ -95,11 +95,14 @@ pub fn estimate_bytes(db: &Database) -> u64 {
     let n = db.object_count();
     let cells = (n as f64 * DEFAULT_DENSITY).min(MAX_CELLS as f64) as u64;
     // Records and offsets; decoded shapes, boxes and materials; voxel
-    // starts and about two voxel entries per object; a mailbox per thread.
+    // starts and about two voxel entries per object; if voxels are
+    // crowded, their hierarchies (about one 32-byte node per two objects);
+    // a mailbox per thread.
     ObjectTable::estimate_bytes(db)
         + (std::mem::size_of::<Shape<'_>>() + std::mem::size_of::<Aabb>() + 8) as u64 * n
         + 4 * cells
         + 8 * n
+        + 16 * n
         + 4 * n * crate::sys::cpus() as u64
 }
 
@@ -112,6 +115,13 @@ impl<'t> DfScene<'t> {
     ) -> Result<DfScene<'t>, Error> {
         opts.validate()?;
         let n = objects.len();
+        // Voxel entries tag hierarchies with the top bit of an id.
+        if n >= nested::NESTED as usize {
+            return Err(Error::Invalid(format!(
+                "{n} objects are more than depth-first keeps in memory (2^31 at most); \
+                 render breadth-first (--mode bf)"
+            )));
+        }
         let mut shapes = Vec::with_capacity(n);
         let mut bboxes = Vec::with_capacity(n);
         let mut material_of = Vec::with_capacity(n);
@@ -148,24 +158,30 @@ impl<'t> DfScene<'t> {
         }
         let plan = plan_groups(db.sizes(), opts.multiple_grids);
         let mut grids = Vec::with_capacity(plan.bounds.len());
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(trace::thread_count(opts))
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
         for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
             let res = match (g, opts.grid_res) {
                 (0, GridRes::Fixed(r)) => r,
                 _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
-            grids.push(ObjectGrid::build(
-                &bboxes,
-                bounds,
-                res,
-                trace::thread_count(opts),
-                |b| plan.partition.group(b) == g,
-            )?);
+            grids.push(ObjectGrid::build(&bboxes, bounds, res, &pool, |b| {
+                plan.partition.group(b) == g
+            })?);
         }
-        let header = db.scene();
         let eps = epsilon(&db.bbox(), opts.precision);
         // Single precision rounds a position to about 6e-8 of its size;
-        // the grids' margin is 1e-6 of a voxel.
-        let mut scale: f64 = 0.0;
+        // the grids' margin is 1e-6 of a voxel. Eye rays start at the eye,
+        // which may lie far outside the grids: their hits are rounded
+        // relative to the eye's distance from the origin too.
+        let header = db.scene();
+        let mut scale: f64 = header
+            .view
+            .from
+            .iter()
+            .fold(0.0, |m, c| m.max(2.0 * c.abs()));
         for g in &grids {
             for i in 0..3 {
                 scale = scale
@@ -273,4 +289,93 @@ pub fn render(
         ..Default::default()
     };
     Ok(DfOutput { frame, stats })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::nff::read_nff_from;
+    use crate::progress::NoProgress;
+    use crate::render::Precision;
+    use crate::sdb::{Compression, DbWriter};
+    use std::fmt::Write;
+    use std::path::Path;
+
+    /// A small crowd of triangles and spheres on a floor, seen close up.
+    fn crowd(dir: &Path) -> Database {
+        let mut s = String::from(
+            "v\nfrom 1.2 1.0 1.6\nat 0 0.3 0\nup 0 1 0\nangle 40\nhither 0.001\n\
+             resolution 32 32\nb 0.1 0.1 0.2\nl 3 8 4 1 1 1\n\
+             f 0.6 0.6 0.6 1 0 0 0 1\np 4\n-3 0 -3\n-3 0 3\n3 0 3\n3 0 -3\n\
+             f 0.9 0.3 0.2 0.6 0.4 20 0 1\n",
+        );
+        let mut x: u64 = 7;
+        let mut next = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..400 {
+            let c = [next(), next() + 0.5, next()];
+            s.push_str("p 3\n");
+            for _ in 0..3 {
+                let v: Vec<f64> = c.iter().map(|c| c + 0.15 * next()).collect();
+                writeln!(s, "{} {} {}", v[0], v[1], v[2]).unwrap();
+            }
+        }
+        for _ in 0..100 {
+            writeln!(s, "s {} 0.05 {} 0.05", 4.0 * next(), 4.0 * next()).unwrap();
+        }
+        let path = dir.join("crowd.sdb");
+        let mut w = DbWriter::create(&path, Compression::None).unwrap();
+        read_nff_from(s.as_bytes(), Path::new("crowd.nff"), &mut w, &NoProgress).unwrap();
+        w.finish().unwrap();
+        Database::open(&path).unwrap()
+    }
+
+    /// A grid of one voxel listing every object besides the usual grids:
+    /// its hierarchy is what the packets' single-voxel paths walk (no
+    /// automatic grid of one voxel is crowded: huge objects get one only
+    /// when they are a handful). Objects found twice are tested once, and
+    /// the nearest hit does not depend on the order, so the image must not
+    /// change.
+    #[test]
+    fn a_crowded_grid_of_one_voxel_gives_the_same_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let db = crowd(dir.path());
+        let objects = ObjectTable::load(&db, &NoProgress).unwrap();
+        for precision in [Precision::Double, Precision::Single] {
+            let opts = RenderOptions {
+                width: 32,
+                height: 32,
+                max_depth: 2,
+                threads: 1,
+                precision,
+                ..Default::default()
+            };
+            let plain = DfScene::new(&db, &objects, &opts).unwrap();
+            let (want, ..) = trace::render(&plain, &opts, &NoProgress).unwrap();
+            let mut s = DfScene::new(&db, &objects, &opts).unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap();
+            let all = s.grids.iter().fold(Aabb::EMPTY, |mut b, g| {
+                b.union(&Aabb {
+                    min: g.spec.lo.map(|c| c as f32),
+                    max: g.spec.hi.map(|c| c as f32),
+                });
+                b
+            });
+            let one = ObjectGrid::build(&s.bboxes, &all, [1, 1, 1], &pool, |_| true).unwrap();
+            assert!(one.single_cell() && one.nested_voxels == 1);
+            s.grids.push(one);
+            let (got, ..) = trace::render(&s, &opts, &NoProgress).unwrap();
+            assert!(
+                want.to_rgb8() == got.to_rgb8(),
+                "{precision:?}: images differ"
+            );
+        }
+    }
 }

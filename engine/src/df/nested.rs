@@ -67,10 +67,27 @@ impl Hierarchies {
         self.objects.len()
     }
 
+    /// Room for `nodes` nodes and `objects` leaf entries more.
+    pub fn reserve(&mut self, nodes: usize, objects: usize) {
+        self.nodes.reserve_exact(nodes);
+        self.objects.reserve_exact(objects);
+    }
+
+    /// Nodes in all the hierarchies.
+    pub fn nodes(&self) -> usize {
+        self.nodes.len()
+    }
+
     /// Appends `other` (built on its own), returning the voxel entry of
-    /// its first hierarchy.
-    pub fn append(&mut self, other: &Hierarchies) -> u32 {
-        let (nodes, objects) = (self.nodes.len() as u32, self.objects.len() as u32);
+    /// its first hierarchy, or `None` if the nodes would outgrow the
+    /// entry's 31 bits.
+    pub fn append(&mut self, other: Hierarchies) -> Option<u32> {
+        let nodes = u32::try_from(self.nodes.len()).ok()?;
+        let objects = u32::try_from(self.objects.len()).ok()?;
+        let total = self.nodes.len() + other.nodes.len();
+        if total > NESTED as usize {
+            return None;
+        }
         self.nodes.extend(other.nodes.iter().map(|n| Node {
             first: n.first
                 + if n.count & INTERIOR == 0 {
@@ -81,7 +98,7 @@ impl Hierarchies {
             ..*n
         }));
         self.objects.extend_from_slice(&other.objects);
-        NESTED | nodes
+        Some(NESTED | nodes)
     }
 
     /// Builds a hierarchy over the objects `ids`, returning its voxel
@@ -246,20 +263,34 @@ pub fn high_first(d: Vec3) -> u8 {
 }
 
 /// Whether the ray `o + t d` (`inv` = 1/d) may meet box `b` grown by `pad`
-/// for some t in `[t0, t1]`. Conservative: an axis where the arithmetic
-/// gives NaN (a zero direction exactly on a face) does not rule the box
-/// out.
+/// for some t in `[t0, t1]`. Conservative: along an axis where the ray's
+/// direction is zero, the box is ruled out only when the origin lies
+/// outside its slab (the arithmetic gives 0 x inf = NaN for an origin
+/// exactly on a face, which must rule nothing out; `f64::min` and `max`
+/// would pass over the NaN and keep the infinity instead).
 #[inline(always)]
 pub fn ray_meets(o: Vec3, inv: Vec3, t0: f64, t1: f64, b: &Aabb, pad: f64) -> bool {
     let (mut lo, mut hi) = (t0, t1);
     for i in 0..3 {
         let a = (b.min[i] as f64 - pad - o[i]) * inv[i];
         let c = (b.max[i] as f64 + pad - o[i]) * inv[i];
-        // f64::max and min pass over a NaN operand.
-        lo = lo.max(a.min(c));
-        hi = hi.min(a.max(c));
+        let (near, far) = slab(a, c);
+        lo = lo.max(near);
+        hi = hi.min(far);
     }
     lo <= hi
+}
+
+/// The parameter range `[near, far]` of a slab whose faces the ray meets
+/// at `a` and `c`: all of it if either is NaN (a zero direction with the
+/// origin on a face, so inside the slab).
+#[inline(always)]
+pub fn slab(a: f64, c: f64) -> (f64, f64) {
+    if a.is_nan() || c.is_nan() {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    } else {
+        (a.min(c), a.max(c))
+    }
 }
 
 #[cfg(test)]
@@ -340,6 +371,29 @@ mod tests {
         expect.sort();
         assert_eq!(found, expect);
         assert_eq!(found.len(), 10, "the row of boxes at y = 3, z = 4");
+    }
+
+    #[test]
+    fn a_ray_along_a_face_meets_the_box() {
+        let b = Aabb {
+            min: [0.0, 0.0, 0.0],
+            max: [1.0, 1.0, 1.0],
+        };
+        let inf = f64::INFINITY;
+        // Along x, in the planes y = 0 and z = 1 (both faces): 0 x inf.
+        for (o, d) in [
+            (Vec3::new(-2.0, 0.0, 1.0), Vec3::new(1.0, 0.0, 0.0)),
+            (Vec3::new(-2.0, 1.0, 0.0), Vec3::new(1.0, 0.0, -0.0)),
+            (Vec3::new(0.5, 0.0, 1.0), Vec3::new(0.0, 0.0, -0.0)),
+        ] {
+            let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+            assert!(ray_meets(o, inv, 0.0, inf, &b, 0.0), "{o:?} {d:?}");
+        }
+        // Just outside a face, with a zero direction: missed.
+        let o = Vec3::new(-2.0, -1e-9, 0.5);
+        let inv = Vec3::new(1.0, inf, inf);
+        assert!(!ray_meets(o, inv, 0.0, inf, &b, 0.0));
+        assert!(ray_meets(o, inv, 0.0, inf, &b, 1e-8), "the pad reaches it");
     }
 
     #[test]

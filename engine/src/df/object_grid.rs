@@ -21,12 +21,13 @@ pub struct ObjectGrid {
 }
 
 impl ObjectGrid {
-    /// Builds the grid over `bounds` for the objects `member` selects.
+    /// Builds the grid over `bounds` for the objects `member` selects;
+    /// `pool` builds the crowded voxels' hierarchies.
     pub fn build(
         bboxes: &[Aabb],
         bounds: &Aabb,
         res: [u32; 3],
-        threads: usize,
+        pool: &rayon::ThreadPool,
         member: impl Fn(&Aabb) -> bool,
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
@@ -88,13 +89,13 @@ impl ObjectGrid {
             nested_voxels: 0,
             nested_entries: 0,
         };
-        grid.nest(bboxes, threads)?;
+        grid.nest(bboxes, pool)?;
         Ok(grid)
     }
 
     /// Gives each voxel of more than [`MIN_OBJECTS`] objects a hierarchy,
-    /// the voxels shared out among `threads` threads.
-    fn nest(&mut self, bboxes: &[Aabb], threads: usize) -> Result<(), Error> {
+    /// the voxels shared out among the threads of `pool`.
+    fn nest(&mut self, bboxes: &[Aabb], pool: &rayon::ThreadPool) -> Result<(), Error> {
         let cells = self.start.len() - 1;
         let crowded: Vec<usize> = (0..cells)
             .filter(|&c| self.cell(c).len() > MIN_OBJECTS)
@@ -102,10 +103,6 @@ impl ObjectGrid {
         if crowded.is_empty() {
             return Ok(());
         }
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
-            .build()
-            .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
         let (start, items) = (&self.start, &self.items);
         let built: Vec<Hierarchies> = pool.install(|| {
             crowded
@@ -118,12 +115,21 @@ impl ObjectGrid {
                 })
                 .collect()
         });
+        // Each built piece is freed once copied, so the hierarchies are
+        // not held twice over (the reserved room is touched as it fills).
+        let nodes = built.iter().map(Hierarchies::nodes).sum();
+        let listed = built.iter().map(Hierarchies::len).sum();
+        self.nested.reserve(nodes, listed);
         let mut entries = Vec::with_capacity(built.len());
-        for h in &built {
-            entries.push(self.nested.append(h));
+        for h in built {
             self.nested_entries += h.len() as u64;
+            entries.push(self.nested.append(h).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "the crowded voxels' hierarchies need {nodes} nodes, more than 2^31; \
+                     choose a finer --grid-res"
+                ))
+            })?);
         }
-        drop(built);
         self.nested_voxels = crowded.len() as u64;
         // Each crowded voxel's list shrinks to its one entry: compact the
         // lists in place, front to back (nothing is written past what has

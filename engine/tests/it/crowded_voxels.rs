@@ -33,12 +33,21 @@ impl Lcg {
     }
 }
 
-fn crowd_nff(triangles: usize, spheres: usize) -> String {
+/// The scene, seen from `distance` times the usual eye's distance with a
+/// field of view as much narrower (the same picture, but eye rays that
+/// start far from the model).
+fn crowd_nff(triangles: usize, spheres: usize, distance: f64) -> String {
     let mut r = Lcg(2026);
     let mut s = String::new();
-    s.push_str(
-        "v\nfrom 1.6 1.2 2.0\nat 0 0.4 0\nup 0 1 0\nangle 35\nhither 0.001\nresolution 48 48\n",
-    );
+    let (from, angle) = ([1.6, 0.8, 2.0].map(|c| c * distance), 35.0 / distance);
+    writeln!(
+        s,
+        "v\nfrom {} {} {}\nat 0 0.4 0\nup 0 1 0\nangle {angle}\nhither 0.001\nresolution 48 48",
+        from[0],
+        from[1] + 0.4,
+        from[2]
+    )
+    .unwrap();
     s.push_str("b 0.1 0.1 0.2\nl 3 8 4 0.9 0.9 0.9\nl -4 5 1 0.5 0.5 0.5\n");
     s.push_str("f 0.6 0.6 0.6 1 0 0 0 1\np 4\n-50 0 -50\n-50 0 50\n50 0 50\n50 0 -50\n");
     s.push_str("f 0.9 0.3 0.2 0.6 0.4 20 0 1\n");
@@ -58,14 +67,22 @@ fn crowd_nff(triangles: usize, spheres: usize) -> String {
             .collect();
         tris.push(v);
     }
-    // Every tenth triangle again, later in the file: exact ties, which
-    // the smaller id must win whichever is tested first.
+    // Every tenth triangle again, later in the file and in another
+    // colour: exact ties, which the smaller id must win whichever is
+    // tested first.
     let again: Vec<_> = tris.iter().step_by(10).cloned().collect();
-    for t in tris.iter().chain(&again) {
+    let polygon = |s: &mut String, t: &Vec<[f64; 3]>| {
         s.push_str("p 3\n");
         for v in t {
             writeln!(s, "{} {} {}", v[0], v[1], v[2]).unwrap();
         }
+    };
+    for t in &tris {
+        polygon(&mut s, t);
+    }
+    s.push_str("f 0.1 0.9 0.1 0.7 0.3 30 0 1\n");
+    for t in &again {
+        polygon(&mut s, t);
     }
     s
 }
@@ -98,7 +115,7 @@ fn assert_same(what: &str, want: &Render, got: &Render) {
 #[test]
 fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
     let dir = tempfile::tempdir().unwrap();
-    let db = database(&crowd_nff(6000, 3000), dir.path());
+    let db = database(&crowd_nff(6000, 3000, 1.0), dir.path());
     for precision in [Precision::Double, Precision::Single] {
         let bf = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 1 << 30);
         let df = df_render(&db, &opts(2, precision));
@@ -130,6 +147,32 @@ fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
                 &bf,
                 &df_render(&db, &o),
             );
+        }
+    }
+}
+
+/// Eye rays from about 107,000 units away: single precision rounds their
+/// hits by a few thousandths, beyond a margin sized by the grid alone
+/// (1e-5 of 100 units, which gave 112 wrong channel values here). The
+/// boxes of the hierarchies must still let every hit through.
+#[test]
+fn a_far_eye_finds_the_same_hits_in_the_hierarchy() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = database(&crowd_nff(3000, 500, 40_000.0), dir.path());
+    for precision in [Precision::Single, Precision::Double] {
+        let bf = bf_render(&db, &opts(1, precision), StoreNumber::Adaptive, 1 << 30);
+        assert!(
+            bf.1.rays.eye_hit_rays > 48 * 48 / 2,
+            "the view should be mostly model and floor"
+        );
+        for res in [[1, 1, 1], [3, 2, 3]] {
+            let o = RenderOptions {
+                grid_res: GridRes::Fixed(res),
+                ..opts(1, precision)
+            };
+            let df = df_render(&db, &o);
+            assert!(df.1.grids[0].nested_voxels > 0);
+            assert_same(&format!("{precision:?}: df, grid {res:?}"), &bf, &df);
         }
     }
 }
