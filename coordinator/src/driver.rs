@@ -228,7 +228,7 @@ impl Job {
             let db = Database::open(&path)?;
             Camera::new(&db.scene().view, o.width, o.height)?;
             let (specs, _) = sray_engine::bf::plan_grids(&db, &o, NOMINAL_MEMORY);
-            let groups = sray_engine::grid::plan_groups(db.sizes(), o.multiple_grids);
+            let groups = sray_engine::grid::plan_groups(db.sizes(), db.density(), o.multiple_grids);
             let grids: Vec<_> = specs
                 .iter()
                 .zip(&groups.counts)

@@ -46,6 +46,44 @@ pub struct SceneInfo {
     pub raw_bytes: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub blocks: Option<u64>,
+    /// Object database only: its format version.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub version: Option<u32>,
+    /// Object database only (version 3 on): occupied (cell, size class)
+    /// pairs of the density summary, and the dense regions the renderers
+    /// give grids of their own (none: an empty list).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub density_entries: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dense_regions: Option<Vec<Region>>,
+}
+
+/// A dense region of a database (see [`crate::grid::Partition`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Region {
+    pub objects: u64,
+    pub bbox_min: [f32; 3],
+    pub bbox_max: [f32; 3],
+}
+
+/// The dense regions the renderers would plan for `db`, if it has a
+/// density summary.
+fn dense_regions(db: &Database) -> Option<Vec<Region>> {
+    let d = db.density()?;
+    let plan = crate::grid::plan_groups(db.sizes(), Some(d), true);
+    let r = plan.partition.regions.as_ref().map_or(0, |r| r.count());
+    Some(
+        (1..=r)
+            .map(|g| {
+                let (min, max) = bbox_fields(plan.bounds[g], db.origin());
+                Region {
+                    objects: plan.counts[g],
+                    bbox_min: min.unwrap_or([0.0; 3]),
+                    bbox_max: max.unwrap_or([0.0; 3]),
+                }
+            })
+            .collect(),
+    )
 }
 
 /// Bounds in world coordinates: `b` relative to `origin`.
@@ -111,6 +149,9 @@ pub fn scene_info_with(
             degenerate_faces: None,
             raw_bytes: Some(db.raw_bytes()),
             blocks: Some(db.block_count()),
+            version: Some(db.version()),
+            density_entries: db.density().map(|d| d.entries.len() as u64),
+            dense_regions: dense_regions(&db),
         });
     }
     let format = detect_format(path)?;
@@ -140,6 +181,9 @@ pub fn scene_info_with(
         degenerate_faces: summary.mesh.map(|m| m.degenerate),
         raw_bytes: None,
         blocks: None,
+        version: None,
+        density_entries: None,
+        dense_regions: None,
     })
 }
 

@@ -78,6 +78,28 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
         i.file_bytes, i.compression
     );
     if let (Some(raw), Some(blocks)) = (i.raw_bytes, i.blocks) {
-        println!("  records      {raw} bytes in {blocks} blocks");
+        let per = raw as f64 / i.objects.max(1) as f64;
+        println!("  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)");
+    }
+    if let Some(v) = i.version {
+        println!("  version      {v}");
+    }
+    match (&i.density_entries, &i.dense_regions) {
+        (Some(n), Some(regions)) => {
+            println!(
+                "  density      {n} occupied cells and size classes; {} dense regions",
+                regions.len()
+            );
+            for r in regions {
+                println!(
+                    "    {} objects in {:?} .. {:?}",
+                    r.objects, r.bbox_min, r.bbox_max
+                );
+            }
+        }
+        _ if i.format == "sdb" => {
+            println!("  density      no summary (written before version 3)")
+        }
+        _ => {}
     }
 }

@@ -387,7 +387,7 @@ pub fn plan_grids(
     opts: &RenderOptions,
     memory: u64,
 ) -> (Vec<GridSpec>, crate::grid::Partition) {
-    let plan = plan_groups(db.sizes(), opts.multiple_grids);
+    let plan = plan_groups(db.sizes(), db.density(), opts.multiple_grids);
     let slots = opts.frame_slots();
     let frame = FramePlan::new(slots, memory).bytes(slots);
     let cap = (memory.saturating_sub(frame) / 8).clamp(1, MAX_CELLS);

@@ -68,6 +68,9 @@ impl VoxelGrids {
             for o in block.objects() {
                 let gi = partition.group(&o.bbox);
                 let g = &mut grids[gi];
+                if !g.spec.holds(&o.bbox) {
+                    return Err(crate::grid::outside_its_grid(db, o.index as u64));
+                }
                 g.objects += 1;
                 let Some((lo, hi)) = g.spec.cell_range(&o.bbox) else {
                     continue;

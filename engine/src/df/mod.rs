@@ -156,7 +156,7 @@ impl<'t> DfScene<'t> {
                 }
             }
         }
-        let plan = plan_groups(db.sizes(), opts.multiple_grids);
+        let plan = plan_groups(db.sizes(), db.density(), opts.multiple_grids);
         let mut grids = Vec::with_capacity(plan.bounds.len());
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(trace::thread_count(opts))
@@ -170,6 +170,11 @@ impl<'t> DfScene<'t> {
             grids.push(ObjectGrid::build(&bboxes, bounds, res, &pool, |b| {
                 plan.partition.group(b) == g
             })?);
+        }
+        for (id, b) in bboxes.iter().enumerate() {
+            if !grids[plan.partition.group(b)].spec.holds(b) {
+                return Err(crate::grid::outside_its_grid(db, id as u64));
+            }
         }
         let eps = epsilon(&db.bbox(), opts.precision);
         // Single precision rounds a position to about 6e-8 of its size;

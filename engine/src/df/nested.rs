@@ -10,8 +10,9 @@
 //! handled as one object with an acceleration structure of its own. Here
 //! a voxel listing more than [`MIN_OBJECTS`] objects lists one entry
 //! instead, tagged [`NESTED`], that stands for a hierarchy of boxes over
-//! those objects (median splits, at most [`LEAF`] objects per leaf); a
-//! ray or packet descends only into the boxes it may meet.
+//! those objects (cut along a Morton curve through their centres, at most
+//! [`LEAF`] objects per leaf); a ray or packet descends only into the
+//! boxes it may meet.
 //!
 //! Images do not change: a box is passed over only when no object inside
 //! it can give a hit the ray would keep (the tests of [`ray_meets`] and

@@ -15,8 +15,9 @@
 //! about what one ray's walk costs per voxel, shared by the whole packet.
 
 use super::DfScene;
-use super::lanes::{LaneTests, Rays, width};
+use super::lanes::{LaneTests, Rays, lanes, width};
 use super::nested::{Entry, high_first};
+use super::single;
 use super::trace::Scratch;
 use crate::grid::GridSpec;
 use crate::hit::{Hit, PrimId};
@@ -199,6 +200,10 @@ pub struct Plan {
     /// A distance far above any rounding of a hit's position, and above
     /// the grids' margin of a voxel: see [`DfScene::slack`].
     slack: f64,
+    /// The grids (bit i: `s.grids[i]`) the lanes walk together; in the
+    /// others (a dense model's fine grid, where the packet's rays spread
+    /// over many voxels) each lane walks alone.
+    together: u32,
 }
 
 impl Plan {
@@ -208,7 +213,7 @@ impl Plan {
     /// axis, or if walking together would not pay.
     pub fn new<R>(s: &DfScene, rays: &Rays<R>, m: Mask, reference: Vec3) -> Option<Plan> {
         let g = s.grids.first()?;
-        if g.single_cell() {
+        if g.single_cell() || s.grids.len() > 32 {
             return None;
         }
         // Along the largest component of the first ray's direction, if
@@ -255,8 +260,31 @@ impl Plan {
             apex: bu.a_hi - bu.a_lo < s.tune.apex * cell[u]
                 && bv.a_hi - bv.a_lo < s.tune.apex * cell[v],
             slack: s.slack,
+            together: 0,
         };
-        plan.worth_it(&g.spec, m, s.tune.worth).then_some(plan)
+        // Grids the rays do not reach cost nothing either way.
+        let mut worth = 0;
+        let mut together = 0;
+        for (i, g) in s.grids.iter().enumerate() {
+            if g.single_cell() || !plan.reaches(&g.spec) {
+                together |= 1 << i;
+            } else if plan.worth_it(&g.spec, m, s.tune.worth) {
+                together |= 1 << i;
+                worth += 1;
+            }
+        }
+        (worth > 0).then_some(Plan { together, ..plan })
+    }
+
+    /// Whether the lanes walk grid `i` together.
+    #[inline(always)]
+    pub fn together(&self, i: usize) -> bool {
+        self.together >> i & 1 != 0
+    }
+
+    /// Whether any ray's segment reaches grid `g`'s extent along k.
+    fn reaches(&self, g: &GridSpec) -> bool {
+        max(self.c_lo, g.lo[self.k]) <= min(self.c_hi, g.hi[self.k])
     }
 
     /// The lanes whose lines may pass through box `b`: for lines through
@@ -599,7 +627,16 @@ pub fn nearest<R: Real>(
     let hf = high_first(rays.d((m.trailing_zeros() as usize).min(LANES - 1)));
     // The large objects' grid first: one ground polygon found early prunes
     // the walk through the main grid.
-    for g in s.grids.iter().rev() {
+    for (gi, g) in s.grids.iter().enumerate().rev() {
+        if !plan.together(gi) {
+            for i in lanes(m) {
+                let (o, d, inv) = (rays.o(i), rays.d(i), rays.inv(i));
+                let t_min = rays.t_min[i];
+                let lane_stamp = sc.next_stamp();
+                single::nearest_in(s, sc, g, lane_stamp, &rays.q[i], o, d, inv, t_min, best, i);
+            }
+            continue;
+        }
         if g.single_cell() {
             // Inside a hierarchy, each box is tested for the lanes that met
             // its parent, and a leaf's objects for those that met the leaf.
@@ -691,9 +728,23 @@ pub fn occluded<R: Real>(
     if tested != super::trace::NO_OBJECT {
         sc.mail[tested as usize] = stamp;
     }
-    for g in s.grids.iter().rev() {
+    for (gi, g) in s.grids.iter().enumerate().rev() {
         if *m == 0 {
             return;
+        }
+        if !plan.together(gi) {
+            for i in lanes(*m) {
+                let (o, d, inv) = (rays.o(i), rays.d(i), rays.inv(i));
+                let (t_min, t_max) = (rays.t_min[i], rays.t_max[i]);
+                let lane_stamp = sc.next_stamp();
+                let id =
+                    single::blocker_in(s, sc, g, lane_stamp, &rays.q[i], o, d, inv, t_min, t_max);
+                if id != super::trace::NO_OBJECT {
+                    *last = id;
+                    *m &= !(1 << i);
+                }
+            }
+            continue;
         }
         if g.single_cell() {
             g.visit(0, hf, *m, &mut |e| match e {

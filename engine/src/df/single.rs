@@ -26,11 +26,34 @@ pub fn nearest<R: Real>(
     lane: usize,
 ) {
     let stamp = sc.next_stamp();
+    // The large objects' grid first: one ground polygon found early prunes
+    // the walk through the main grid.
+    for g in s.grids.iter().rev() {
+        nearest_in(s, sc, g, stamp, q, o, d, inv, t_min, best, lane);
+    }
+}
+
+/// [`nearest`] within grid `g` alone, with mailbox stamp `stamp`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn nearest_in<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    g: &ObjectGrid,
+    stamp: u32,
+    q: &RayQ<R>,
+    o: Vec3,
+    d: Vec3,
+    inv: Vec3,
+    t_min: f64,
+    best: &mut Hits<R>,
+    lane: usize,
+) {
     let rmin = R::from_f64(t_min);
     let (hf, pad) = (high_first(d), s.slack);
     // Each voxel's objects; in a crowded voxel's hierarchy, only the boxes
     // the ray may meet before its best hit so far.
-    let visit = |sc: &mut Scratch<R>, best: &mut Hits<R>, g: &ObjectGrid, cell: usize| {
+    let visit = |sc: &mut Scratch<R>, best: &mut Hits<R>, cell: usize| {
         g.visit(cell, hf, (), &mut |e| match e {
             Entry::Box(b, ()) => {
                 ray_meets(o, inv, t_min, best.upper[lane].to_f64(), b, pad).then_some(())
@@ -41,22 +64,18 @@ pub fn nearest<R: Real>(
             }
         });
     };
-    // The large objects' grid first: one ground polygon found early prunes
-    // the walk through the main grid.
-    for g in s.grids.iter().rev() {
-        if g.single_cell() {
-            // A one-voxel grid (a few large objects): no walk needed.
-            visit(sc, best, g, 0);
-            continue;
-        }
-        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.t[lane].next_up()) else {
-            continue;
-        };
-        loop {
-            visit(sc, best, g, w.index);
-            if (best.hit(lane).is_some() && best.t[lane] < w.t_exit()) || !w.advance() {
-                break;
-            }
+    if g.single_cell() {
+        // A one-voxel grid (a few large objects): no walk needed.
+        visit(sc, best, 0);
+        return;
+    }
+    let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, best.t[lane].next_up()) else {
+        return;
+    };
+    loop {
+        visit(sc, best, w.index);
+        if (best.hit(lane).is_some() && best.t[lane] < w.t_exit()) || !w.advance() {
+            break;
         }
     }
 }
@@ -111,10 +130,37 @@ pub fn occluded<R: Real>(
     if cached != NO_OBJECT && blocks(s, sc, stamp, q, rmin, rmax, cached) {
         return true;
     }
+    for g in s.grids.iter().rev() {
+        let id = blocker_in(s, sc, g, stamp, q, o, d, inv, t_min, t_max);
+        if id != NO_OBJECT {
+            sc.shadow_cache[slot] = id;
+            return true;
+        }
+    }
+    false
+}
+
+/// The first object of grid `g` found between `t_min` and `t_max` along
+/// the ray (not one stamped `stamp` already), or `NO_OBJECT`.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub fn blocker_in<R: Real>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    g: &ObjectGrid,
+    stamp: u32,
+    q: &RayQ<R>,
+    o: Vec3,
+    d: Vec3,
+    inv: Vec3,
+    t_min: f64,
+    t_max: f64,
+) -> u32 {
+    let (rmin, rmax) = (R::from_f64(t_min), R::from_f64(t_max));
     let (hf, pad) = (high_first(d), s.slack);
     // The first blocker among a voxel's objects (in a crowded voxel's
     // hierarchy, among the boxes the segment meets).
-    let blocker = |sc: &mut Scratch<R>, g: &ObjectGrid, cell: usize| {
+    let blocker = |sc: &mut Scratch<R>, cell: usize| {
         let mut found = NO_OBJECT;
         g.visit(cell, hf, (), &mut |e| match e {
             Entry::Box(b, ()) => ray_meets(o, inv, t_min, t_max, b, pad).then_some(()),
@@ -127,30 +173,18 @@ pub fn occluded<R: Real>(
         });
         found
     };
-    for g in s.grids.iter().rev() {
-        if g.single_cell() {
-            let id = blocker(sc, g, 0);
-            if id != NO_OBJECT {
-                sc.shadow_cache[slot] = id;
-                return true;
-            }
-            continue;
-        }
-        let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, t_max) else {
-            continue;
-        };
-        loop {
-            let id = blocker(sc, g, w.index);
-            if id != NO_OBJECT {
-                sc.shadow_cache[slot] = id;
-                return true;
-            }
-            if !w.advance() {
-                break;
-            }
+    if g.single_cell() {
+        return blocker(sc, 0);
+    }
+    let Some(mut w) = Dda::start(&g.spec, o, d, inv, t_min, t_max) else {
+        return NO_OBJECT;
+    };
+    loop {
+        let id = blocker(sc, w.index);
+        if id != NO_OBJECT || !w.advance() {
+            return id;
         }
     }
-    false
 }
 
 /// Whether object `id` blocks the shadow ray, unless tested already.

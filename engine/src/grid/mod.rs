@@ -91,6 +91,15 @@ impl GridSpec {
             + self.res[0] as usize * (c[1] as usize + self.res[1] as usize * c[2] as usize)
     }
 
+    /// Whether box `b` lies within the grid (an empty box does). Every
+    /// object lies within its group's grid when the database's summaries
+    /// agree with its records.
+    #[inline]
+    pub fn holds(&self, b: &Aabb) -> bool {
+        b.is_empty()
+            || (0..3).all(|i| self.lo[i] <= b.min[i] as f64 && b.max[i] as f64 <= self.hi[i])
+    }
+
     /// Inclusive voxel ranges along each axis that a box overlaps, widened
     /// by a tiny margin; `None` if the box is empty.
     #[inline]
@@ -156,3 +165,16 @@ impl GridSpec {
 
 #[cfg(test)]
 mod tests;
+
+/// The error for an object outside the grid its group was given: the
+/// database's tables (size or density summary) disagree with its records.
+pub fn outside_its_grid(db: &crate::sdb::Database, id: u64) -> crate::error::Error {
+    crate::error::Error::Database {
+        file: db.path().to_path_buf(),
+        location: "tables".into(),
+        message: format!(
+            "object {id} lies outside the bounds the size and density summaries give its \
+             group: the tables disagree with the records; regenerate the database"
+        ),
+    }
+}

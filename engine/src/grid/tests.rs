@@ -123,11 +123,11 @@ fn a_ground_polygon_is_set_apart() {
         min: [-50.0, -50.0, 0.0],
         max: [50.0, 50.0, 0.0],
     });
-    let plan = plan_groups(&s, true);
+    let plan = plan_groups(&s, None, true);
     assert_eq!(plan.partition.groups(), 2);
     assert_eq!(plan.counts, vec![1000, 1]);
     assert!(plan.bounds[0].diagonal() < 2.0);
-    assert_eq!(plan_groups(&s, false).partition, Partition::one());
+    assert_eq!(plan_groups(&s, None, false).partition, Partition::one());
 }
 
 #[test]
@@ -141,7 +141,7 @@ fn uniform_scenes_keep_one_grid() {
             max: [x + 1.0, y + 1.0, 1.0],
         });
     }
-    assert_eq!(plan_groups(&s, true).partition, Partition::one());
+    assert_eq!(plan_groups(&s, None, true).partition, Partition::one());
 }
 
 #[test]
@@ -169,4 +169,140 @@ fn a_saved_walk_resumes_where_it_stopped() {
             break;
         }
     }
+}
+
+/// A deterministic generator for the scenes below.
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> f32 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) as f32
+    }
+}
+
+fn cube(c: [f32; 3], r: f32) -> Aabb {
+    Aabb {
+        min: c.map(|x| x - r),
+        max: c.map(|x| x + r),
+    }
+}
+
+/// Plans the grids of `boxes` as a database would (size and density
+/// summaries written in order), and checks the plan against the objects:
+/// every object's group counts it, and lies within that group's bounds.
+fn plan_of(boxes: &[Aabb]) -> GroupPlan {
+    let mut sizes = crate::scene::SizeSummary::default();
+    let mut density = crate::scene::DensitySummary::default();
+    for b in boxes {
+        sizes.add(b);
+        density.add(b);
+    }
+    let plan = plan_groups(&sizes, Some(&density), true);
+    let n = plan.partition.groups();
+    assert_eq!(plan.counts.len(), n);
+    assert_eq!(plan.bounds.len(), n);
+    let mut counts = vec![0u64; n];
+    for b in boxes {
+        let g = plan.partition.group(b);
+        counts[g] += 1;
+        let within =
+            (0..3).all(|i| plan.bounds[g].min[i] <= b.min[i] && b.max[i] <= plan.bounds[g].max[i]);
+        assert!(
+            within,
+            "{b:?} outside group {g}'s bounds {:?}",
+            plan.bounds[g]
+        );
+    }
+    assert_eq!(counts, plan.counts);
+    assert_eq!(
+        plan_groups(&sizes, Some(&density), false).partition,
+        Partition::one()
+    );
+    plan
+}
+
+#[test]
+fn a_dense_model_in_a_sparse_world_gets_a_grid_of_its_own() {
+    let mut r = Lcg(5);
+    let mut boxes = Vec::new();
+    // A floor first (the lattice must not take its size), then small
+    // spheres over it, then a model of tiny triangles in a unit box, then
+    // spheres again.
+    boxes.push(Aabb {
+        min: [-100.0, 0.0, -100.0],
+        max: [100.0, 0.0, 100.0],
+    });
+    let spheres = |r: &mut Lcg, boxes: &mut Vec<Aabb>, n: usize| {
+        for _ in 0..n {
+            let (x, z) = (200.0 * r.next() - 100.0, 200.0 * r.next() - 100.0);
+            boxes.push(cube([x, 0.1, z], 0.1));
+        }
+    };
+    spheres(&mut r, &mut boxes, 1500);
+    for _ in 0..20_000 {
+        let c = [r.next() - 0.5, r.next(), r.next() - 0.5];
+        boxes.push(cube(c, 0.002 + 0.002 * r.next()));
+    }
+    spheres(&mut r, &mut boxes, 1500);
+    let plan = plan_of(&boxes);
+    let regions = plan.partition.regions.as_ref().expect("a dense region");
+    assert_eq!(regions.count(), 1);
+    assert_eq!(plan.counts[1], 20_000, "{:?}", plan.counts);
+    assert!(plan.bounds[1].diagonal() < 2.0, "{:?}", plan.bounds[1]);
+    assert!(plan.bounds[0].diagonal() > 200.0);
+}
+
+#[test]
+fn evenly_spread_objects_and_surfaces_get_no_region() {
+    let mut r = Lcg(6);
+    // Objects filling a box.
+    let boxes: Vec<Aabb> = (0..20_000)
+        .map(|_| cube([r.next(), r.next(), r.next()].map(|x| 10.0 * x), 0.01))
+        .collect();
+    assert!(plan_of(&boxes).partition.regions.is_none());
+    // Small triangles over a sphere's surface (most cells empty, the
+    // occupied ones far denser than the box's average, but the region
+    // they make is the whole box).
+    let boxes: Vec<Aabb> = (0..20_000)
+        .map(|_| {
+            let (u, v) = (std::f32::consts::TAU * r.next(), 2.0 * r.next() - 1.0);
+            let s = (1.0 - v * v).sqrt();
+            cube([5.0 * s * u.cos(), 5.0 * s * u.sin(), 5.0 * v], 0.01)
+        })
+        .collect();
+    assert!(plan_of(&boxes).partition.regions.is_none());
+}
+
+#[test]
+fn two_dense_models_get_two_regions_and_huge_objects_stay_apart() {
+    let mut r = Lcg(7);
+    let mut boxes = Vec::new();
+    for centre in [[-40.0f32, 0.5, 30.0], [60.0, 0.5, -20.0]] {
+        for _ in 0..10_000 {
+            let c = [0, 1, 2].map(|i| centre[i] + r.next() - 0.5);
+            boxes.push(cube(c, 0.003));
+        }
+    }
+    for _ in 0..3000 {
+        boxes.push(cube(
+            [200.0 * r.next() - 100.0, 0.2, 200.0 * r.next() - 100.0],
+            0.2,
+        ));
+    }
+    // Two walls far larger than everything else.
+    boxes.push(Aabb {
+        min: [-500.0, 0.0, -500.0],
+        max: [500.0, 300.0, -500.0],
+    });
+    boxes.push(Aabb {
+        min: [-500.0, 0.0, 500.0],
+        max: [500.0, 300.0, 500.0],
+    });
+    let plan = plan_of(&boxes);
+    assert_eq!(plan.partition.regions.as_ref().map(|r| r.count()), Some(2));
+    assert_eq!(plan.counts, vec![3000, 10_000, 10_000, 2]);
 }

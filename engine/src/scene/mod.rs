@@ -4,12 +4,14 @@
 //! are [`crate::shapes`].
 
 pub(crate) mod aabb;
+pub(crate) mod density;
 pub mod recorder;
 pub mod setup;
 mod sink;
 mod sizes;
 
 pub use aabb::Aabb;
+pub use density::{CELLS as DENSITY_CELLS, DensitySummary, Lattice};
 pub use sink::SceneSink;
 pub use sizes::{SIZE_CLASSES, SizeClass, SizeSummary, size_class};
 

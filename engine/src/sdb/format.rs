@@ -7,13 +7,16 @@ use bytemuck::{Pod, Zeroable};
 compile_error!("the object database format is little-endian; big-endian targets are not supported");
 
 pub const MAGIC: [u8; 8] = *b"SRAYSDB\0";
-/// The version written when the geometry is relative to the world's
-/// origin; such files read the same in every sray that reads version 1.
-pub const VERSION: u32 = 1;
-/// The version written when the geometry is relative to another origin
-/// (a mesh, recentred): an older sray refuses it rather than misplacing
+/// The oldest version read: geometry relative to the world's origin.
+/// Version 2 (also read) has it relative to the header's origin (a mesh,
+/// recentred), so that an older sray refused it rather than misplacing
 /// the geometry.
-pub const VERSION_ORIGIN: u32 = 2;
+pub const VERSION: u32 = 1;
+/// The version written today: the tables end with a density summary
+/// ([`crate::scene::DensitySummary`]), and the geometry is relative to the
+/// header's origin (zero: the world's). An older sray refuses it rather
+/// than reading the tables as malformed.
+pub const VERSION_DENSITY: u32 = 3;
 /// Header flag: `vertices` is the size of a mesh's vertex table.
 pub const FLAG_MESH: u32 = 1;
 /// Header flag: `triangles` and `vertices` are recorded (files written

@@ -4,7 +4,11 @@
 use super::format::*;
 use crate::error::{Error, IoContext};
 use crate::hit::PrimId;
-use crate::scene::{Aabb, Light, Material, SIZE_CLASSES, SceneHeader, SizeSummary, View};
+use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
+use crate::scene::{
+    Aabb, DENSITY_CELLS, DensitySummary, Light, Material, SIZE_CLASSES, SceneHeader, SizeClass,
+    SizeSummary, View,
+};
 use crate::shapes::{KINDS, KindCounts, Shape, ShapeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -24,6 +28,8 @@ pub struct Database {
     path: PathBuf,
     scene: SceneHeader,
     sizes: SizeSummary,
+    density: Option<DensitySummary>,
+    version: u32,
     counts: KindCounts,
     object_count: u64,
     bbox: Aabb,
@@ -97,11 +103,11 @@ impl Database {
             ));
         }
         let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-        if h.version != VERSION && h.version != VERSION_ORIGIN {
+        if !(VERSION..=VERSION_DENSITY).contains(&h.version) {
             return Err(err(
                 "header",
                 format!(
-                    "database version {} is not supported (this sray reads versions {VERSION} and {VERSION_ORIGIN}); regenerate it with `sray convert` or `sray gen`",
+                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_DENSITY}); regenerate it with `sray convert` or `sray gen`",
                     h.version
                 ),
             ));
@@ -157,8 +163,8 @@ impl Database {
                 "checksum mismatch: the tables are corrupt".into(),
             ));
         }
-        let (mut scene, sizes) =
-            decode_tables(&tables).ok_or_else(|| err("tables", "malformed tables".into()))?;
+        let (mut scene, sizes, density) = decode_tables(&tables, h.version >= VERSION_DENSITY)
+            .ok_or_else(|| err("tables", "malformed tables".into()))?;
         let origin = h.origin();
         if !origin.iter().all(|c| c.is_finite()) {
             return Err(err("header", "the origin is not finite".into()));
@@ -184,6 +190,8 @@ impl Database {
             path: path.to_path_buf(),
             scene,
             sizes,
+            density,
+            version: h.version,
             counts: KindCounts(std::array::from_fn(|i| h.counts[i])),
             object_count: h.object_count,
             bbox,
@@ -258,6 +266,11 @@ impl Database {
         self.counts
     }
     /// Object counts and bounds per size class.
+    /// Where the objects are, if the database says (version 3 files).
+    pub fn density(&self) -> Option<&DensitySummary> {
+        self.density.as_ref()
+    }
+
     pub fn sizes(&self) -> &SizeSummary {
         &self.sizes
     }
@@ -270,6 +283,10 @@ impl Database {
     }
     pub fn compression(&self) -> Compression {
         self.compression
+    }
+    /// The format version the file was written in.
+    pub fn version(&self) -> u32 {
+        self.version
     }
     pub fn block_count(&self) -> u64 {
         self.block_count
@@ -360,7 +377,12 @@ fn read_up_to(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
     Ok(n)
 }
 
-fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
+/// The tables: the scene's header, the size summary, and (`density`: in a
+/// version 3 file) the density summary.
+fn decode_tables(
+    buf: &[u8],
+    density: bool,
+) -> Option<(SceneHeader, SizeSummary, Option<DensitySummary>)> {
     let mut d = Dec { buf, pos: 0 };
     let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
     let from = v3(&mut d)?;
@@ -410,7 +432,7 @@ fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
     }
     let mut sizes = SizeSummary::default();
     let nc = d.u32()? as usize;
-    if nc > SIZE_CLASSES || nc * 36 != d.remaining() {
+    if nc > SIZE_CLASSES || nc * 36 > d.remaining() || (!density && nc * 36 != d.remaining()) {
         return None;
     }
     for _ in 0..nc {
@@ -424,6 +446,36 @@ fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
         c.count = count;
         c.bounds = Aabb::from_array(b);
     }
+    let density = if density {
+        let level = d.u32()? as i32;
+        let origin = [d.u64()? as i64, d.u64()? as i64, d.u64()? as i64];
+        let n = d.u32()? as usize;
+        if n > MAX_DENSITY_ENTRIES || n * 40 != d.remaining() {
+            return None;
+        }
+        let mut entries = Vec::with_capacity(n);
+        for _ in 0..n {
+            let cell = d.u32()?;
+            let class = d.u32()?;
+            let count = d.u64()?;
+            let mut b = [0f32; 6];
+            for x in &mut b {
+                *x = d.f32()?;
+            }
+            if cell >= (DENSITY_CELLS * DENSITY_CELLS * DENSITY_CELLS) as u32
+                || class >= SIZE_CLASSES as u32
+            {
+                return None;
+            }
+            let bounds = Aabb::from_array(b);
+            entries.push(((cell, class as u8), SizeClass { count, bounds }));
+        }
+        // Level i32::MIN: the writer kept no summary.
+        (level != i32::MIN && (-1100..=1100).contains(&level))
+            .then(|| DensitySummary::from_parts(level, origin, entries))
+    } else {
+        None
+    };
     Some((
         SceneHeader {
             view,
@@ -432,6 +484,7 @@ fn decode_tables(buf: &[u8]) -> Option<(SceneHeader, SizeSummary)> {
             materials,
         },
         sizes,
+        density,
     ))
 }
 

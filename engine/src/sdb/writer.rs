@@ -3,7 +3,9 @@
 
 use super::format::*;
 use crate::error::{Error, IoContext};
-use crate::scene::{Aabb, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View};
+use crate::scene::{
+    Aabb, DensitySummary, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View,
+};
 use crate::shapes::{KindCounts, Shape};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -41,6 +43,7 @@ pub struct DbWriter {
     counts: KindCounts,
     bbox: Aabb,
     sizes: SizeSummary,
+    density: DensitySummary,
     view: Option<View>,
     background: [f32; 3],
     lights: Vec<Light>,
@@ -96,6 +99,7 @@ impl DbWriter {
             counts: KindCounts::default(),
             bbox: Aabb::EMPTY,
             sizes: SizeSummary::default(),
+            density: DensitySummary::default(),
             view: None,
             background: [0.0; 3],
             lights: Vec::new(),
@@ -209,6 +213,27 @@ impl DbWriter {
                 e.f32(x);
             }
         }
+        // The density summary: its lattice, then its entries (none if it
+        // was dropped or the scene is empty; level i32::MIN marks that).
+        let d = &self.density;
+        let sorted = if d.usable() { d.sorted() } else { Vec::new() };
+        e.u32(if d.usable() {
+            d.level as u32
+        } else {
+            i32::MIN as u32
+        });
+        for o in d.origin {
+            e.u64(o as u64);
+        }
+        e.u32(sorted.len() as u32);
+        for ((cell, class), c) in sorted {
+            e.u32(cell);
+            e.u32(class as u32);
+            e.u64(c.count);
+            for x in c.bounds.to_array() {
+                e.f32(x);
+            }
+        }
         e.0
     }
 
@@ -225,11 +250,7 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: if self.origin == [0.0; 3] {
-                VERSION
-            } else {
-                VERSION_ORIGIN
-            },
+            version: VERSION_DENSITY,
             header_bytes: HEADER_BYTES as u32,
             compression: match self.compression {
                 Compression::None => 0,
@@ -378,6 +399,7 @@ impl SceneSink for DbWriter {
         let bbox = shape.bounds();
         self.bbox.union(&bbox);
         self.sizes.add(&bbox);
+        self.density.add(&bbox);
         let b = &mut self.block;
         b.push(kind as u32 | (count << 8));
         b.push(material);

@@ -1,10 +1,13 @@
 //! A dense model in a sparse world: thousands of small triangles in a unit
-//! box on a wide floor strewn with spheres. The automatic grid, sized for
-//! the whole floor, puts the model into a few voxels; the depth-first
-//! tracer gives those voxels a hierarchy of their objects instead of a
-//! list. The image must be the breadth-first tracer's (which keeps the
+//! box on a wide floor strewn with spheres. By default the model gets a
+//! grid of its own (a dense region of the database's density summary).
+//! With one grid (`--grids 1`, the paper's setup), sized for the whole
+//! floor, the model falls into a few voxels, and the depth-first tracer
+//! gives those voxels a hierarchy of their objects instead of a list.
+//! Either way the image must be the breadth-first tracer's (which keeps
 //! plain lists), bit for bit, in both precisions and at any thread count,
-//! including where hits tie (triangles repeated under larger ids).
+//! including where hits tie (triangles repeated under larger ids, in
+//! another colour).
 
 use sray_engine::bf::StoreNumber;
 use sray_engine::nff::read_nff_from;
@@ -106,19 +109,31 @@ fn opts(threads: usize, precision: Precision) -> RenderOptions {
     }
 }
 
+/// One grid for everything, as in the paper's single-grid setup: the
+/// model crowds a few of its voxels.
+fn one_grid(threads: usize, precision: Precision) -> RenderOptions {
+    RenderOptions {
+        multiple_grids: false,
+        ..opts(threads, precision)
+    }
+}
+
 fn assert_same(what: &str, want: &Render, got: &Render) {
     let differing = want.0.iter().zip(&got.0).filter(|(a, b)| a != b).count();
     assert_eq!(differing, 0, "{what}: {differing} channel values differ");
     assert_eq!(want.1.rays, got.1.rays, "{what}: ray counts differ");
 }
 
+/// The model's triangles: 6,000 and every tenth again.
+const MODEL: u64 = 6600;
+
 #[test]
 fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
     let dir = tempfile::tempdir().unwrap();
     let db = database(&crowd_nff(6000, 3000, 1.0), dir.path());
     for precision in [Precision::Double, Precision::Single] {
-        let bf = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 1 << 30);
-        let df = df_render(&db, &opts(2, precision));
+        let bf = bf_render(&db, &one_grid(2, precision), StoreNumber::Adaptive, 1 << 30);
+        let df = df_render(&db, &one_grid(2, precision));
         let nested: u64 = df.1.grids.iter().map(|g| g.nested_voxels).sum();
         assert!(
             nested > 0,
@@ -133,14 +148,14 @@ fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
         assert_same(
             &format!("{precision:?}: df, one thread"),
             &bf,
-            &df_render(&db, &opts(1, precision)),
+            &df_render(&db, &one_grid(1, precision)),
         );
         // Finer grids leave fewer voxels crowded, and one voxel puts every
         // object in a single hierarchy.
         for res in [[1, 1, 1], [3, 2, 3], [40, 2, 40]] {
             let o = RenderOptions {
                 grid_res: GridRes::Fixed(res),
-                ..opts(2, precision)
+                ..one_grid(2, precision)
             };
             assert_same(
                 &format!("{precision:?}: df, grid {res:?}"),
@@ -149,6 +164,46 @@ fn crowded_voxels_get_a_hierarchy_and_the_same_image() {
             );
         }
     }
+}
+
+/// With the grids planned from the database's density summary, the
+/// model gets a grid of its own (no voxel of the floor's grid holds it),
+/// in both tracers, and the image does not change.
+#[test]
+fn a_dense_model_gets_a_grid_of_its_own_and_the_same_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = database(&crowd_nff(6000, 3000, 1.0), dir.path());
+    let precision = Precision::Single;
+    let want = df_render(&db, &one_grid(2, precision));
+    let df = df_render(&db, &opts(2, precision));
+    let bf = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 1 << 30);
+    let tight = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 4 << 20);
+    for (what, r) in [("df", &df), ("bf", &bf), ("bf, 4 MiB", &tight)] {
+        // Nearly all the model (a few triangles at its edge, whose centres
+        // fall in a sparse cell of the density lattice, stay behind) in a
+        // grid about the model's size.
+        let model = r.1.grids.iter().filter(|g| {
+            let size = (0..3).map(|i| g.hi[i] - g.lo[i]).fold(0.0, f64::max);
+            g.objects >= MODEL * 95 / 100 && g.objects <= MODEL && size < 1.5
+        });
+        assert_eq!(
+            model.count(),
+            1,
+            "{what}: the model's grid: {:?}",
+            r.1.grids
+        );
+        assert_eq!(
+            r.1.grids.iter().map(|g| g.objects).sum::<u64>(),
+            db.object_count()
+        );
+        assert_same(&format!("{what}, grids of their own"), &want, r);
+    }
+    assert_eq!(
+        df.1.grids.iter().map(|g| g.nested_voxels).sum::<u64>(),
+        0,
+        "nothing crowded left: {:?}",
+        df.1.grids
+    );
 }
 
 /// Eye rays from about 107,000 units away: single precision rounds their
@@ -160,7 +215,7 @@ fn a_far_eye_finds_the_same_hits_in_the_hierarchy() {
     let dir = tempfile::tempdir().unwrap();
     let db = database(&crowd_nff(3000, 500, 40_000.0), dir.path());
     for precision in [Precision::Single, Precision::Double] {
-        let bf = bf_render(&db, &opts(1, precision), StoreNumber::Adaptive, 1 << 30);
+        let bf = bf_render(&db, &one_grid(1, precision), StoreNumber::Adaptive, 1 << 30);
         assert!(
             bf.1.rays.eye_hit_rays > 48 * 48 / 2,
             "the view should be mostly model and floor"
@@ -168,11 +223,61 @@ fn a_far_eye_finds_the_same_hits_in_the_hierarchy() {
         for res in [[1, 1, 1], [3, 2, 3]] {
             let o = RenderOptions {
                 grid_res: GridRes::Fixed(res),
-                ..opts(1, precision)
+                ..one_grid(1, precision)
             };
             let df = df_render(&db, &o);
             assert!(df.1.grids[0].nested_voxels > 0);
             assert_same(&format!("{precision:?}: df, grid {res:?}"), &bf, &df);
         }
     }
+}
+
+/// A database whose density summary disagrees with its records (every
+/// entry's box moved along x by a quarter of its width, checksums made
+/// good again) is an error naming the tables in both tracers, not objects
+/// silently left out of their grid.
+#[test]
+fn a_density_summary_that_lies_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = database(&crowd_nff(6000, 3000, 1.0), dir.path());
+    let entries = db.density().unwrap().entries.len();
+    let info = sray_engine::info::scene_info(db.path(), &NoProgress).unwrap();
+    assert_eq!(info.dense_regions.map(|r| r.len()), Some(1));
+    let path = db.path().to_path_buf();
+    drop(db);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let word = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let (tables_at, tables_len) = (word(&bytes, 120) as usize, word(&bytes, 128) as usize);
+    assert_eq!(tables_at + tables_len, bytes.len());
+    // The entries end the tables: cell, class, count, then min and max.
+    let float = |b: &[u8], at: usize| f32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    for k in 0..entries {
+        let e = bytes.len() - (entries - k) * 40;
+        let (lo, hi) = (float(&bytes, e + 16), float(&bytes, e + 28));
+        let shift = 0.25 * (hi - lo);
+        bytes[e + 16..e + 20].copy_from_slice(&(lo + shift).to_le_bytes());
+        bytes[e + 28..e + 32].copy_from_slice(&(hi + shift).to_le_bytes());
+    }
+    let crc = crc32fast::hash(&bytes[tables_at..]);
+    bytes[168..172].copy_from_slice(&crc.to_le_bytes());
+    let crc = crc32fast::hash(&bytes[..252]);
+    bytes[252..256].copy_from_slice(&crc.to_le_bytes());
+    let bad = dir.path().join("bad.sdb");
+    std::fs::write(&bad, &bytes).unwrap();
+    let db = Database::open(&bad).unwrap();
+    let o = opts(1, Precision::Double);
+    let e = sray_engine::df::render(&db, &o, &NoProgress)
+        .err()
+        .expect("df refuses");
+    assert!(e.to_string().contains("disagree"), "{e}");
+    let b = sray_engine::bf::BfOptions {
+        memory: 1 << 30,
+        store: StoreNumber::Adaptive,
+        spill_dir: None,
+        shading: sray_engine::bf::Shading::Carry,
+    };
+    let e = sray_engine::bf::render(&db, &o, &b, &NoProgress)
+        .err()
+        .expect("bf refuses");
+    assert!(e.to_string().contains("disagree"), "{e}");
 }
