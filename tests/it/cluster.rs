@@ -557,3 +557,78 @@ fn seven_scenes_any_worker_count_and_shard_size() {
         }
     }
 }
+
+/// A dense model in a sparse world (thousands of small triangles in a unit
+/// box on a wide floor of spheres): the coordinator and the workers plan
+/// the same grids from the database's density summary, the model's among
+/// them, and the image and counts are the embedded render's.
+#[test]
+fn local_workers_plan_a_dense_models_grid_as_the_embedded_render_does() {
+    use std::fmt::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut s = String::from(
+        "v\nfrom 1.6 1.2 2.0\nat 0 0.4 0\nup 0 1 0\nangle 35\nhither 0.001\nresolution 40 40\n\
+         b 0.1 0.1 0.2\nl 3 8 4\nf 0.6 0.6 0.6 1 0 0 0 1\np 4\n-50 0 -50\n-50 0 50\n50 0 50\n\
+         50 0 -50\nf 0.9 0.3 0.2 0.6 0.4 20 0 1\n",
+    );
+    let mut x: u64 = 11;
+    let mut next = move || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..3000 {
+        let (a, b) = (100.0 * next() - 50.0, 100.0 * next() - 50.0);
+        writeln!(s, "s {a:.4} 0.2 {b:.4} 0.2").unwrap();
+    }
+    for _ in 0..6000 {
+        let c = [next() - 0.5, next(), next() - 0.5];
+        s.push_str("p 3\n");
+        for _ in 0..3 {
+            let v: Vec<f64> = c.iter().map(|c| c + 0.12 * next() - 0.06).collect();
+            writeln!(s, "{} {} {}", v[0], v[1], v[2]).unwrap();
+        }
+    }
+    std::fs::write(d.join("crowd.nff"), s).unwrap();
+    ok(d, &["convert", "crowd.nff", "-o", "crowd.sdb", "--quiet"]);
+    let want = embedded(d, "crowd.sdb", "40");
+    let model = |stats: &serde_json::Value| {
+        stats["grids"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|g| g["objects"].as_u64().unwrap() > 5500)
+            .count()
+    };
+    assert_eq!(model(&want.1), 1, "embedded grids: {}", want.1["grids"]);
+    let o = run(
+        d,
+        &[
+            "render",
+            "crowd.sdb",
+            "-o",
+            "local.png",
+            "--local-workers",
+            "2",
+            "--width",
+            "40",
+            "--height",
+            "40",
+            "--shard-rays",
+            "400",
+            "--stats",
+            "cluster.json",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = cluster_stats(d);
+    same(
+        "local workers",
+        &std::fs::read(d.join("local.png")).unwrap(),
+        &s,
+        &want,
+    );
+    assert_eq!(s["grids"], want.1["grids"]);
+}
