@@ -157,6 +157,12 @@ impl<'t> DfScene<'t> {
             }
         }
         let plan = plan_groups(db.sizes(), db.density(), opts.multiple_grids);
+        // Each object's group, worked out once (each grid's build looks
+        // at every object twice).
+        let group: Vec<u8> = bboxes
+            .iter()
+            .map(|b| plan.partition.group(b) as u8)
+            .collect();
         let mut grids = Vec::with_capacity(plan.bounds.len());
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(trace::thread_count(opts))
@@ -167,12 +173,12 @@ impl<'t> DfScene<'t> {
                 (0, GridRes::Fixed(r)) => r,
                 _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
-            grids.push(ObjectGrid::build(&bboxes, bounds, res, &pool, |b| {
-                plan.partition.group(b) == g
+            grids.push(ObjectGrid::build(&bboxes, bounds, res, &pool, |id| {
+                group[id] as usize == g
             })?);
         }
         for (id, b) in bboxes.iter().enumerate() {
-            if !grids[plan.partition.group(b)].spec.holds(b) {
+            if !grids[group[id] as usize].spec.holds(b) {
                 return Err(crate::grid::outside_its_grid(db, id as u64));
             }
         }

@@ -21,14 +21,14 @@ pub struct ObjectGrid {
 }
 
 impl ObjectGrid {
-    /// Builds the grid over `bounds` for the objects `member` selects;
+    /// Builds the grid over `bounds` for the objects (by id) `member` selects;
     /// `pool` builds the crowded voxels' hierarchies.
     pub fn build(
         bboxes: &[Aabb],
         bounds: &Aabb,
         res: [u32; 3],
         pool: &rayon::ThreadPool,
-        member: impl Fn(&Aabb) -> bool,
+        member: impl Fn(usize) -> bool,
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
         let cells = spec.cells();
@@ -38,7 +38,7 @@ impl ObjectGrid {
         let each = |f: &mut dyn FnMut(u32, usize)| {
             for (id, b) in bboxes.iter().enumerate() {
                 let id = id as u32;
-                if !member(b) {
+                if !member(id as usize) {
                     continue;
                 }
                 if let Some((lo, hi)) = spec.cell_range(b) {
