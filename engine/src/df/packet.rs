@@ -244,7 +244,7 @@ impl Plan {
         let bu = LineBounds::of(rays, m, k, u, reference[k], &su);
         let bv = LineBounds::of(rays, m, k, v, reference[k], &sv);
         let cell = g.spec.cell_size();
-        let plan = Plan {
+        let mut plan = Plan {
             k,
             u,
             v,
@@ -273,7 +273,8 @@ impl Plan {
                 worth += 1;
             }
         }
-        (worth > 0).then_some(Plan { together, ..plan })
+        plan.together = together;
+        (worth > 0).then_some(plan)
     }
 
     /// Whether the lanes walk grid `i` together.

@@ -34,7 +34,7 @@ pub fn nearest<R: Real>(
 }
 
 /// [`nearest`] within grid `g` alone, with mailbox stamp `stamp`.
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn nearest_in<R: Real>(
     s: &DfScene,
@@ -142,7 +142,7 @@ pub fn occluded<R: Real>(
 
 /// The first object of grid `g` found between `t_min` and `t_max` along
 /// the ray (not one stamped `stamp` already), or `NO_OBJECT`.
-#[inline]
+#[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub fn blocker_in<R: Real>(
     s: &DfScene,
