@@ -46,8 +46,9 @@ use crate::shapes::Prepared;
 use rayon::prelude::*;
 use serde::Serialize;
 
-/// Grids a ray can walk (the main grid and the huge objects' grid).
-pub const MAX_GRIDS: usize = 2;
+/// Grids a ray can walk (the main grid, and dense regions or the huge
+/// objects' grid: see [`crate::grid::MAX_GROUPS`]).
+pub const MAX_GRIDS: usize = crate::grid::MAX_GROUPS;
 const NONE16: u16 = u16::MAX;
 
 /// How many voxels a ray stores itself in per pass.

@@ -187,7 +187,10 @@ impl<'db, R: Real> Tracer<'db, R> {
         opts.validate()?;
         let (specs, partition) = super::plan_grids(db, opts, bf.memory);
         if specs.len() > MAX_GRIDS {
-            return Err(Error::Invalid("too many grids".into()));
+            return Err(Error::Invalid(format!(
+                "{} grids are more than the breadth-first tracer takes ({MAX_GRIDS}); render with --grids 1",
+                specs.len()
+            )));
         }
         // The voxel flags, a pass's coarse cells (four bytes per 64
         // voxels), and per block its voxel boxes (one per grid) and its

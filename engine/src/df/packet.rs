@@ -212,8 +212,9 @@ impl Plan {
     /// `None` if their directions do not all point the same way along any
     /// axis, or if walking together would not pay.
     pub fn new<R>(s: &DfScene, rays: &Rays<R>, m: Mask, reference: Vec3) -> Option<Plan> {
-        let g = s.grids.first()?;
-        if g.single_cell() || s.grids.len() > 32 {
+        // The first grid of more than one voxel sets the culling's scale.
+        let g = s.grids.iter().find(|g| !g.single_cell())?;
+        if s.grids.len() > 32 {
             return None;
         }
         // Along the largest component of the first ray's direction, if
@@ -624,6 +625,9 @@ pub fn nearest<R: Real>(
     plan: &Plan,
     best: &mut Hits<R>,
 ) {
+    // This packet's stamp and one for each lane in each grid it may walk
+    // lane by lane, without the counter wrapping between them.
+    sc.reserve_stamps(1 + (LANES * s.grids.len()) as u32);
     let stamp = sc.next_stamp();
     let hf = high_first(rays.d((m.trailing_zeros() as usize).min(LANES - 1)));
     // The large objects' grid first: one ground polygon found early prunes
@@ -724,6 +728,7 @@ pub fn occluded<R: Real>(
     tested: u32,
     last: &mut u32,
 ) {
+    sc.reserve_stamps(1 + (LANES * s.grids.len()) as u32);
     let stamp = sc.next_stamp();
     let hf = high_first(rays.d((m.trailing_zeros() as usize).min(LANES - 1)));
     if tested != super::trace::NO_OBJECT {

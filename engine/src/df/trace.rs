@@ -97,6 +97,17 @@ impl<R: Real> Scratch<R> {
 
     /// A stamp no object's mailbox holds.
     #[inline]
+    /// Makes sure the next `n` stamps are taken without the counter
+    /// wrapping: a query that holds one stamp while it takes others (a
+    /// packet walking some grids lane by lane) must not see the mailboxes
+    /// cleared and its own stamp come round again.
+    pub fn reserve_stamps(&mut self, n: u32) {
+        if self.stamp > u32::MAX - n {
+            self.mail.fill(0);
+            self.stamp = 0;
+        }
+    }
+
     pub fn next_stamp(&mut self) -> u32 {
         if self.stamp == u32::MAX {
             self.mail.fill(0);

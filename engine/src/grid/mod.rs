@@ -10,7 +10,7 @@ mod dda;
 mod partition;
 
 pub use dda::{Dda, DdaSave};
-pub use partition::{GridStat, GroupPlan, Partition, choose_resolution, plan_groups};
+pub use partition::{GridStat, GroupPlan, MAX_GROUPS, Partition, choose_resolution, plan_groups};
 
 use crate::math::Vec3;
 use crate::scene::Aabb;

@@ -36,8 +36,8 @@ pub struct Regions {
     lattice: Lattice,
     /// Per lattice cell: 0, or 1 + the index of the region it is part of.
     cell_region: Vec<u8>,
-    /// Per region: the classes below this one are its objects.
-    below: Vec<u8>,
+    /// Per region: the classes below this one are its objects (256: all).
+    below: Vec<u16>,
 }
 
 impl Regions {
@@ -51,7 +51,7 @@ impl Regions {
         match self.lattice.cell_of(b) {
             Some(cell) => match self.cell_region[cell as usize] as usize {
                 0 => 0,
-                r if class < self.below[r - 1] => r,
+                r if (class as u16) < self.below[r - 1] => r,
                 _ => 0,
             },
             None => 0,
@@ -120,9 +120,10 @@ pub fn plan_groups(
     }
     let main_classes = splits.first().map_or(SIZE_CLASSES, |&k| k as usize);
     let (main_count, main_bounds) = sizes.range(0, main_classes);
+    let room = MAX_GROUPS.saturating_sub(1 + splits.len());
     let dense = match density {
-        Some(d) if allow_split && d.usable() => {
-            dense_regions(d, main_classes, main_count, &main_bounds)
+        Some(d) if allow_split && d.usable() && room > 0 => {
+            dense_regions(d, main_classes, main_count, &main_bounds, room)
         }
         _ => None,
     };
@@ -167,8 +168,10 @@ const DENSE_REGION: f64 = 16.0;
 const MIN_REGION_OBJECTS: u64 = 2048;
 /// ... and this share of the main grid's.
 const MIN_REGION_SHARE: f64 = 0.02;
-/// Most regions set apart (every ray walks every grid its path meets).
-const MAX_REGIONS: usize = 4;
+/// Most grids a plan makes: the breadth-first tracer keeps a walk per grid
+/// in every ray slot, so each grid allowed costs every ray memory. The
+/// main grid, and a dense region and the huge objects, or two regions.
+pub const MAX_GROUPS: usize = 3;
 
 struct Dense {
     regions: Regions,
@@ -185,8 +188,15 @@ fn thick_volume(e: [f64; 3], big: f64) -> f64 {
 }
 
 /// Finds the dense regions among the objects of classes below
-/// `main_classes` (`n` objects within `bounds`).
-fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb) -> Option<Dense> {
+/// `main_classes` (`n` objects within `bounds`), at most `most` of them
+/// (the largest).
+fn dense_regions(
+    d: &DensitySummary,
+    main_classes: usize,
+    n: u64,
+    bounds: &Aabb,
+    most: usize,
+) -> Option<Dense> {
     use crate::scene::DENSITY_CELLS as C;
     if n < MIN_REGION_OBJECTS || bounds.is_empty() {
         return None;
@@ -256,9 +266,9 @@ fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb)
     }
     // Each part: the classes that make it dense. Adding classes from the
     // smallest up, keep the most that stay at least half as dense as the
-    // densest choice (a few larger objects among a model's triangles must
-    // not stretch its grid over the whole cell).
-    let mut found: Vec<(u64, Aabb, u8, usize)> = Vec::new();
+    // densest choice worth a grid (a few larger objects among a model's
+    // triangles must not stretch its grid over the whole cell).
+    let mut found: Vec<(u64, Aabb, u16, usize)> = Vec::new();
     let mut per_part: Vec<Vec<(u8, u64, Aabb)>> = vec![Vec::new(); parts.len()];
     for (&(cell, class), e) in &d.entries {
         let p = part[cell as usize] as usize;
@@ -269,7 +279,7 @@ fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb)
     for (pi, mut entries) in per_part.into_iter().enumerate() {
         entries.sort_by_key(|e| e.0);
         let (mut count, mut b) = (0u64, Aabb::EMPTY);
-        let mut choices: Vec<(f64, u64, Aabb, u8)> = Vec::new();
+        let mut choices: Vec<(f64, u64, Aabb, u16)> = Vec::new();
         for (i, &(class, k, cb)) in entries.iter().enumerate() {
             count += k;
             b.union(&cb);
@@ -278,14 +288,17 @@ fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb)
                 continue;
             }
             let rho = (count as f64 / n as f64) / (thick_volume(b.extent(), big) / volume);
-            choices.push((rho, count, b, class.saturating_add(1)));
+            choices.push((rho, count, b, class as u16 + 1));
         }
+        // Only choices that would be set apart count (a few tiny objects
+        // in a tiny box are dense, but not worth a grid).
+        choices.retain(|&(rho, count, ..)| {
+            rho >= DENSE_REGION
+                && count >= MIN_REGION_OBJECTS
+                && count as f64 >= MIN_REGION_SHARE * n as f64
+        });
         let best = choices.iter().map(|c| c.0).fold(0.0, f64::max);
-        if let Some(&(rho, count, b, below)) = choices.iter().rev().find(|c| c.0 >= best / 2.0)
-            && rho >= DENSE_REGION
-            && count >= MIN_REGION_OBJECTS
-            && count as f64 >= MIN_REGION_SHARE * n as f64
-        {
+        if let Some(&(_, count, b, below)) = choices.iter().rev().find(|c| c.0 >= best / 2.0) {
             found.push((count, b, below, pi + 1));
         }
     }
@@ -293,7 +306,7 @@ fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb)
         return None;
     }
     found.sort_by_key(|f| std::cmp::Reverse(f.0));
-    found.truncate(MAX_REGIONS);
+    found.truncate(most);
     let mut cell_region = vec![0u8; cells];
     for (r, f) in found.iter().enumerate() {
         for c in &parts[f.3 - 1] {
@@ -312,7 +325,7 @@ fn dense_regions(d: &DensitySummary, main_classes: usize, n: u64, bounds: &Aabb)
             continue;
         }
         let r = regions.cell_region[cell as usize] as usize;
-        if r == 0 || class >= regions.below[r - 1] {
+        if r == 0 || class as u16 >= regions.below[r - 1] {
             rest.union(&e.bounds);
         }
     }

@@ -278,7 +278,7 @@ fn evenly_spread_objects_and_surfaces_get_no_region() {
 }
 
 #[test]
-fn two_dense_models_get_two_regions_and_huge_objects_stay_apart() {
+fn two_dense_models_and_huge_objects_make_at_most_three_grids() {
     let mut r = Lcg(7);
     let mut boxes = Vec::new();
     for centre in [[-40.0f32, 0.5, 30.0], [60.0, 0.5, -20.0]] {
@@ -302,7 +302,13 @@ fn two_dense_models_get_two_regions_and_huge_objects_stay_apart() {
         min: [-500.0, 0.0, 500.0],
         max: [500.0, 300.0, 500.0],
     });
+    // Main, one region and the huge objects: a plan makes three grids at
+    // most, so the other model stays in the main grid.
     let plan = plan_of(&boxes);
+    assert_eq!(plan.partition.regions.as_ref().map(|r| r.count()), Some(1));
+    assert_eq!(plan.counts, vec![13_000, 10_000, 2]);
+    // Without the walls, both models get a grid.
+    let plan = plan_of(&boxes[..boxes.len() - 2]);
     assert_eq!(plan.partition.regions.as_ref().map(|r| r.count()), Some(2));
-    assert_eq!(plan.counts, vec![3000, 10_000, 10_000, 2]);
+    assert_eq!(plan.counts, vec![3000, 10_000, 10_000]);
 }

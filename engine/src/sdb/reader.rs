@@ -449,6 +449,10 @@ fn decode_tables(
     let density = if density {
         let level = d.u32()? as i32;
         let origin = [d.u64()? as i64, d.u64()? as i64, d.u64()? as i64];
+        // Cell coordinates stay exact in an f64 (see the writer).
+        if origin.iter().any(|o| o.unsigned_abs() > 1 << 52) {
+            return None;
+        }
         let n = d.u32()? as usize;
         if n > MAX_DENSITY_ENTRIES || n * 40 != d.remaining() {
             return None;
@@ -469,6 +473,14 @@ fn decode_tables(
             }
             let bounds = Aabb::from_array(b);
             entries.push(((cell, class as u8), SizeClass { count, bounds }));
+        }
+        // No more objects than the size summary counts (the writer leaves
+        // out only objects with empty boxes).
+        let total = entries
+            .iter()
+            .try_fold(0u64, |a, e| a.checked_add(e.1.count))?;
+        if total > sizes.total() {
+            return None;
         }
         // Level i32::MIN: the writer kept no summary.
         (level != i32::MIN && (-1100..=1100).contains(&level))

@@ -40,6 +40,11 @@ impl Lcg {
 /// field of view as much narrower (the same picture, but eye rays that
 /// start far from the model).
 fn crowd_nff(triangles: usize, spheres: usize, distance: f64) -> String {
+    crowd_nff_spread(triangles, spheres, distance, 50.0)
+}
+
+/// As [`crowd_nff`], the spheres within `spread` of the centre.
+fn crowd_nff_spread(triangles: usize, spheres: usize, distance: f64, spread: f64) -> String {
     let mut r = Lcg(2026);
     let mut s = String::new();
     let (from, angle) = ([1.6, 0.8, 2.0].map(|c| c * distance), 35.0 / distance);
@@ -55,7 +60,7 @@ fn crowd_nff(triangles: usize, spheres: usize, distance: f64) -> String {
     s.push_str("f 0.6 0.6 0.6 1 0 0 0 1\np 4\n-50 0 -50\n-50 0 50\n50 0 50\n50 0 -50\n");
     s.push_str("f 0.9 0.3 0.2 0.6 0.4 20 0 1\n");
     for _ in 0..spheres {
-        let (x, z) = (r.range(-50.0, 50.0), r.range(-50.0, 50.0));
+        let (x, z) = (r.range(-spread, spread), r.range(-spread, spread));
         if x.abs() < 2.0 && z.abs() < 2.0 {
             continue;
         }
@@ -280,4 +285,24 @@ fn a_density_summary_that_lies_is_an_error() {
         .err()
         .expect("bf refuses");
     assert!(e.to_string().contains("disagree"), "{e}");
+}
+
+/// Spheres only near the model: the floor is set apart as huge, and the
+/// model is a dense region among the spheres, so there are three grids,
+/// the most a plan makes; the breadth-first tracer (a walk per grid in
+/// every ray slot) takes them, in ample and in tight memory.
+#[test]
+fn a_region_and_a_huge_floor_make_three_grids_in_both_tracers() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = database(&crowd_nff_spread(6000, 1500, 1.0, 8.0), dir.path());
+    let precision = Precision::Double;
+    let want = df_render(&db, &one_grid(2, precision));
+    let df = df_render(&db, &opts(2, precision));
+    assert_eq!(df.1.grids.len(), 3, "{:?}", df.1.grids);
+    let bf = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 1 << 30);
+    let tight = bf_render(&db, &opts(2, precision), StoreNumber::Adaptive, 4 << 20);
+    for (what, r) in [("df", &df), ("bf", &bf), ("bf, 4 MiB", &tight)] {
+        assert_eq!(r.1.grids.len(), 3, "{what}: {:?}", r.1.grids);
+        assert_same(&format!("{what}, three grids"), &want, r);
+    }
 }
