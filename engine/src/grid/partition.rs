@@ -48,13 +48,18 @@ impl Regions {
     /// The region (1-based) of an object of class `class` and box `b`, or 0.
     #[inline]
     fn of(&self, class: u8, b: &Aabb) -> usize {
-        match self.lattice.cell_of(b) {
-            Some(cell) => match self.cell_region[cell as usize] as usize {
-                0 => 0,
-                r if (class as u16) < self.below[r - 1] => r,
-                _ => 0,
-            },
-            None => 0,
+        self.lattice
+            .cell_of(b)
+            .map_or(0, |cell| self.taking(cell, class))
+    }
+
+    /// The region (1-based) that takes the objects of class `class`
+    /// centred in lattice cell `cell`, or 0.
+    #[inline]
+    fn taking(&self, cell: u32, class: u8) -> usize {
+        match self.cell_region[cell as usize] as usize {
+            r if r != 0 && (class as u16) < self.below[r - 1] => r,
+            _ => 0,
         }
     }
 }
@@ -324,8 +329,7 @@ fn dense_regions(
         if (class as usize) >= main_classes {
             continue;
         }
-        let r = regions.cell_region[cell as usize] as usize;
-        if r == 0 || class as u16 >= regions.below[r - 1] {
+        if regions.taking(cell, class) == 0 {
             rest.union(&e.bounds);
         }
     }
