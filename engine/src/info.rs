@@ -46,6 +46,21 @@ pub struct SceneInfo {
     pub raw_bytes: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub blocks: Option<u64>,
+    /// Object database only: the records' size once triangle runs are
+    /// expanded (what a scan decodes, and the depth-first tracer holds).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub decoded_bytes: Option<u64>,
+    /// Object database only: how blocks store objects: "records" (one per
+    /// object, before version 4) or "triangle runs" (consecutive
+    /// triangles as shared, bit-packed vertices and one-byte indices).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub layout: Option<&'static str>,
+    /// Object database only (version 4 on): triangle runs, and the
+    /// triangles they hold.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub runs: Option<u64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub run_triangles: Option<u64>,
     /// Object database only: its format version.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub version: Option<u32>,
@@ -149,6 +164,14 @@ pub fn scene_info_with(
             degenerate_faces: None,
             raw_bytes: Some(db.raw_bytes()),
             blocks: Some(db.block_count()),
+            decoded_bytes: Some(db.decoded_bytes()),
+            layout: Some(if db.has_runs() {
+                "triangle runs"
+            } else {
+                "records"
+            }),
+            runs: db.has_runs().then(|| db.run_counts().runs),
+            run_triangles: db.has_runs().then(|| db.run_counts().run_triangles),
             version: Some(db.version()),
             density_entries: db.density().map(|d| d.entries.len() as u64),
             dense_regions: dense_regions(&db),
@@ -180,6 +203,10 @@ pub fn scene_info_with(
         compression: wrapping.name(),
         degenerate_faces: summary.mesh.map(|m| m.degenerate),
         raw_bytes: None,
+        decoded_bytes: None,
+        layout: None,
+        runs: None,
+        run_triangles: None,
         blocks: None,
         version: None,
         density_entries: None,

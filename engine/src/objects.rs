@@ -16,18 +16,18 @@ pub struct ObjectTable {
 impl ObjectTable {
     /// Bytes an in-memory copy of `db` takes.
     pub fn estimate_bytes(db: &Database) -> u64 {
-        db.raw_bytes() + 4 * db.object_count()
+        db.decoded_bytes() + 4 * db.object_count()
     }
 
     pub fn load(db: &Database, progress: &dyn Progress) -> Result<ObjectTable, Error> {
-        if db.raw_bytes() / 4 > u32::MAX as u64 {
+        if db.decoded_bytes() / 4 > u32::MAX as u64 {
             return Err(Error::Invalid(format!(
                 "{}: {} bytes of records are too many to hold in memory for the depth-first tracer; use --mode bf",
                 db.path().display(),
-                db.raw_bytes()
+                db.decoded_bytes()
             )));
         }
-        let mut words = Vec::with_capacity((db.raw_bytes() / 4) as usize);
+        let mut words = Vec::with_capacity((db.decoded_bytes() / 4) as usize);
         let mut offsets = Vec::with_capacity(db.object_count() as usize);
         let mut scan = db.scan()?;
         progress.set_total(db.object_count());

@@ -4,6 +4,7 @@ use super::bar::Bar;
 use clap::Args;
 use sray_engine::info::{SceneInfo, scene_info_with};
 use sray_engine::mesh::MeshOptions;
+use sray_engine::shapes::ShapeKind;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -80,6 +81,23 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
     if let (Some(raw), Some(blocks)) = (i.raw_bytes, i.blocks) {
         let per = raw as f64 / i.objects.max(1) as f64;
         println!("  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)");
+    }
+    if let (Some(raw), Some(decoded)) = (i.raw_bytes, i.decoded_bytes) {
+        // Per triangle only where every object is one or more of them.
+        let faces = i.counts.get(ShapeKind::Polygon) + i.counts.get(ShapeKind::Patch);
+        if i.triangles >= i.objects && faces == i.objects {
+            let per = raw as f64 / i.triangles as f64;
+            println!("               {per:.1} bytes per triangle; {decoded} bytes expanded");
+        }
+    }
+    if let Some(layout) = i.layout {
+        match (i.runs, i.run_triangles) {
+            (Some(r), Some(t)) => println!(
+                "  layout       {layout}: {t} of {} triangles in {r} runs, objects in input order",
+                i.triangles
+            ),
+            _ => println!("  layout       {layout}, objects in input order"),
+        }
     }
     if let Some(v) = i.version {
         println!("  version      {v}");

@@ -318,7 +318,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             ))
         };
         let mut slots_n = budget.slots(rays_resident, resident);
-        if self.db.raw_bytes() < CHEAP_SCAN_BYTES {
+        if self.db.decoded_bytes() < CHEAP_SCAN_BYTES {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
             slots_n = slots_n.min(CACHE_SLOTS);

@@ -12,11 +12,15 @@ pub const MAGIC: [u8; 8] = *b"SRAYSDB\0";
 /// recentred), so that an older sray refused it rather than misplacing
 /// the geometry.
 pub const VERSION: u32 = 1;
-/// The version written today: the tables end with a density summary
+/// Version 3 (also read): the tables end with a density summary
 /// ([`crate::scene::DensitySummary`]), and the geometry is relative to the
 /// header's origin (zero: the world's). An older sray refuses it rather
 /// than reading the tables as malformed.
 pub const VERSION_DENSITY: u32 = 3;
+/// The version written today: as version 3, with blocks that store
+/// consecutive triangles as runs ([`super::packed`]); the header records
+/// the records' size once expanded (`decoded_bytes`).
+pub const VERSION_PACKED: u32 = 4;
 /// Header flag: `vertices` is the size of a mesh's vertex table.
 pub const FLAG_MESH: u32 = 1;
 /// Header flag: `triangles` and `vertices` are recorded (files written
@@ -94,6 +98,8 @@ pub struct RawHeader {
     /// 0 = none, 1 = zstd.
     pub compression: u32,
     pub compression_level: i32,
+    /// The largest block's records, expanded: what a reader's buffers
+    /// hold (a stored block is never larger).
     pub block_raw_max: u32,
     pub reserved0: u32,
     pub object_count: u64,
@@ -106,7 +112,7 @@ pub struct RawHeader {
     pub material_statements: u64,
     pub tables_offset: u64,
     pub tables_len: u64,
-    /// Sum of uncompressed block payload bytes.
+    /// Sum of uncompressed block payload bytes (as stored: runs packed).
     pub raw_bytes: u64,
     pub bbox: [f32; 6],
     pub tables_crc: u32,
@@ -122,7 +128,18 @@ pub struct RawHeader {
     pub vertices: [u32; 2],
     /// [`FLAG_MESH`], [`FLAG_COUNTS`].
     pub flags: u32,
-    pub reserved: [u32; 9],
+    /// The records' size once runs are expanded, two words, low first
+    /// (version 4; before it, `raw_bytes` is that size and these words
+    /// were reserved).
+    pub decoded_bytes: [u32; 2],
+    /// Triangle runs, and the triangles they hold (version 4), each two
+    /// words, low first.
+    pub runs: [u32; 2],
+    pub run_triangles: [u32; 2],
+    /// The largest block as stored, before compression (version 4: runs
+    /// packed; before it, `block_raw_max`).
+    pub block_stored_max: u32,
+    pub reserved: [u32; 2],
     /// CRC-32 of the 252 bytes before it.
     pub header_crc: u32,
 }

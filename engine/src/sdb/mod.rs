@@ -12,6 +12,9 @@
 //!
 //! A block holds whole records, at most [`MAX_BLOCK_RAW`] bytes of them,
 //! objects in id order; each block's CRC-32 covers its header and payload.
+//! Since version 4 consecutive triangles are stored as runs of shared,
+//! bit-packed vertices and one-byte indices ([`packed`]), which a reader
+//! expands back into their records.
 //! A record is 4-byte words: kind and vertex count, material index, bounding
 //! box (six `f32`), then the geometry. The bounding box lets the grid be
 //! built without decoding geometry. Tables sit at the end because a streamed
@@ -19,11 +22,13 @@
 //! readers fetch them at open and then read blocks strictly front to back.
 
 mod format;
+mod packed;
 mod read_ahead;
 mod reader;
 mod writer;
 
 pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub use packed::PackCounts;
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};

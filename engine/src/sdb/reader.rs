@@ -2,6 +2,7 @@
 //! decoding records in place: no allocation per object.
 
 use super::format::*;
+use super::packed::PackCounts;
 use crate::error::{Error, IoContext};
 use crate::hit::PrimId;
 use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
@@ -38,8 +39,14 @@ pub struct Database {
     material_statements: u64,
     tables_offset: u64,
     raw_bytes: u64,
+    decoded_bytes: u64,
+    /// Blocks store triangles as runs (version 4).
+    runs: bool,
+    run_counts: PackCounts,
     file_bytes: u64,
     largest_block: usize,
+    /// The largest block as stored, before compression.
+    largest_stored: usize,
     origin: [f64; 3],
     /// The view and lights as stored, in world coordinates (`scene` has
     /// them relative to the origin, as the geometry is).
@@ -103,11 +110,11 @@ impl Database {
             ));
         }
         let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-        if !(VERSION..=VERSION_DENSITY).contains(&h.version) {
+        if !(VERSION..=VERSION_PACKED).contains(&h.version) {
             return Err(err(
                 "header",
                 format!(
-                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_DENSITY}); regenerate it with `sray convert` or `sray gen`",
+                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_PACKED}); regenerate it with `sray convert` or `sray gen`",
                     h.version
                 ),
             ));
@@ -186,6 +193,26 @@ impl Database {
             ));
         }
         let bbox = Aabb::from_array(h.bbox);
+        let runs = h.version >= VERSION_PACKED;
+        let decoded_bytes = if runs {
+            join64(h.decoded_bytes[0], h.decoded_bytes[1])
+        } else {
+            h.raw_bytes
+        };
+        if decoded_bytes < h.raw_bytes || !decoded_bytes.is_multiple_of(4) {
+            return Err(err(
+                "header",
+                "the records' expanded size is below their stored size".into(),
+            ));
+        }
+        let largest_stored = if runs {
+            h.block_stored_max as usize
+        } else {
+            h.block_raw_max as usize
+        };
+        if largest_stored > h.block_raw_max as usize {
+            return Err(err("header", "unsupported header or block size".into()));
+        }
         Ok(Database {
             path: path.to_path_buf(),
             scene,
@@ -200,8 +227,15 @@ impl Database {
             material_statements: h.material_statements,
             tables_offset: h.tables_offset,
             raw_bytes: h.raw_bytes,
+            decoded_bytes,
+            runs,
+            run_counts: PackCounts {
+                runs: join64(h.runs[0], h.runs[1]),
+                run_triangles: join64(h.run_triangles[0], h.run_triangles[1]),
+            },
             file_bytes,
             largest_block: h.block_raw_max as usize,
+            largest_stored,
             origin,
             world_view,
             world_lights,
@@ -297,24 +331,41 @@ impl Database {
     pub fn file_bytes(&self) -> u64 {
         self.file_bytes
     }
-    /// Uncompressed size of all records.
+    /// Uncompressed size of all blocks as stored (triangle runs packed).
     pub fn raw_bytes(&self) -> u64 {
         self.raw_bytes
     }
 
-    /// Size of the largest uncompressed block.
+    /// Size of all records once expanded: what holding every object in
+    /// memory takes, and what a scan decodes.
+    pub fn decoded_bytes(&self) -> u64 {
+        self.decoded_bytes
+    }
+
+    /// Whether blocks store consecutive triangles as runs (version 4).
+    pub fn has_runs(&self) -> bool {
+        self.runs
+    }
+
+    /// Triangle runs and the triangles they hold (zero before version 4).
+    pub fn run_counts(&self) -> PackCounts {
+        self.run_counts
+    }
+
+    /// Size of the largest block's records, expanded.
     pub fn largest_block(&self) -> usize {
         self.largest_block
     }
 
-    /// Memory a scan holds: buffers for one raw and one stored block.
+    /// Memory a scan holds: buffers for one block's records and for one
+    /// stored block (packed, compressed, or both).
     pub fn scan_buffer_bytes(&self) -> usize {
-        self.largest_block
-            + if self.compression == Compression::None {
-                0
-            } else {
-                max_stored(self.largest_block)
-            }
+        let packed = if self.runs { self.largest_stored } else { 0 };
+        let compressed = match self.compression {
+            Compression::None => 0,
+            Compression::Zstd(_) => max_stored(self.largest_stored),
+        };
+        self.largest_block + packed + compressed
     }
 
     /// Starts a sequential scan of the objects. The first scan checks
@@ -353,6 +404,7 @@ impl Database {
             file,
             decompressor,
             words: Vec::with_capacity(self.largest_block / 4),
+            packed: Vec::new(),
             stored: Vec::new(),
             next_index: 0,
             next_object: 0,
@@ -507,6 +559,8 @@ pub struct Scan<'d> {
     decompressor: Option<zstd::bulk::Decompressor<'static>>,
     /// The decoded block, as 4-byte words.
     words: Vec<u32>,
+    /// The block as stored, before its runs are expanded (version 4).
+    packed: Vec<u32>,
     stored: Vec<u8>,
     next_index: u64,
     next_object: u64,
@@ -516,6 +570,14 @@ pub struct Scan<'d> {
     verify: bool,
     /// The blocks' spans so far, while the database's layout is unknown.
     learned: Vec<BlockSpan>,
+}
+
+/// Which buffer a block's bytes are read into.
+#[derive(Clone, Copy)]
+enum Buffer {
+    Words,
+    Packed,
+    Stored,
 }
 
 /// One decoded, validated block.
@@ -549,12 +611,17 @@ impl Scan<'_> {
         }
     }
 
-    fn read_exact_or_err(&mut self, buf_is_words: bool, len: usize) -> Result<(), Error> {
-        let r = if buf_is_words {
-            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
-            self.file.read_exact(&mut bytes[..len])
-        } else {
-            self.file.read_exact(&mut self.stored[..len])
+    fn read_exact_or_err(&mut self, into: Buffer, len: usize) -> Result<(), Error> {
+        let r = match into {
+            Buffer::Words => {
+                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
+                self.file.read_exact(&mut bytes[..len])
+            }
+            Buffer::Packed => {
+                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.packed[..]);
+                self.file.read_exact(&mut bytes[..len])
+            }
+            Buffer::Stored => self.file.read_exact(&mut self.stored[..len]),
         };
         r.map_err(|e| {
             if e.kind() == std::io::ErrorKind::UnexpectedEof {
@@ -635,9 +702,9 @@ impl Scan<'_> {
         }
         let raw_len = h.raw_len as usize;
         let stored_len = h.stored_len as usize;
-        if raw_len > self.db.largest_block
+        if raw_len > self.db.largest_stored
             || !raw_len.is_multiple_of(4)
-            || stored_len > max_stored(self.db.largest_block)
+            || stored_len > max_stored(self.db.largest_stored)
         {
             return Err(self.err("block lengths are out of range: the block is corrupt"));
         }
@@ -645,16 +712,30 @@ impl Scan<'_> {
         if end > self.db.tables_offset {
             return Err(self.err("block runs into the tables: the block is corrupt"));
         }
-        self.words.resize(raw_len.div_ceil(4).max(1), 0);
+        // Version 4 blocks are read into `packed` and expanded into
+        // `words`; older ones are read into `words` as they are.
+        let runs = self.db.runs;
+        let target = if runs {
+            &mut self.packed
+        } else {
+            &mut self.words
+        };
+        target.resize(raw_len.div_ceil(4).max(1), 0);
+        let into = if runs { Buffer::Packed } else { Buffer::Words };
         let compressed = self.decompressor.is_some();
         if compressed {
             self.stored.resize(stored_len, 0);
-            self.read_exact_or_err(false, stored_len)?;
+            self.read_exact_or_err(Buffer::Stored, stored_len)?;
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&self.stored[..stored_len]) != h.crc
             {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
-            let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
+            let target = if runs {
+                &mut self.packed
+            } else {
+                &mut self.words
+            };
+            let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut target[..]);
             let n = self
                 .decompressor
                 .as_mut()
@@ -668,8 +749,8 @@ impl Scan<'_> {
             if stored_len != raw_len {
                 return Err(self.err("stored and raw lengths differ in an uncompressed block"));
             }
-            self.read_exact_or_err(true, raw_len)?;
-            let bytes: &[u8] = bytemuck::cast_slice(&self.words[..]);
+            self.read_exact_or_err(into, raw_len)?;
+            let bytes: &[u8] = bytemuck::cast_slice(if runs { &self.packed } else { &self.words });
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&bytes[..raw_len]) != h.crc {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
@@ -677,7 +758,18 @@ impl Scan<'_> {
         if h.index as u64 != self.next_index || h.first_object != self.next_object {
             return Err(self.err("block is out of sequence"));
         }
-        self.words.truncate(raw_len / 4);
+        if runs {
+            self.packed.truncate(raw_len / 4);
+            super::packed::unpack(
+                &self.packed,
+                h.object_count,
+                self.db.largest_block / 4,
+                &mut self.words,
+            )
+            .map_err(|m| self.err(m))?;
+        } else {
+            self.words.truncate(raw_len / 4);
+        }
         if self.verify {
             validate_records(&self.words, h.object_count, self.db.scene.materials.len())
                 .map_err(|m| self.err(m))?;

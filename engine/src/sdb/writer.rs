@@ -2,6 +2,7 @@
 //! under its name only once it is complete.
 
 use super::format::*;
+use super::packed::{PackCounts, Packer};
 use crate::error::{Error, IoContext};
 use crate::scene::{
     Aabb, DensitySummary, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View,
@@ -20,7 +21,10 @@ pub struct WriteSummary {
     pub bbox: Aabb,
     pub file_bytes: u64,
     pub raw_bytes: u64,
+    /// The records' size once runs are expanded.
+    pub decoded_bytes: u64,
     pub blocks: u64,
+    pub runs: PackCounts,
 }
 
 /// A [`SceneSink`] that writes an object database. Call
@@ -34,11 +38,17 @@ pub struct DbWriter {
     block: Vec<u32>,
     block_first: u64,
     block_objects: u32,
+    /// Stores a block's triangles as runs; `None` writes version 3.
+    packer: Option<Packer>,
+    /// The block as stored, before compression.
+    packed: Vec<u32>,
     stored: Vec<u8>,
     offset: u64,
     blocks: u64,
     raw_bytes: u64,
+    decoded_bytes: u64,
     largest_block: usize,
+    largest_stored: usize,
     objects: u64,
     counts: KindCounts,
     bbox: Aabb,
@@ -90,11 +100,15 @@ impl DbWriter {
             block: Vec::with_capacity(BLOCK_TARGET / 4),
             block_first: 0,
             block_objects: 0,
+            packer: Some(Packer::default()),
+            packed: Vec::with_capacity(BLOCK_TARGET / 4),
             stored: Vec::new(),
             offset: HEADER_BYTES as u64,
             blocks: 0,
             raw_bytes: 0,
+            decoded_bytes: 0,
             largest_block: 0,
+            largest_stored: 0,
             objects: 0,
             counts: KindCounts::default(),
             bbox: Aabb::EMPTY,
@@ -114,10 +128,21 @@ impl DbWriter {
         })
     }
 
-    /// Memory the writer holds besides its buffer: one block of records
-    /// and, compressing, one compressed block.
+    /// Writes version 3, triangles as records, as sray did before runs
+    /// (for comparisons and for tests of reading old files).
+    pub fn without_runs(mut self) -> DbWriter {
+        self.packer = None;
+        self
+    }
+
+    /// Memory the writer holds besides its buffer: one block of records,
+    /// the block as stored and, compressing, one compressed block.
     pub fn block_bytes(&self) -> usize {
-        BLOCK_TARGET * if self.compressor.is_some() { 2 } else { 1 } + (64 << 10)
+        BLOCK_TARGET * if self.compressor.is_some() { 3 } else { 2 } + (64 << 10)
+    }
+
+    fn run_counts(&self) -> PackCounts {
+        self.packer.as_ref().map(|p| p.counts).unwrap_or_default()
     }
 
     pub fn objects_written(&self) -> u64 {
@@ -132,7 +157,14 @@ impl DbWriter {
         if self.block_objects == 0 {
             return Ok(());
         }
-        let raw: &[u8] = bytemuck::cast_slice(&self.block);
+        let raw: &[u8] = match self.packer.as_mut() {
+            Some(p) => {
+                p.pack(&self.block, &mut self.packed);
+                bytemuck::cast_slice(&self.packed)
+            }
+            None => bytemuck::cast_slice(&self.block),
+        };
+        let decoded_len = self.block.len() * 4;
         let (payload, stored_len): (&[u8], usize) = match self.compressor.as_mut() {
             None => (raw, raw.len()),
             Some(c) => {
@@ -157,12 +189,14 @@ impl DbWriter {
         };
         h.crc = h.compute_crc(&payload[..stored_len]);
         let raw_len = raw.len() as u64;
-        self.largest_block = self.largest_block.max(raw.len());
+        self.largest_block = self.largest_block.max(decoded_len);
+        self.largest_stored = self.largest_stored.max(raw.len());
         let out = self.out.as_mut().expect("writer used after finish");
         out.write_all(bytemuck::bytes_of(&h)).at(&self.path)?;
         out.write_all(&payload[..stored_len]).at(&self.path)?;
         self.offset += (BLOCK_HEADER_BYTES + stored_len) as u64;
         self.raw_bytes += raw_len;
+        self.decoded_bytes += decoded_len as u64;
         self.blocks += 1;
         self.block.clear();
         self.block_first = self.objects;
@@ -250,7 +284,11 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: VERSION_DENSITY,
+            version: if self.packer.is_some() {
+                VERSION_PACKED
+            } else {
+                VERSION_DENSITY
+            },
             header_bytes: HEADER_BYTES as u32,
             compression: match self.compression {
                 Compression::None => 0,
@@ -284,7 +322,19 @@ impl DbWriter {
                 } else {
                     0
                 },
-            reserved: [0; 9],
+            decoded_bytes: if self.packer.is_some() {
+                split64(self.decoded_bytes)
+            } else {
+                [0; 2]
+            },
+            runs: split64(self.run_counts().runs),
+            run_triangles: split64(self.run_counts().run_triangles),
+            block_stored_max: if self.packer.is_some() {
+                self.largest_stored as u32
+            } else {
+                0
+            },
+            reserved: [0; 2],
             header_crc: 0,
         };
         h.set_origin(self.origin);
@@ -305,7 +355,9 @@ impl DbWriter {
             bbox: self.bbox,
             file_bytes,
             raw_bytes: self.raw_bytes,
+            decoded_bytes: self.decoded_bytes,
             blocks: self.blocks,
+            runs: self.run_counts(),
         })
     }
 

@@ -1,0 +1,652 @@
+//! Triangle runs: how version 4 stores a mesh without repeating what its
+//! records can imply.
+//!
+//! A block is still built as records (see the module documentation of
+//! [`super`]), but before it is stored every stretch of consecutive
+//! triangles of one material, or of triangular patches (a normal per
+//! vertex), becomes a *run*, as GPU meshlets are:
+//!
+//! ```text
+//! word 0   RUN (triangles) or RUN_PATCH | faces << 8
+//! word 1   material
+//! word 2   corners (1..=256): distinct vertices, with their normals
+//! word 3   bit widths of x | y << 8 | z << 16 (patches: one more word,
+//!          the normals' widths)
+//! ...      base keys: x, y, z (patches: and the normal's three)
+//! ...      the corners, each number as (key - base) in its width,
+//!          packed low bit first into words
+//! ...      three one-byte corner indices per face, padded to a word
+//! ```
+//!
+//! A coordinate's *key* is its bit pattern mapped so that integer order is
+//! the order of the numbers ([`key`]); within a run the keys of an axis
+//! span few values, so a vertex takes some 60 bits instead of 96. Nothing
+//! is rounded: reading a block expands each run back into exactly the
+//! records it came from, bounding boxes recomputed as the writer computed
+//! them, so every tracer sees the same words, bit for bit, as from a
+//! version 3 file. A face whose stored box is not the one its vertices
+//! imply, and a lone face, stay records.
+
+use crate::scene::Aabb;
+use crate::shapes::ShapeKind;
+use std::collections::HashMap;
+
+/// The codes in a run's first word where a record has its kind; no kind
+/// has them.
+pub const RUN: u32 = 0xff;
+pub const RUN_PATCH: u32 = 0xfe;
+const _: () = assert!(crate::shapes::KINDS < RUN_PATCH as usize);
+/// Corner indices are one byte.
+pub const MAX_RUN_VERTICES: usize = 256;
+const RECORD_HEADER_WORDS: usize = super::format::RECORD_HEADER_WORDS;
+
+/// The faces a run holds: records of three vertices, with or without a
+/// normal per vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Face {
+    Triangle,
+    Patch,
+}
+
+impl Face {
+    fn of_head(head: u32) -> Option<Face> {
+        if head == ShapeKind::Polygon as u32 | 3 << 8 {
+            Some(Face::Triangle)
+        } else if head == ShapeKind::Patch as u32 | 3 << 8 {
+            Some(Face::Patch)
+        } else {
+            None
+        }
+    }
+
+    fn of_code(code: u32) -> Option<Face> {
+        match code {
+            RUN => Some(Face::Triangle),
+            RUN_PATCH => Some(Face::Patch),
+            _ => None,
+        }
+    }
+
+    fn code(self) -> u32 {
+        match self {
+            Face::Triangle => RUN,
+            Face::Patch => RUN_PATCH,
+        }
+    }
+
+    /// The first word of the face's record.
+    fn head(self) -> u32 {
+        let kind = match self {
+            Face::Triangle => ShapeKind::Polygon,
+            Face::Patch => ShapeKind::Patch,
+        };
+        kind as u32 | 3 << 8
+    }
+
+    /// Numbers per corner: a position, and a normal for a patch.
+    fn numbers(self) -> usize {
+        match self {
+            Face::Triangle => 3,
+            Face::Patch => 6,
+        }
+    }
+
+    /// Words of the face's record.
+    fn record_words(self) -> usize {
+        RECORD_HEADER_WORDS + 3 * self.numbers()
+    }
+
+    /// Words before a run's corners: code and count, material, corners,
+    /// widths (a word per three numbers), base keys.
+    fn run_header_words(self) -> usize {
+        3 + self.numbers() / 3 + self.numbers()
+    }
+}
+
+/// A corner's numbers as bits: position, then normal (zeros for a
+/// triangle).
+type Corner = [u32; 6];
+
+/// The order-preserving integer of a finite `f32`'s bits (negative
+/// numbers reversed below the positive ones).
+#[inline]
+fn key(bits: u32) -> u32 {
+    if bits >> 31 == 0 {
+        bits | 0x8000_0000
+    } else {
+        !bits
+    }
+}
+
+#[inline]
+fn unkey(k: u32) -> u32 {
+    if k >> 31 == 1 { k & 0x7fff_ffff } else { !k }
+}
+
+/// The box a face's record stores: the one [`crate::shapes::Shape::bounds`]
+/// gives a polygon or a patch (its vertices', normals aside).
+#[inline]
+fn face_box(c: &[Corner; 3]) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for p in c {
+        b.add_point([p[0], p[1], p[2]].map(f32::from_bits));
+    }
+    b
+}
+
+/// The record of a face of `material` with corners `c`.
+#[inline]
+fn push_record(out: &mut Vec<u32>, face: Face, material: u32, c: &[Corner; 3]) {
+    out.push(face.head());
+    out.push(material);
+    out.extend(face_box(c).to_array().map(f32::to_bits));
+    for p in c {
+        out.extend_from_slice(&p[..3]);
+    }
+    if face == Face::Patch {
+        for p in c {
+            out.extend_from_slice(&p[3..]);
+        }
+    }
+}
+
+/// Appends bits to words, low bit first.
+struct BitWriter<'a> {
+    out: &'a mut Vec<u32>,
+    acc: u64,
+    bits: u32,
+}
+
+impl BitWriter<'_> {
+    fn put(&mut self, value: u32, width: u32) {
+        if width == 0 {
+            return;
+        }
+        self.acc |= (value as u64) << self.bits;
+        self.bits += width;
+        if self.bits >= 32 {
+            self.out.push(self.acc as u32);
+            self.acc >>= 32;
+            self.bits -= 32;
+        }
+    }
+
+    fn finish(self) {
+        if self.bits > 0 {
+            self.out.push(self.acc as u32);
+        }
+    }
+}
+
+/// Reads bits from words, low bit first; the caller has checked that
+/// the words hold every bit it asks for.
+struct BitReader<'a> {
+    words: &'a [u32],
+    next: usize,
+    acc: u64,
+    bits: u32,
+}
+
+impl BitReader<'_> {
+    #[inline]
+    fn get(&mut self, width: u32) -> u32 {
+        if width == 0 {
+            return 0;
+        }
+        if self.bits < width {
+            self.acc |= (self.words[self.next] as u64) << self.bits;
+            self.next += 1;
+            self.bits += 32;
+        }
+        let v = (self.acc & ((1u64 << width) - 1)) as u32;
+        self.acc >>= width;
+        self.bits -= width;
+        v
+    }
+}
+
+/// What packing a block did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PackCounts {
+    pub runs: u64,
+    pub run_triangles: u64,
+}
+
+/// Builds runs from a block's records; reused across blocks.
+#[derive(Default)]
+pub struct Packer {
+    /// The run being gathered: its faces, material, first record's word
+    /// offset, distinct corners and each face's corner indices.
+    face: Option<Face>,
+    material: u32,
+    first: usize,
+    corners: Vec<Corner>,
+    local: HashMap<Corner, u8>,
+    faces: Vec<[u8; 3]>,
+    pub counts: PackCounts,
+}
+
+impl Packer {
+    /// Stores the block whose records are `records` (as a writer built
+    /// them) into `out`, with runs for its triangles and patches.
+    pub fn pack(&mut self, records: &[u32], out: &mut Vec<u32>) {
+        out.clear();
+        self.clear();
+        let mut pos = 0;
+        while pos < records.len() {
+            let head = records[pos];
+            let kind = ShapeKind::from_u8((head & 0xff) as u8).expect("a record the writer built");
+            let len = RECORD_HEADER_WORDS
+                + kind
+                    .payload_words(head >> 8)
+                    .expect("a record the writer built");
+            let r = &records[pos..pos + len];
+            if !self.take(r, pos) {
+                self.close(records, out);
+                if !self.take(r, pos) {
+                    out.extend_from_slice(r);
+                }
+            }
+            pos += len;
+        }
+        self.close(records, out);
+    }
+
+    fn clear(&mut self) {
+        self.face = None;
+        self.corners.clear();
+        self.local.clear();
+        self.faces.clear();
+    }
+
+    /// Adds the record at `pos` to the run if it is a face that fits;
+    /// `false` leaves the run as it was.
+    fn take(&mut self, r: &[u32], pos: usize) -> bool {
+        let Some(face) = Face::of_head(r[0]) else {
+            return false;
+        };
+        let g = &r[RECORD_HEADER_WORDS..];
+        let corners: [Corner; 3] = std::array::from_fn(|i| {
+            std::array::from_fn(|a| match (a, face) {
+                (0..3, _) => g[3 * i + a],
+                (_, Face::Patch) => g[9 + 3 * i + a - 3],
+                (_, Face::Triangle) => 0,
+            })
+        });
+        if face_box(&corners).to_array().map(f32::to_bits)[..] != r[2..RECORD_HEADER_WORDS] {
+            return false;
+        }
+        if self.face.is_some_and(|f| f != face) || (self.face.is_some() && r[1] != self.material) {
+            return false;
+        }
+        let new = (0..3)
+            .filter(|&i| {
+                !self.local.contains_key(&corners[i]) && !corners[..i].contains(&corners[i])
+            })
+            .count();
+        if self.corners.len() + new > MAX_RUN_VERTICES {
+            return false;
+        }
+        if self.face.is_none() {
+            self.face = Some(face);
+            self.material = r[1];
+            self.first = pos;
+        }
+        let idx = corners.map(|c| {
+            let next = self.corners.len();
+            *self.local.entry(c).or_insert_with(|| {
+                self.corners.push(c);
+                next as u8
+            })
+        });
+        self.faces.push(idx);
+        true
+    }
+
+    /// Writes the run gathered so far (a lone face as its record).
+    fn close(&mut self, records: &[u32], out: &mut Vec<u32>) {
+        let Some(face) = self.face else {
+            return;
+        };
+        let n = self.faces.len();
+        if n == 1 {
+            out.extend_from_slice(&records[self.first..self.first + face.record_words()]);
+        } else {
+            let numbers = face.numbers();
+            let mut lo = [u32::MAX; 6];
+            let mut hi = [0u32; 6];
+            for c in &self.corners {
+                for a in 0..numbers {
+                    lo[a] = lo[a].min(key(c[a]));
+                    hi[a] = hi[a].max(key(c[a]));
+                }
+            }
+            let width: [u32; 6] = std::array::from_fn(|a| 32 - (hi[a] - lo[a]).leading_zeros());
+            out.push(face.code() | (n as u32) << 8);
+            out.push(self.material);
+            out.push(self.corners.len() as u32);
+            for w in width[..numbers].chunks(3) {
+                out.push(w[0] | w[1] << 8 | w[2] << 16);
+            }
+            out.extend_from_slice(&lo[..numbers]);
+            let mut w = BitWriter {
+                out,
+                acc: 0,
+                bits: 0,
+            };
+            for c in &self.corners {
+                for a in 0..numbers {
+                    w.put(key(c[a]) - lo[a], width[a]);
+                }
+            }
+            w.finish();
+            for quad in self.faces.as_flattened().chunks(4) {
+                let mut b = [0u8; 4];
+                b[..quad.len()].copy_from_slice(quad);
+                out.push(u32::from_le_bytes(b));
+            }
+            self.counts.runs += 1;
+            self.counts.run_triangles += n as u64;
+        }
+        self.clear();
+    }
+}
+
+/// Expands a stored block (`packed`, holding `objects` objects) into its
+/// records, at most `max_words` of them; describes the first problem of a
+/// corrupt block. Nothing in `packed` can make it panic.
+pub fn unpack(
+    packed: &[u32],
+    objects: u32,
+    max_words: usize,
+    out: &mut Vec<u32>,
+) -> Result<(), String> {
+    out.clear();
+    let mut pos = 0usize;
+    let mut seen = 0u64;
+    let mut corners = [[0u32; 6]; MAX_RUN_VERTICES];
+    while pos < packed.len() {
+        let head = packed[pos];
+        let Some(face) = Face::of_code(head & 0xff) else {
+            let kind = ShapeKind::from_u8((head & 0xff) as u8)
+                .ok_or_else(|| format!("record {seen} has unknown kind {}", head & 0xff))?;
+            let len = kind
+                .payload_words(head >> 8)
+                .map(|p| p + RECORD_HEADER_WORDS)
+                .ok_or_else(|| {
+                    format!("record {seen} is a {} with an invalid count", kind.name())
+                })?;
+            let r = packed
+                .get(pos..pos + len)
+                .ok_or_else(|| format!("record {seen} is cut off"))?;
+            if out.len() + len > max_words {
+                return Err("the block expands beyond its largest size".into());
+            }
+            out.extend_from_slice(r);
+            pos += len;
+            seen += 1;
+            continue;
+        };
+        let n = (head >> 8) as usize;
+        let numbers = face.numbers();
+        let header = face.run_header_words();
+        let h = packed
+            .get(pos..pos + header)
+            .ok_or_else(|| format!("the run at object {seen} is cut off"))?;
+        let (material, nv) = (h[1], h[2] as usize);
+        let width: [u32; 6] = std::array::from_fn(|a| match h.get(3 + a / 3) {
+            Some(w) if a < numbers => w >> (8 * (a % 3)) & 0xff,
+            _ => 0,
+        });
+        if n < 2
+            || !(1..=MAX_RUN_VERTICES).contains(&nv)
+            || width.iter().any(|&w| w > 32)
+            || h[3..3 + numbers / 3].iter().any(|w| w >> 24 != 0)
+        {
+            return Err(format!("the run at object {seen} has an invalid header"));
+        }
+        let base = &h[3 + numbers / 3..];
+        let corner_words = (nv * width.iter().sum::<u32>() as usize).div_ceil(32);
+        let index_words = (3 * n).div_ceil(4);
+        let start = pos + header;
+        let body = packed
+            .get(start..start + corner_words + index_words)
+            .ok_or_else(|| format!("the run at object {seen} is cut off"))?;
+        if out.len() + n * face.record_words() > max_words {
+            return Err("the block expands beyond its largest size".into());
+        }
+        let mut bits = BitReader {
+            words: &body[..corner_words],
+            next: 0,
+            acc: 0,
+            bits: 0,
+        };
+        for c in corners.iter_mut().take(nv) {
+            for a in 0..numbers {
+                c[a] = unkey(base[a].wrapping_add(bits.get(width[a])));
+            }
+        }
+        let index: &[u8] = bytemuck::cast_slice(&body[corner_words..]);
+        for t in index[..3 * n].chunks_exact(3) {
+            if t.iter().any(|&i| i as usize >= nv) {
+                return Err(format!(
+                    "the run at object {seen} names a corner it does not have"
+                ));
+            }
+            let c = [
+                corners[t[0] as usize],
+                corners[t[1] as usize],
+                corners[t[2] as usize],
+            ];
+            push_record(out, face, material, &c);
+        }
+        pos = start + corner_words + index_words;
+        seen += n as u64;
+    }
+    if seen != objects as u64 {
+        return Err(format!(
+            "the block holds {seen} objects, its header says {objects}"
+        ));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(out: &mut Vec<u32>, material: u32, v: [[f32; 3]; 3]) {
+        let c = v.map(|p| {
+            let mut c = [0; 6];
+            c[..3].copy_from_slice(&p.map(f32::to_bits));
+            c
+        });
+        push_record(out, Face::Triangle, material, &c);
+    }
+
+    /// A patch with the normals `n`.
+    fn patch(out: &mut Vec<u32>, material: u32, v: [[f32; 3]; 3], n: [[f32; 3]; 3]) {
+        let c: [Corner; 3] = std::array::from_fn(|i| {
+            let mut c = [0; 6];
+            c[..3].copy_from_slice(&v[i].map(f32::to_bits));
+            c[3..].copy_from_slice(&n[i].map(f32::to_bits));
+            c
+        });
+        push_record(out, Face::Patch, material, &c);
+    }
+
+    fn sphere(out: &mut Vec<u32>, material: u32) {
+        let kind = ShapeKind::Sphere;
+        out.push(kind as u32);
+        out.push(material);
+        out.extend([-1f32, -1., -1., 1., 1., 1.].map(f32::to_bits));
+        out.extend((0..kind.payload_words(0).unwrap()).map(|i| (i as f32).to_bits()));
+    }
+
+    /// Records and their objects, packed and unpacked again.
+    fn round_trip(records: &[u32], objects: u32) -> (Vec<u32>, PackCounts) {
+        let mut p = Packer::default();
+        let mut packed = Vec::new();
+        p.pack(records, &mut packed);
+        let mut back = Vec::new();
+        unpack(&packed, objects, records.len(), &mut back).unwrap();
+        assert_eq!(back, records);
+        (packed, p.counts)
+    }
+
+    /// A strip of `n` triangles over awkward numbers: signed zeros, both
+    /// signs, subnormals, the largest finite values.
+    fn strip(n: usize, material: u32, out: &mut Vec<u32>) {
+        strip_of(Face::Triangle, n, material, out)
+    }
+
+    fn strip_of(face: Face, n: usize, material: u32, out: &mut Vec<u32>) {
+        let odd = [
+            0.0f32,
+            -0.0,
+            1e-45,
+            -1e-45,
+            f32::MAX,
+            -f32::MAX,
+            1.5,
+            -2.25,
+            0.1,
+        ];
+        for i in 0..n {
+            let p = |j: usize| -> [f32; 3] {
+                let k = i + j;
+                [
+                    odd[k % odd.len()],
+                    k as f32 * 0.5,
+                    odd[(k * 7) % odd.len()] - k as f32,
+                ]
+            };
+            let v = [p(0), p(1), p(2)];
+            match face {
+                Face::Triangle => triangle(out, material, v),
+                // Normals as awkward as the vertices, and shared less.
+                Face::Patch => patch(out, material, v, [p(1), p(3), p(i % 4)]),
+            }
+        }
+    }
+
+    #[test]
+    fn runs_give_back_their_records_bit_for_bit() {
+        let mut r = Vec::new();
+        strip(40, 0, &mut r);
+        sphere(&mut r, 1);
+        strip(1, 0, &mut r);
+        sphere(&mut r, 1);
+        strip(30, 2, &mut r);
+        strip(30, 3, &mut r);
+        strip_of(Face::Patch, 25, 3, &mut r);
+        strip_of(Face::Patch, 1, 4, &mut r);
+        strip(30, 3, &mut r);
+        let (packed, counts) = round_trip(&r, 40 + 1 + 1 + 1 + 30 + 30 + 25 + 1 + 30);
+        assert_eq!(
+            counts,
+            PackCounts {
+                runs: 5,
+                run_triangles: 155
+            }
+        );
+        assert!(
+            packed.len() * 2 < r.len(),
+            "{} of {} words",
+            packed.len(),
+            r.len()
+        );
+    }
+
+    #[test]
+    fn a_run_closes_at_256_vertices() {
+        let mut r = Vec::new();
+        for i in 0..200 {
+            let x = i as f32;
+            triangle(&mut r, 0, [[x, 0., 0.], [x, 1., 0.], [x, 0., 1.]]);
+        }
+        let (_, counts) = round_trip(&r, 200);
+        // 85 triangles use 255 vertices; the 86th would need 258.
+        assert_eq!(counts.runs, 3);
+        assert_eq!(counts.run_triangles, 200);
+    }
+
+    #[test]
+    fn a_triangle_whose_box_is_not_its_vertices_stays_a_record() {
+        let mut r = Vec::new();
+        strip(3, 0, &mut r);
+        let at = r.len();
+        strip(1, 0, &mut r);
+        r[at + 2] = (-1000f32).to_bits();
+        strip(3, 0, &mut r);
+        let (packed, counts) = round_trip(&r, 7);
+        assert_eq!(counts.run_triangles, 6);
+        let words = Face::Triangle.record_words();
+        assert!(packed.windows(words).any(|w| w == &r[at..at + words]));
+    }
+
+    #[test]
+    fn corrupt_runs_are_errors_not_panics() {
+        let mut r = Vec::new();
+        strip(20, 0, &mut r);
+        let mut patches = Vec::new();
+        strip_of(Face::Patch, 20, 0, &mut patches);
+        let mut packed = Vec::new();
+        Packer::default().pack(&patches, &mut packed);
+        let mut out = Vec::new();
+        for cut in 0..packed.len() {
+            let _ = unpack(&packed[..cut], 20, patches.len(), &mut out);
+        }
+        for i in 0..packed.len() {
+            for v in [0, 0xfe, 0x21, 0xffff_ffff, packed[i] ^ 0x80] {
+                let mut p = packed.clone();
+                p[i] = v;
+                let _ = unpack(&p, 20, patches.len(), &mut out);
+            }
+        }
+        let mut packed = Vec::new();
+        Packer::default().pack(&r, &mut packed);
+        let mut out = Vec::new();
+        // Every truncation, and every single-word change to a few patterns.
+        for cut in 0..packed.len() {
+            let _ = unpack(&packed[..cut], 20, r.len(), &mut out);
+        }
+        for i in 0..packed.len() {
+            for v in [
+                0,
+                1,
+                0xff,
+                0x100,
+                0xffff_ffff,
+                0x2121_2121,
+                packed[i] ^ 0x80,
+            ] {
+                let mut p = packed.clone();
+                p[i] = v;
+                let _ = unpack(&p, 20, r.len(), &mut out);
+            }
+        }
+        assert!(unpack(&packed, 21, r.len(), &mut out).is_err());
+        assert!(unpack(&packed, 20, r.len() - 1, &mut out).is_err());
+        // An index past the run's vertices.
+        let mut p = packed.clone();
+        let last = p.len() - 1;
+        p[last] = 0xffff_ffff;
+        assert!(
+            unpack(&p, 20, r.len(), &mut out)
+                .unwrap_err()
+                .contains("corner")
+        );
+    }
+
+    #[test]
+    fn keys_order_numbers_and_invert() {
+        let xs = [-f32::MAX, -1.0, -1e-45, -0.0, 0.0, 1e-45, 1.0, f32::MAX];
+        for w in xs.windows(2) {
+            assert!(key(w[0].to_bits()) < key(w[1].to_bits()));
+        }
+        for x in xs {
+            assert_eq!(unkey(key(x.to_bits())), x.to_bits());
+        }
+    }
+}
