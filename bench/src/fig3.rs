@@ -52,6 +52,8 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 res.to_string(),
                 "--store-number".into(),
                 store.into(),
+                // The paper's passes: every one reads the whole database.
+                "--full-scans".into(),
                 "--depth".into(),
                 "1".into(),
                 "--width".into(),

@@ -31,6 +31,9 @@ pub struct RenderRequest {
     /// Camera, lights and material from the command line, and the
     /// defaults of meshes (its image size is the render's).
     pub setup: Setup,
+    /// Breadth-first passes read every block, as the paper's do
+    /// ([`Database::set_full_scans`]).
+    pub full_scans: bool,
 }
 
 pub struct RenderResult {
@@ -209,7 +212,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
         image: [req.options.width, req.options.height],
         ..req.setup.clone()
     };
-    let scene = prepare(
+    let mut scene = prepare(
         &req.scene,
         &PrepareOptions {
             tmp_dir: req.tmp_dir.as_deref(),
@@ -218,6 +221,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
         },
         stages,
     )?;
+    scene.db.set_full_scans(req.full_scans);
     let (mode, reason) = choose_mode(req.mode, &scene.db, req.options.frame_slots(), memory);
     let progress = stages.stage("rendering");
     let (frame, mut stats) = match mode {

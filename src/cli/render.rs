@@ -94,6 +94,11 @@ pub struct RenderArgs {
     /// (the paper's sort-and-scan of the objects)
     #[arg(long, default_value = "carry")]
     pub shading: Shading,
+    /// Breadth-first: read every block of the database in every pass, as
+    /// the paper does, instead of passing over the blocks no ray is near
+    /// (slower; the same image; for reproducing the paper's figures)
+    #[arg(long)]
+    pub full_scans: bool,
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
@@ -170,6 +175,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
     }
+    if a.full_scans && (a.coordinator.is_some() || a.local_workers.is_some()) {
+        anyhow::bail!(
+            "--full-scans is for renders in this process (the paper's experiments), not on a cluster"
+        );
+    }
     let req = RenderRequest {
         scene: SceneSource::parse(&a.scene)?,
         options: RenderOptions {
@@ -188,6 +198,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         memory: a.memory,
         store: a.store_number,
         shading: a.shading,
+        full_scans: a.full_scans,
         tmp_dir: a.tmp_dir.clone(),
         setup: a.setup.setup([a.width, a.height])?,
     };

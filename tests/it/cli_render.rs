@@ -292,3 +292,60 @@ fn breadth_first_peak_memory_stays_within_the_budget() {
         );
     }
 }
+
+/// `--full-scans` (the paper's passes, for `sray bench`): every pass reads
+/// every block, and the image is the same; a cluster refuses it.
+#[test]
+fn full_scans_read_every_block_and_change_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(d, &["convert", "spd:tetra:6", "-o", "t.sdb", "-q"]);
+    let render = |png: &str, extra: &[&str]| {
+        let mut a = vec![
+            "render",
+            "t.sdb",
+            "-o",
+            png,
+            "--mode",
+            "bf",
+            "--width",
+            "48",
+            "--height",
+            "48",
+            "--store-number",
+            "1",
+            "--memory",
+            "2MiB",
+            "--stats",
+            "s.json",
+            "-q",
+        ];
+        a.extend_from_slice(extra);
+        ok(d, &a);
+        json(&std::fs::read_to_string(d.join("s.json")).unwrap())
+    };
+    let fast = render("fast.png", &[]);
+    let full = render("full.png", &["--full-scans"]);
+    assert!(fast["db_blocks_skipped"].as_u64().unwrap() > 0, "{fast}");
+    assert_eq!(full["db_blocks_skipped"].as_u64(), Some(0), "{full}");
+    assert_eq!(fast["db_scans"], full["db_scans"]);
+    assert!(full["db_bytes_read"].as_u64() > fast["db_bytes_read"].as_u64());
+    assert_eq!(
+        std::fs::read(d.join("fast.png")).unwrap(),
+        std::fs::read(d.join("full.png")).unwrap()
+    );
+    let err = fails(
+        d,
+        &[
+            "render",
+            "t.sdb",
+            "-o",
+            "c.png",
+            "--full-scans",
+            "--local-workers",
+            "1",
+        ],
+    );
+    assert!(err.contains("--full-scans"), "{err}");
+    assert!(!d.join("c.png").exists());
+}

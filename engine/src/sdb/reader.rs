@@ -43,6 +43,9 @@ pub struct Database {
     /// Blocks store triangles as runs (version 4).
     runs: bool,
     run_counts: PackCounts,
+    /// Scans read every block, as the paper's passes do: none is passed
+    /// over ([`Database::set_full_scans`]).
+    full_scans: bool,
     file_bytes: u64,
     largest_block: usize,
     /// The largest block as stored, before compression.
@@ -229,6 +232,7 @@ impl Database {
             raw_bytes: h.raw_bytes,
             decoded_bytes,
             runs,
+            full_scans: false,
             run_counts: PackCounts {
                 runs: join64(h.runs[0], h.runs[1]),
                 run_triangles: join64(h.run_triangles[0], h.run_triangles[1]),
@@ -345,6 +349,22 @@ impl Database {
     /// Whether blocks store consecutive triangles as runs (version 4).
     pub fn has_runs(&self) -> bool {
         self.runs
+    }
+
+    /// Makes every scan read every block, as the paper's passes do, rather
+    /// than pass over the blocks a pass has no use for: slower, for
+    /// reproducing the paper's figures. Images and counts do not change.
+    pub fn set_full_scans(&mut self, on: bool) {
+        self.full_scans = on;
+    }
+
+    pub fn full_scans(&self) -> bool {
+        self.full_scans
+    }
+
+    /// Bytes of the blocks, headers and payloads: what a full scan reads.
+    pub fn blocks_bytes(&self) -> u64 {
+        self.tables_offset - HEADER_BYTES as u64
     }
 
     /// Triangle runs and the triangles they hold (zero before version 4).
@@ -646,9 +666,12 @@ impl Scan<'_> {
 
     /// Passes over the next block without reading it (a seek forward),
     /// once a complete scan of this database has learned where its blocks
-    /// lie; returns `false`, and does nothing, before then or after the
-    /// last block.
+    /// lie; returns `false`, and does nothing, before then, after the
+    /// last block, or when the database asks for full scans.
     pub fn skip_block(&mut self) -> Result<bool, Error> {
+        if self.db.full_scans {
+            return Ok(false);
+        }
         let Some(span) = self
             .db
             .layout

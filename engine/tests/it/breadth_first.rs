@@ -340,6 +340,30 @@ fn passes_leave_unread_the_blocks_no_ray_is_near() {
             if memory < 1 << 20 {
                 assert!(join_skipped > skipped, "{join_skipped} vs {skipped}");
             }
+            // The paper's passes (`--full-scans`, for `sray bench`): every
+            // pass and every join reads every block; the same image.
+            let mut full = db.clone();
+            full.set_full_scans(true);
+            let blocks_bytes = db.blocks_bytes();
+            for shading in [bf::Shading::Carry, bf::Shading::Join] {
+                let got = common::bf_render_with(
+                    &full,
+                    &opts(2, true),
+                    StoreNumber::Fixed(1),
+                    memory,
+                    shading,
+                );
+                assert_same("tetra6", "full scans", &want, &got);
+                let z = got.1.details.unwrap();
+                assert_eq!(z["db_blocks_skipped"].as_u64(), Some(0));
+                let scans = z["db_scans"].as_u64().unwrap();
+                let read = z["db_bytes_read"].as_u64().unwrap();
+                // A join stops after the last block holding a hit.
+                match shading {
+                    bf::Shading::Carry => assert_eq!(read, scans * blocks_bytes, "{scans} scans"),
+                    _ => assert!(read <= scans * blocks_bytes, "{scans} scans"),
+                }
+            }
         }
     }
 }
