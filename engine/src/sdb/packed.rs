@@ -29,7 +29,6 @@
 
 use crate::scene::Aabb;
 use crate::shapes::ShapeKind;
-use std::collections::HashMap;
 
 /// The codes in a run's first word where a record has its kind; no kind
 /// has them.
@@ -212,6 +211,63 @@ pub struct PackCounts {
     pub run_triangles: u64,
 }
 
+/// Slots of [`CornerIndex`]: four per corner a run may have.
+const INDEX_SLOTS: usize = 4 * MAX_RUN_VERTICES;
+
+/// Where each distinct corner of the run being gathered is: open
+/// addressing over a table four times the largest run, emptied by a new
+/// stamp rather than by clearing it (a writer looks up three corners per
+/// triangle, a billion triangles for tetra 15).
+struct CornerIndex {
+    stamp: u32,
+    /// Stamp and corner index of each slot; a slot of an older stamp is
+    /// empty.
+    slots: Box<[(u32, u8)]>,
+}
+
+impl Default for CornerIndex {
+    fn default() -> CornerIndex {
+        CornerIndex {
+            stamp: 1,
+            slots: vec![(0, 0); INDEX_SLOTS].into_boxed_slice(),
+        }
+    }
+}
+
+impl CornerIndex {
+    fn clear(&mut self) {
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            self.slots.fill((0, 0));
+            self.stamp = 1;
+        }
+    }
+
+    /// The index of `c` among `corners`, or the empty slot where it goes.
+    #[inline]
+    fn find(&self, corners: &[Corner], c: &Corner) -> Result<u8, usize> {
+        let h = c.iter().fold(0u64, |h, &w| {
+            (h.rotate_left(5) ^ w as u64).wrapping_mul(0x517c_c1b7_2722_0a95)
+        });
+        let mut slot = (h >> 32) as usize % INDEX_SLOTS;
+        // At most a quarter of the slots are full: the probe ends.
+        loop {
+            let (stamp, i) = self.slots[slot];
+            if stamp != self.stamp {
+                return Err(slot);
+            }
+            if corners[i as usize] == *c {
+                return Ok(i);
+            }
+            slot = (slot + 1) % INDEX_SLOTS;
+        }
+    }
+
+    fn insert(&mut self, slot: usize, i: u8) {
+        self.slots[slot] = (self.stamp, i);
+    }
+}
+
 /// Builds runs from a block's records; reused across blocks.
 #[derive(Default)]
 pub struct Packer {
@@ -221,7 +277,7 @@ pub struct Packer {
     material: u32,
     first: usize,
     corners: Vec<Corner>,
-    local: HashMap<Corner, u8>,
+    local: CornerIndex,
     faces: Vec<[u8; 3]>,
     pub counts: PackCounts,
 }
@@ -281,7 +337,8 @@ impl Packer {
         }
         let new = (0..3)
             .filter(|&i| {
-                !self.local.contains_key(&corners[i]) && !corners[..i].contains(&corners[i])
+                self.local.find(&self.corners, &corners[i]).is_err()
+                    && !corners[..i].contains(&corners[i])
             })
             .count();
         if self.corners.len() + new > MAX_RUN_VERTICES {
@@ -292,12 +349,14 @@ impl Packer {
             self.material = r[1];
             self.first = pos;
         }
-        let idx = corners.map(|c| {
-            let next = self.corners.len();
-            *self.local.entry(c).or_insert_with(|| {
+        let idx = corners.map(|c| match self.local.find(&self.corners, &c) {
+            Ok(i) => i,
+            Err(slot) => {
+                let i = self.corners.len() as u8;
+                self.local.insert(slot, i);
                 self.corners.push(c);
-                next as u8
-            })
+                i
+            }
         });
         self.faces.push(idx);
         true

@@ -196,7 +196,14 @@ impl Database {
             ));
         }
         let bbox = Aabb::from_array(h.bbox);
-        let runs = h.version >= VERSION_PACKED;
+        let run_counts = PackCounts {
+            runs: join64(h.runs[0], h.runs[1]),
+            run_triangles: join64(h.run_triangles[0], h.run_triangles[1]),
+        };
+        // A version 4 file without a run stores its records as version 3
+        // does: they are read in place (a record with a run's code is an
+        // unknown kind there, so a lying count is an error, not a misread).
+        let runs = h.version >= VERSION_PACKED && run_counts.runs > 0;
         let decoded_bytes = if runs {
             join64(h.decoded_bytes[0], h.decoded_bytes[1])
         } else {
@@ -233,10 +240,7 @@ impl Database {
             decoded_bytes,
             runs,
             full_scans: false,
-            run_counts: PackCounts {
-                runs: join64(h.runs[0], h.runs[1]),
-                run_triangles: join64(h.run_triangles[0], h.run_triangles[1]),
-            },
+            run_counts,
             file_bytes,
             largest_block: h.block_raw_max as usize,
             largest_stored,
