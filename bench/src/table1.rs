@@ -201,8 +201,9 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         "Seconds, one thread. The breadth-first shading carries each hit's surface from the \
          intersection scan (`--shading carry`, the default); \"bf shade (join)\" is the paper's \
          Pseudocode 4 (`--shading join`: hits sorted by object, joined with a scan of the objects), \
-         run as the paper runs it, every pass and join a full scan of the database (`--full-scans`; \
-         by default passes skip the blocks no ray is near). \
+         run as the paper runs it: every pass reads the whole database, and each join reads it \
+         up to the last hit object (`--full-scans`; by default passes and joins skip the blocks \
+         no ray or hit is in). \
          Two threads (\"bf 1T/2T\" is the breadth-first speed-up from one thread to two), and peak \
          memory of the one-thread runs:",
     );

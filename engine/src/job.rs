@@ -84,10 +84,8 @@ pub fn mesh_memory(budget: u64) -> Result<u64, Error> {
             fmt_bytes(MIN_MESH_MEMORY)
         )));
     }
-    let fixed = crate::input::INPUT_BYTES
-        + BUDGET_WRITE_BUFFER as u64
-        + 2 * crate::sdb::BLOCK_TARGET as u64
-        + (64 << 10);
+    let fixed =
+        crate::input::INPUT_BYTES + BUDGET_WRITE_BUFFER as u64 + DbWriter::HELD_BYTES as u64;
     Ok(budget
         .saturating_sub(fixed)
         .max(crate::mesh::builder::MIN_MEMORY))

@@ -96,7 +96,8 @@ pub struct RenderArgs {
     pub shading: Shading,
     /// Breadth-first: read every block of the database in every pass, as
     /// the paper does, instead of passing over the blocks no ray is near
-    /// (slower; the same image; for reproducing the paper's figures)
+    /// (slower; the same image; for reproducing the paper's figures; a
+    /// depth-first render reads the database once anyway)
     #[arg(long)]
     pub full_scans: bool,
     /// Intersection arithmetic: double or single

@@ -332,6 +332,15 @@ impl Packer {
         if face_box(&corners).to_array().map(f32::to_bits)[..] != r[2..RECORD_HEADER_WORDS] {
             return false;
         }
+        // Which of +0 and -0 `f32::min` and `max` return for the pair is
+        // left open (it may differ between machines), so a face whose box
+        // depends on that keeps the box it was written with.
+        if (0..3).any(|a| {
+            let zero = |bits: u32| corners.iter().any(|c| c[a] == bits);
+            zero(0) && zero(0x8000_0000)
+        }) {
+            return false;
+        }
         if self.face.is_some_and(|f| f != face) || (self.face.is_some() && r[1] != self.material) {
             return false;
         }
@@ -380,7 +389,14 @@ impl Packer {
                     hi[a] = hi[a].max(key(c[a]));
                 }
             }
-            let width: [u32; 6] = std::array::from_fn(|a| 32 - (hi[a] - lo[a]).leading_zeros());
+            // Numbers a face does not have (a triangle's normal) take none.
+            let width: [u32; 6] = std::array::from_fn(|a| {
+                if a < numbers {
+                    32 - (hi[a] - lo[a]).leading_zeros()
+                } else {
+                    0
+                }
+            });
             out.push(face.code() | (n as u32) << 8);
             out.push(self.material);
             out.push(self.corners.len() as u32);
@@ -560,12 +576,14 @@ mod tests {
     }
 
     fn strip_of(face: Face, n: usize, material: u32, out: &mut Vec<u32>) {
+        // +0 and -0 three apart: no face has both on an axis (such a face
+        // stays a record; see `a_run_of_256_corners_and_faces_of_both_zeros`).
         let odd = [
             0.0f32,
-            -0.0,
             1e-45,
-            -1e-45,
             f32::MAX,
+            -0.0,
+            -1e-45,
             -f32::MAX,
             1.5,
             -2.25,
@@ -696,6 +714,56 @@ mod tests {
                 .unwrap_err()
                 .contains("corner")
         );
+    }
+
+    #[test]
+    fn a_run_of_256_corners_and_faces_of_both_zeros() {
+        // 85 triangles of three new corners, then one of one new corner:
+        // the run holds exactly 256, the last index 255.
+        let mut r = Vec::new();
+        for i in 0..85 {
+            let x = i as f32;
+            triangle(&mut r, 0, [[x, 0., 0.], [x, 1., 0.], [x, 0., 1.]]);
+        }
+        triangle(&mut r, 0, [[0., 0., 0.], [0., 1., 0.], [9., 9., 9.]]);
+        let (packed, counts) = round_trip(&r, 86);
+        assert_eq!(counts.runs, 1);
+        assert_eq!(packed[2], 256);
+        // A face with +0 and -0 on one axis keeps its record: which of the
+        // two its box holds is the writer's machine's choice.
+        let mut r = Vec::new();
+        strip(3, 0, &mut r);
+        triangle(&mut r, 0, [[0., 1., 2.], [-0., 1., 3.], [1., 2., 2.]]);
+        triangle(&mut r, 0, [[5., -0., 2.], [6., 0., 3.], [5., 2., 2.]]);
+        strip(3, 0, &mut r);
+        let (_, counts) = round_trip(&r, 8);
+        assert_eq!(counts.run_triangles, 6);
+    }
+
+    #[test]
+    fn invalid_run_headers_are_errors() {
+        let mut r = Vec::new();
+        strip(20, 0, &mut r);
+        let mut packed = Vec::new();
+        Packer::default().pack(&r, &mut packed);
+        let mut out = Vec::new();
+        assert!(unpack(&packed, 20, r.len(), &mut out).is_ok());
+        let set = |at: usize, v: u32| {
+            let mut p = packed.clone();
+            p[at] = v;
+            p
+        };
+        for p in [
+            set(0, RUN | 1 << 8),           // a run of one face
+            set(0, RUN),                    // of none
+            set(2, 0),                      // no corners
+            set(2, 257),                    // too many
+            set(3, packed[3] & !0xff | 33), // a width above 32
+            set(3, packed[3] | 1 << 24),    // a stray byte
+        ] {
+            let e = unpack(&p, 20, r.len(), &mut out).unwrap_err();
+            assert!(e.contains("invalid header"), "{e}");
+        }
     }
 
     #[test]

@@ -215,6 +215,18 @@ impl Database {
                 "the records' expanded size is below their stored size".into(),
             ));
         }
+        if h.block_count > file_bytes / BLOCK_HEADER_BYTES as u64 {
+            return Err(err(
+                "header",
+                "the block count exceeds what the file has room for".into(),
+            ));
+        }
+        if runs && decoded_bytes > h.block_count.saturating_mul(h.block_raw_max as u64) {
+            return Err(err(
+                "header",
+                "the records' expanded size exceeds what the blocks can hold".into(),
+            ));
+        }
         let largest_stored = if runs {
             h.block_stored_max as usize
         } else {
@@ -429,6 +441,7 @@ impl Database {
             decompressor,
             words: Vec::with_capacity(self.largest_block / 4),
             packed: Vec::new(),
+            decoded: 0,
             stored: Vec::new(),
             next_index: 0,
             next_object: 0,
@@ -585,6 +598,8 @@ pub struct Scan<'d> {
     words: Vec<u32>,
     /// The block as stored, before its runs are expanded (version 4).
     packed: Vec<u32>,
+    /// Bytes of records the blocks read so far hold.
+    decoded: u64,
     stored: Vec<u8>,
     next_index: u64,
     next_object: u64,
@@ -704,6 +719,15 @@ impl Scan<'_> {
                     self.next_object, self.offset, self.db.object_count, self.db.tables_offset
                 )));
             }
+            if self.verify
+                && self.stats.blocks_skipped == 0
+                && self.decoded != self.db.decoded_bytes
+            {
+                return Err(self.err(format!(
+                    "blocks hold {} bytes of records, the header says {}",
+                    self.decoded, self.db.decoded_bytes
+                )));
+            }
             if self.verify {
                 self.db.verified.store(true, Ordering::Release);
             }
@@ -802,6 +826,7 @@ impl Scan<'_> {
                 .map_err(|m| self.err(m))?;
         }
         self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
+        self.decoded += self.words.len() as u64 * 4;
         self.stats.blocks_read += 1;
         self.offset = end;
         let index = self.next_index;
@@ -920,7 +945,7 @@ impl<'a> Block<'a> {
         }
     }
 
-    /// Uncompressed payload bytes of this block.
+    /// Bytes of this block's records (runs expanded).
     pub fn raw_bytes(&self) -> usize {
         self.words.len() * 4
     }

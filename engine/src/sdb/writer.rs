@@ -135,11 +135,10 @@ impl DbWriter {
         self
     }
 
-    /// Memory the writer holds besides its buffer: one block of records,
-    /// the block as stored and, compressing, one compressed block.
-    pub fn block_bytes(&self) -> usize {
-        BLOCK_TARGET * if self.compressor.is_some() { 3 } else { 2 } + (64 << 10)
-    }
+    /// Memory a writer holds besides its output buffer, at most: one
+    /// block of records, the block as stored, one compressed block, the
+    /// packer's tables, and room for a record past the block's target.
+    pub const HELD_BYTES: usize = 3 * BLOCK_TARGET + (96 << 10);
 
     fn run_counts(&self) -> PackCounts {
         self.packer.as_ref().map(|p| p.counts).unwrap_or_default()

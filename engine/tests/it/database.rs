@@ -520,3 +520,67 @@ fn triangle_runs_read_back_the_records_of_version_3_bit_for_bit() {
         }
     }
 }
+
+#[test]
+fn a_header_that_lies_about_runs_is_an_error() {
+    // tetra5 stores its triangles as runs, in several blocks. Each field
+    // is changed with the header's checksum made right again, as a
+    // careless tool would.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.sdb");
+    write_db(
+        &SceneSource::Spd {
+            scene: SpdScene::Tetra,
+            size: 5,
+        },
+        &path,
+        Compression::None,
+    );
+    let good = std::fs::read(&path).unwrap();
+    let db = Database::open(&path).unwrap();
+    assert!(db.has_runs() && db.block_count() > 1);
+    let bad = dir.path().join("bad.sdb");
+    // Offsets of the header's fields (sdb::format::RawHeader).
+    const BLOCK_RAW_MAX: usize = 24;
+    const DECODED_BYTES: usize = 216;
+    const RUNS: usize = 224;
+    const BLOCK_STORED_MAX: usize = 240;
+    let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    let u64_at = |b: &[u8], at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap());
+    let with = |at: usize, bytes: &[u8]| {
+        let mut b = good.clone();
+        b[at..at + bytes.len()].copy_from_slice(bytes);
+        let crc = crc32fast::hash(&b[..252]);
+        b[252..256].copy_from_slice(&crc.to_le_bytes());
+        std::fs::write(&bad, &b).unwrap();
+    };
+    let decoded = u64_at(&good, DECODED_BYTES);
+    assert_eq!(decoded, Database::open(&path).unwrap().decoded_bytes());
+    let raw_max = u32_at(&good, BLOCK_RAW_MAX);
+
+    // Caught at open.
+    with(DECODED_BYTES, &(decoded * 1000).to_le_bytes());
+    let e = Database::open(&bad).unwrap_err().to_string();
+    assert!(e.contains("expanded size"), "{e}");
+    with(BLOCK_STORED_MAX, &(raw_max + 4).to_le_bytes());
+    let e = Database::open(&bad).unwrap_err().to_string();
+    assert!(e.contains("block size"), "{e}");
+    // Caught by the first scan.
+    for (at, bytes, says) in [
+        (
+            DECODED_BYTES,
+            (decoded + 4).to_le_bytes().to_vec(),
+            "bytes of records",
+        ),
+        (RUNS, 0u64.to_le_bytes().to_vec(), "unknown kind"),
+        (
+            BLOCK_STORED_MAX,
+            64u32.to_le_bytes().to_vec(),
+            "out of range",
+        ),
+    ] {
+        with(at, &bytes);
+        let e = read_all(&bad).unwrap_err().to_string();
+        assert!(e.contains(says), "{e}");
+    }
+}
