@@ -27,7 +27,6 @@
 //! version 3 file. A face whose stored box is not the one its vertices
 //! imply, and a lone face, stay records.
 
-use crate::scene::Aabb;
 use crate::shapes::ShapeKind;
 
 /// The codes in a run's first word where a record has its kind; no kind
@@ -122,29 +121,50 @@ fn unkey(k: u32) -> u32 {
     if k >> 31 == 1 { k & 0x7fff_ffff } else { !k }
 }
 
-/// The box a face's record stores: the one [`crate::shapes::Shape::bounds`]
-/// gives a polygon or a patch (its vertices', normals aside).
-#[inline]
-fn face_box(c: &[Corner; 3]) -> Aabb {
-    let mut b = Aabb::EMPTY;
-    for p in c {
-        b.add_point([p[0], p[1], p[2]].map(f32::from_bits));
+/// The box of a face's positions (normals aside), as bits in a record's
+/// order (least x, y, z, then greatest), as a reader rebuilds it: by plain
+/// comparisons, whose result is the same on every machine (`f32::min`
+/// leaves open which of +0 and -0 it returns). A writer packs a face only
+/// if this is the box its record holds, so the reader gives back that
+/// record's very bits.
+#[inline(always)]
+fn face_box(c: &[Corner; 3]) -> [u32; 6] {
+    let mut b = [0u32; 6];
+    for a in 0..3 {
+        let x = c.map(|p| f32::from_bits(p[a]));
+        let lo = if x[1] < x[0] { x[1] } else { x[0] };
+        let lo = if x[2] < lo { x[2] } else { lo };
+        let hi = if x[1] > x[0] { x[1] } else { x[0] };
+        let hi = if x[2] > hi { x[2] } else { hi };
+        b[a] = lo.to_bits();
+        b[3 + a] = hi.to_bits();
     }
     b
 }
 
 /// The record of a face of `material` with corners `c`.
 #[inline]
+#[cfg(test)]
 fn push_record(out: &mut Vec<u32>, face: Face, material: u32, c: &[Corner; 3]) {
-    out.push(face.head());
-    out.push(material);
-    out.extend(face_box(c).to_array().map(f32::to_bits));
-    for p in c {
-        out.extend_from_slice(&p[..3]);
+    let at = out.len();
+    out.resize(at + face.record_words(), 0);
+    write_record(&mut out[at..], face, material, c);
+}
+
+/// Writes the record of a face of `material` with corners `c` into `rec`
+/// (exactly the record's length).
+#[inline(always)]
+fn write_record(rec: &mut [u32], face: Face, material: u32, c: &[Corner; 3]) {
+    rec[0] = face.head();
+    rec[1] = material;
+    rec[2..RECORD_HEADER_WORDS].copy_from_slice(&face_box(c));
+    let g = &mut rec[RECORD_HEADER_WORDS..];
+    for (i, p) in c.iter().enumerate() {
+        g[3 * i..3 * i + 3].copy_from_slice(&p[..3]);
     }
     if face == Face::Patch {
-        for p in c {
-            out.extend_from_slice(&p[3..]);
+        for (i, p) in c.iter().enumerate() {
+            g[9 + 3 * i..12 + 3 * i].copy_from_slice(&p[3..]);
         }
     }
 }
@@ -329,16 +349,7 @@ impl Packer {
                 (_, Face::Triangle) => 0,
             })
         });
-        if face_box(&corners).to_array().map(f32::to_bits)[..] != r[2..RECORD_HEADER_WORDS] {
-            return false;
-        }
-        // Which of +0 and -0 `f32::min` and `max` return for the pair is
-        // left open (it may differ between machines), so a face whose box
-        // depends on that keeps the box it was written with.
-        if (0..3).any(|a| {
-            let zero = |bits: u32| corners.iter().any(|c| c[a] == bits);
-            zero(0) && zero(0x8000_0000)
-        }) {
+        if face_box(&corners)[..] != r[2..RECORD_HEADER_WORDS] {
             return false;
         }
         if self.face.is_some_and(|f| f != face) || (self.face.is_some() && r[1] != self.material) {
@@ -502,6 +513,9 @@ pub fn unpack(
             }
         }
         let index: &[u8] = bytemuck::cast_slice(&body[corner_words..]);
+        let words = face.record_words();
+        out.reserve(n * words);
+        let mut rec = [0u32; RECORD_HEADER_WORDS + 18];
         for t in index[..3 * n].chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {
                 return Err(format!(
@@ -513,7 +527,8 @@ pub fn unpack(
                 corners[t[1] as usize],
                 corners[t[2] as usize],
             ];
-            push_record(out, face, material, &c);
+            write_record(&mut rec[..words], face, material, &c);
+            out.extend_from_slice(&rec[..words]);
         }
         pos = start + corner_words + index_words;
         seen += n as u64;
@@ -529,6 +544,8 @@ pub fn unpack(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const TRIANGLE_HEAD_FOR_TESTS: u32 = ShapeKind::Polygon as u32 | 3 << 8;
 
     fn triangle(out: &mut Vec<u32>, material: u32, v: [[f32; 3]; 3]) {
         let c = v.map(|p| {
@@ -729,15 +746,25 @@ mod tests {
         let (packed, counts) = round_trip(&r, 86);
         assert_eq!(counts.runs, 1);
         assert_eq!(packed[2], 256);
-        // A face with +0 and -0 on one axis keeps its record: which of the
-        // two its box holds is the writer's machine's choice.
+        // Faces with +0 and -0 on one axis, whose boxes `Shape::bounds`
+        // made (with `f32::min` and `max`, which leave open which zero
+        // they return): whether packed or kept, they read back as stored.
         let mut r = Vec::new();
         strip(3, 0, &mut r);
-        triangle(&mut r, 0, [[0., 1., 2.], [-0., 1., 3.], [1., 2., 2.]]);
-        triangle(&mut r, 0, [[5., -0., 2.], [6., 0., 3.], [5., 2., 2.]]);
+        for v in [
+            [[0., 1., 2.], [-0., 1., 3.], [1., 2., 2.]],
+            [[-0., 1., 2.], [0., 1., 3.], [-1., 2., 2.]],
+            [[5., -0., 2.], [6., 0., 3.], [5., 2., 2.]],
+            [[5., 0., 2.], [6., -0., 3.], [5., -2., 2.]],
+        ] {
+            let shape = crate::shapes::Shape::Polygon(crate::shapes::Polygon { vertices: &v });
+            r.push(TRIANGLE_HEAD_FOR_TESTS);
+            r.push(0);
+            r.extend(shape.bounds().to_array().map(f32::to_bits));
+            r.extend(v.as_flattened().iter().map(|x| x.to_bits()));
+        }
         strip(3, 0, &mut r);
-        let (_, counts) = round_trip(&r, 8);
-        assert_eq!(counts.run_triangles, 6);
+        round_trip(&r, 10);
     }
 
     #[test]
