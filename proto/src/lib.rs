@@ -28,4 +28,7 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// summary, the jobs running in the heartbeat's answer).
 /// 6: raw record chunks (`RecordChunk.raw`).
 /// 7: a contribution's `run` (its colour goes to the slots after it too).
-pub const PROTOCOL_VERSION: u32 = 7;
+/// 8: scenes travel as object database version 4 (triangle runs), which a
+/// worker of protocol 7 cannot read: it is refused when it registers, not
+/// when its first task fails.
+pub const PROTOCOL_VERSION: u32 = 8;
