@@ -286,6 +286,23 @@ fn every_shared_mesh_reads_converts_and_renders_whole() {
             assert_eq!(a[key], b[key], "{name}: {key}");
         }
         assert_eq!(b["lights"], 2, "{name}: the default key and fill lights");
+        // Stored as triangle runs (database version 4), which expand to
+        // the records' size.
+        assert_eq!(b["version"], 4, "{name}");
+        assert_eq!(b["layout"], "triangle runs", "{name}");
+        let objects = b["objects"].as_u64().unwrap();
+        assert!(
+            b["run_triangles"].as_u64().unwrap() * 100 >= objects * 95,
+            "{name}: {b}"
+        );
+        assert!(b["runs"].as_u64().unwrap() * 2 <= objects, "{name}: {b}");
+        assert!(
+            b["raw_bytes"].as_u64().unwrap() * 2 < b["decoded_bytes"].as_u64().unwrap(),
+            "{name}: {b}"
+        );
+        let text = ok(d, &["info", "m.sdb"]);
+        assert!(text.contains("layout       triangle runs"), "{text}");
+        assert!(text.contains("bytes per triangle"), "{text}");
         // The default view shows the whole model, filling a fair part of
         // the image.
         ok(
