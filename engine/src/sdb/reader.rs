@@ -374,10 +374,6 @@ impl Database {
         self.full_scans = on;
     }
 
-    pub fn full_scans(&self) -> bool {
-        self.full_scans
-    }
-
     /// Bytes of the blocks, headers and payloads: what a full scan reads.
     pub fn blocks_bytes(&self) -> u64 {
         self.tables_offset - HEADER_BYTES as u64
@@ -611,12 +607,11 @@ pub struct Scan<'d> {
     learned: Vec<BlockSpan>,
 }
 
-/// Which buffer a block's bytes are read into.
-#[derive(Clone, Copy)]
-enum Buffer {
-    Words,
-    Packed,
-    Stored,
+/// The buffer a block's payload (decompressed) goes to: version 4 blocks
+/// to `packed`, to be expanded into `words`; older ones to `words`, as
+/// they are.
+fn payload<'a>(runs: bool, packed: &'a mut Vec<u32>, words: &'a mut Vec<u32>) -> &'a mut Vec<u32> {
+    if runs { packed } else { words }
 }
 
 /// One decoded, validated block.
@@ -650,17 +645,15 @@ impl Scan<'_> {
         }
     }
 
-    fn read_exact_or_err(&mut self, into: Buffer, len: usize) -> Result<(), Error> {
-        let r = match into {
-            Buffer::Words => {
-                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.words[..]);
-                self.file.read_exact(&mut bytes[..len])
-            }
-            Buffer::Packed => {
-                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.packed[..]);
-                self.file.read_exact(&mut bytes[..len])
-            }
-            Buffer::Stored => self.file.read_exact(&mut self.stored[..len]),
+    /// Reads `len` bytes into the compressed block's buffer (`stored`) or
+    /// into the payload's.
+    fn read_exact_or_err(&mut self, stored: bool, len: usize) -> Result<(), Error> {
+        let r = if stored {
+            self.file.read_exact(&mut self.stored[..len])
+        } else {
+            let target = payload(self.db.runs, &mut self.packed, &mut self.words);
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut target[..]);
+            self.file.read_exact(&mut bytes[..len])
         };
         r.map_err(|e| {
             if e.kind() == std::io::ErrorKind::UnexpectedEof {
@@ -763,29 +756,17 @@ impl Scan<'_> {
         if end > self.db.tables_offset {
             return Err(self.err("block runs into the tables: the block is corrupt"));
         }
-        // Version 4 blocks are read into `packed` and expanded into
-        // `words`; older ones are read into `words` as they are.
         let runs = self.db.runs;
-        let target = if runs {
-            &mut self.packed
-        } else {
-            &mut self.words
-        };
-        target.resize(raw_len.div_ceil(4).max(1), 0);
-        let into = if runs { Buffer::Packed } else { Buffer::Words };
+        payload(runs, &mut self.packed, &mut self.words).resize(raw_len.div_ceil(4).max(1), 0);
         let compressed = self.decompressor.is_some();
         if compressed {
             self.stored.resize(stored_len, 0);
-            self.read_exact_or_err(Buffer::Stored, stored_len)?;
+            self.read_exact_or_err(true, stored_len)?;
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&self.stored[..stored_len]) != h.crc
             {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
-            let target = if runs {
-                &mut self.packed
-            } else {
-                &mut self.words
-            };
+            let target = payload(runs, &mut self.packed, &mut self.words);
             let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut target[..]);
             let n = self
                 .decompressor
@@ -800,8 +781,9 @@ impl Scan<'_> {
             if stored_len != raw_len {
                 return Err(self.err("stored and raw lengths differ in an uncompressed block"));
             }
-            self.read_exact_or_err(into, raw_len)?;
-            let bytes: &[u8] = bytemuck::cast_slice(if runs { &self.packed } else { &self.words });
+            self.read_exact_or_err(false, raw_len)?;
+            let bytes: &[u8] =
+                bytemuck::cast_slice(payload(runs, &mut self.packed, &mut self.words));
             if VERIFY_CHECKSUMS && self.verify && h.compute_crc(&bytes[..raw_len]) != h.crc {
                 return Err(self.err("checksum mismatch: the block is corrupt"));
             }
