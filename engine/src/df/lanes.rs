@@ -1,8 +1,8 @@
 //! The rays of a packet, one array per coordinate, and the tests of one
 //! candidate against several of them.
 
-use super::DfScene;
 use super::packet::Hits;
+use super::{Candidate, DfScene};
 use crate::intersect::{RayQ, triangle};
 use crate::math::{Real, V3, Vec3, Vec3Ext};
 use crate::render::KindCounts;
@@ -167,19 +167,60 @@ impl<R> Rays<R> {
 /// lane's test is exactly the scalar test of the candidate's kind.
 pub struct LaneTests<'a, 't> {
     s: &'a DfScene<'t>,
-    shape: &'a Shape<'t>,
-    bbox: &'a Aabb,
+    c: Candidate<'a, 't>,
     id: u32,
 }
 
 impl<'a, 't> LaneTests<'a, 't> {
     #[inline(always)]
-    pub fn new(s: &'a DfScene<'t>, id: u32) -> Self {
-        LaneTests {
-            s,
-            shape: &s.shapes[id as usize],
-            bbox: &s.bboxes[id as usize],
-            id,
+    pub fn new(s: &'a DfScene<'t>, c: Candidate<'a, 't>, id: u32) -> Self {
+        LaneTests { s, c, id }
+    }
+
+    /// Tests the lanes of `m`, each up to `to`'s limit for it, and
+    /// gives `to` each hit: each lane's test is the scalar test of the
+    /// object's kind.
+    #[inline(always)]
+    fn hits<R: Real>(&self, rays: &Rays<R>, m: Mask, to: &mut impl LaneSink<R>) {
+        match &self.c {
+            Candidate::Face { v, .. } => {
+                let [a, b, c] = *v;
+                for i in lanes(m) {
+                    if let Some(t) =
+                        triangle::intersect(a, b, c, &rays.q[i], rays.rmin[i], to.limit(i))
+                    {
+                        to.hit(i, t);
+                    }
+                }
+            }
+            Candidate::Record(h) => match &h.shape {
+                Shape::Sphere(sp) => {
+                    for i in lanes(m) {
+                        let (q, lo, hi) = (&rays.q[i], rays.rmin[i], to.limit(i));
+                        if let Some(t) = SphereKind::intersect(sp, None, &h.bbox, q, lo, hi) {
+                            to.hit(i, t);
+                        }
+                    }
+                }
+                Shape::Polygon(p) if p.vertices.len() == 3 => {
+                    let (a, b, c) = (p.vertices[0], p.vertices[1], p.vertices[2]);
+                    for i in lanes(m) {
+                        if let Some(t) =
+                            triangle::intersect(a, b, c, &rays.q[i], rays.rmin[i], to.limit(i))
+                        {
+                            to.hit(i, t);
+                        }
+                    }
+                }
+                _ => {
+                    for i in lanes(m) {
+                        let (q, lo, hi) = (&rays.q[i], rays.rmin[i], to.limit(i));
+                        if let Some(t) = self.c.intersect(self.s, q, lo, hi) {
+                            to.hit(i, t);
+                        }
+                    }
+                }
+            },
         }
     }
 
@@ -193,74 +234,71 @@ impl<'a, 't> LaneTests<'a, 't> {
         best: &mut Hits<R>,
         tests: &mut KindCounts,
     ) -> Mask {
-        tests.add_n(self.shape.kind(), m.count_ones() as u64);
-        let id = self.id;
-        let mut won: Mask = 0;
-        match self.shape {
-            Shape::Sphere(sp) => {
-                for i in lanes(m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
-                    if let Some(t) = SphereKind::intersect(sp, None, self.bbox, q, lo, hi) {
-                        won |= (best.offer(i, t, id) as Mask) << i;
-                    }
-                }
-            }
-            Shape::Polygon(p) if p.vertices.len() == 3 => {
-                let (a, b, c) = (p.vertices[0], p.vertices[1], p.vertices[2]);
-                for i in lanes(m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
-                    if let Some(t) = triangle::intersect(a, b, c, q, lo, hi) {
-                        won |= (best.offer(i, t, id) as Mask) << i;
-                    }
-                }
-            }
-            _ => {
-                for i in lanes(m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], best.upper[i]);
-                    if let Some(t) = self.s.intersect(id, q, lo, hi) {
-                        won |= (best.offer(i, t, id) as Mask) << i;
-                    }
-                }
-            }
-        }
-        won
+        tests.add_n(self.c.kind(), m.count_ones() as u64);
+        let mut to = Nearest {
+            best,
+            id: self.id,
+            won: 0,
+        };
+        self.hits(rays, m, &mut to);
+        to.won
     }
 
     /// Clears from `*m` the lanes the candidate blocks (a hit anywhere in
     /// their segments); whether it blocked any.
     #[inline(always)]
     pub fn blocks<R: Real>(&self, rays: &Rays<R>, m: &mut Mask, tests: &mut KindCounts) -> bool {
-        tests.add_n(self.shape.kind(), m.count_ones() as u64);
-        let mut hit: Mask = 0;
-        match self.shape {
-            Shape::Sphere(sp) => {
-                for i in lanes(*m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
-                    if SphereKind::intersect(sp, None, self.bbox, q, lo, hi).is_some() {
-                        hit |= 1 << i;
-                    }
-                }
-            }
-            Shape::Polygon(p) if p.vertices.len() == 3 => {
-                let (a, b, c) = (p.vertices[0], p.vertices[1], p.vertices[2]);
-                for i in lanes(*m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
-                    if triangle::intersect(a, b, c, q, lo, hi).is_some() {
-                        hit |= 1 << i;
-                    }
-                }
-            }
-            _ => {
-                for i in lanes(*m) {
-                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], rays.rmax[i]);
-                    if self.s.intersect(self.id, q, lo, hi).is_some() {
-                        hit |= 1 << i;
-                    }
-                }
-            }
-        }
-        *m &= !hit;
-        hit != 0
+        tests.add_n(self.c.kind(), m.count_ones() as u64);
+        let mut to = Blocked {
+            rmax: &rays.rmax,
+            hit: 0,
+        };
+        self.hits(rays, *m, &mut to);
+        *m &= !to.hit;
+        to.hit != 0
+    }
+}
+
+/// Where [`LaneTests::hits`] gets each lane's limit and puts its hits.
+trait LaneSink<R> {
+    fn limit(&self, i: usize) -> R;
+    fn hit(&mut self, i: usize, t: R);
+}
+
+/// Hits offered to each lane's best so far.
+struct Nearest<'b, R> {
+    best: &'b mut Hits<R>,
+    id: u32,
+    won: Mask,
+}
+
+impl<R: Real> LaneSink<R> for Nearest<'_, R> {
+    #[inline(always)]
+    fn limit(&self, i: usize) -> R {
+        self.best.upper[i]
+    }
+
+    #[inline(always)]
+    fn hit(&mut self, i: usize, t: R) {
+        self.won |= (self.best.offer(i, t, self.id) as Mask) << i;
+    }
+}
+
+/// Lanes blocked anywhere along their segments.
+struct Blocked<'r, R> {
+    rmax: &'r [R; LANES],
+    hit: Mask,
+}
+
+impl<R: Real> LaneSink<R> for Blocked<'_, R> {
+    #[inline(always)]
+    fn limit(&self, i: usize) -> R {
+        self.rmax[i]
+    }
+
+    #[inline(always)]
+    fn hit(&mut self, i: usize, _: R) {
+        self.hit |= 1 << i;
     }
 }
 

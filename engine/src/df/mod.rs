@@ -16,34 +16,28 @@ pub use object_grid::ObjectGrid;
 use crate::error::Error;
 use crate::grid::{DEFAULT_DENSITY, GridStat, MAX_CELLS, choose_resolution, plan_groups};
 use crate::intersect::RayQ;
+use crate::intersect::{Surface, triangle};
 use crate::math::Real;
-use crate::objects::ObjectTable;
+use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
 use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
-use crate::shapes::{Prepared, Shape};
+use crate::shapes::{KindCounts, Patch, Polygon, Prepared, Shape, ShapeKind};
 use polygon::EdgeBins;
 use std::time::Instant;
 
-/// `prep_of` entry of objects without prepared data.
+/// `prep` or `bins` of a record without that data.
 const PLAIN: u32 = u32::MAX;
 
-/// A scene ready for depth-first tracing, borrowing its objects' geometry
-/// from an [`ObjectTable`].
+/// A scene ready for depth-first tracing, borrowing its objects from an
+/// [`ObjectStore`].
 pub struct DfScene<'t> {
-    /// Each object's shape, decoded once.
-    pub shapes: Vec<Shape<'t>>,
-    pub bboxes: Vec<Aabb>,
-    /// Index into `preps` of each object's prepared test data, or
-    /// `PLAIN` for objects with none worth keeping (spheres, triangles).
-    pub prep_of: Vec<u32>,
-    pub preps: Vec<Prepared>,
-    /// Index into `edge_bins` of each many-sided polygon's binned edges,
-    /// or `PLAIN`.
-    pub bins_of: Vec<u32>,
-    pub edge_bins: Vec<EdgeBins>,
-    pub material_of: Vec<u32>,
+    pub objects: &'t ObjectStore,
+    /// The store's records, decoded once (faces need no decoding).
+    records: Vec<Held<'t>>,
+    preps: Vec<Prepared>,
+    edge_bins: Vec<EdgeBins>,
     pub materials: Vec<Material>,
     /// One grid per object group; the last holds the large objects, if any.
     pub grids: Vec<ObjectGrid>,
@@ -54,6 +48,65 @@ pub struct DfScene<'t> {
     /// rays skip a candidate only when it lies at least this far from them.
     pub slack: f64,
     pub tune: Tune,
+}
+
+/// An object held as a record, decoded.
+pub struct Held<'t> {
+    shape: Shape<'t>,
+    bbox: Aabb,
+    material: u32,
+    /// Index into `preps` of its prepared test data, or `PLAIN` for
+    /// objects with none worth keeping (spheres, triangles).
+    prep: u32,
+    /// Index into `edge_bins` of a many-sided polygon's binned edges, or
+    /// `PLAIN`.
+    bins: u32,
+}
+
+/// One object, ready to be tested: a face's corners, or a decoded record.
+#[derive(Clone, Copy)]
+pub enum Candidate<'a, 't> {
+    /// A triangle or a triangular patch (the test is the same).
+    Face {
+        kind: ShapeKind,
+        v: [[f32; 3]; 3],
+    },
+    Record(&'a Held<'t>),
+}
+
+impl Candidate<'_, '_> {
+    #[inline(always)]
+    pub fn kind(&self) -> ShapeKind {
+        match self {
+            Candidate::Face { kind, .. } => *kind,
+            Candidate::Record(h) => h.shape.kind(),
+        }
+    }
+
+    #[inline(always)]
+    pub fn bbox(&self) -> Aabb {
+        match self {
+            Candidate::Face { v, .. } => Aabb::of_face(v),
+            Candidate::Record(h) => h.bbox,
+        }
+    }
+
+    /// Nearest `t` in `(t_min, t_max)` at which `ray` meets the object:
+    /// its kind's test, through its prepared data. A face's test is a
+    /// three-vertex polygon's and a three-vertex patch's.
+    #[inline(always)]
+    pub fn intersect<R: Real>(&self, s: &DfScene, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
+        match self {
+            Candidate::Face { v, .. } => triangle::intersect(v[0], v[1], v[2], ray, t_min, t_max),
+            Candidate::Record(h) => match (h.bins, &h.shape) {
+                (PLAIN, shape) => shape.intersect(s.prep(h), &h.bbox, ray, t_min, t_max),
+                (b, Shape::Polygon(p)) => {
+                    s.edge_bins[b as usize].intersect(p.vertices, &h.bbox, ray, t_min, t_max)
+                }
+                (_, shape) => shape.intersect(s.prep(h), &h.bbox, ray, t_min, t_max),
+            },
+        }
+    }
 }
 
 /// Knobs of the packet tracer. The defaults were chosen by instruction
@@ -94,23 +147,28 @@ impl Default for Tune {
 pub fn estimate_bytes(db: &Database) -> u64 {
     let n = db.object_count();
     let cells = (n as f64 * DEFAULT_DENSITY).min(MAX_CELLS as f64) as u64;
-    // Records and offsets; decoded shapes, boxes and materials; voxel
-    // starts and about two voxel entries per object; if voxels are
-    // crowded, their hierarchies (about one 32-byte node per two objects);
-    // a mailbox per thread.
-    ObjectTable::estimate_bytes(db)
-        + (std::mem::size_of::<Shape<'_>>() + std::mem::size_of::<Aabb>() + 8) as u64 * n
-        + 4 * cells
-        + 8 * n
-        + 16 * n
+    let faces = db.run_counts().run_triangles;
+    // The objects; records decoded (shapes, boxes, materials); a bit per
+    // voxel, a count per 64, a start per listing voxel (fewer than the
+    // objects, but for tiny scenes) and about three entries per object;
+    // the hierarchies of crowded voxels (rare but for dense models in
+    // coarse grids: about one 32-byte node per eight objects); a mailbox
+    // per thread.
+    ObjectStore::estimate_bytes(db)
+        + size_of::<Held<'_>>() as u64 * (n - faces)
+        + cells / 8
+        + cells / 16
+        + 4 * cells.min(n)
+        + 12 * n
+        + 4 * n
         + 4 * n * crate::sys::cpus() as u64
 }
 
 impl<'t> DfScene<'t> {
-    /// Decodes the objects and builds the grids (the preprocess).
+    /// Decodes the records and builds the grids (the preprocess).
     pub fn new(
         db: &Database,
-        objects: &'t ObjectTable,
+        objects: &'t ObjectStore,
         opts: &RenderOptions,
     ) -> Result<DfScene<'t>, Error> {
         opts.validate()?;
@@ -122,18 +180,15 @@ impl<'t> DfScene<'t> {
                  render breadth-first (--mode bf)"
             )));
         }
-        let mut shapes = Vec::with_capacity(n);
-        let mut bboxes = Vec::with_capacity(n);
-        let mut material_of = Vec::with_capacity(n);
-        let mut prep_of = Vec::with_capacity(n);
+        let mut records = Vec::with_capacity(objects.records());
         let mut preps = Vec::new();
-        let mut bins_of = Vec::with_capacity(n);
         let mut edge_bins = Vec::new();
         for id in 0..n as u32 {
-            let o = objects.get(id);
-            shapes.push(o.shape);
-            bboxes.push(o.bbox);
-            material_of.push(o.material);
+            let Slot::Record(r) = objects.slot(id) else {
+                continue;
+            };
+            debug_assert_eq!(r as usize, records.len());
+            let o = objects.record(r, id);
             let prep = o.shape.prepare();
             let bins = match (&o.shape, &prep) {
                 (Shape::Polygon(p), Some(Prepared::Polygon(plane))) => {
@@ -141,28 +196,28 @@ impl<'t> DfScene<'t> {
                 }
                 _ => None,
             };
-            match prep {
-                None => prep_of.push(PLAIN),
-                Some(p) => {
-                    prep_of.push(preps.len() as u32);
-                    preps.push(p);
-                }
+            let mut held = Held {
+                shape: o.shape,
+                bbox: o.bbox,
+                material: o.material,
+                prep: PLAIN,
+                bins: PLAIN,
+            };
+            if let Some(p) = prep {
+                held.prep = preps.len() as u32;
+                preps.push(p);
             }
-            match bins {
-                None => bins_of.push(PLAIN),
-                Some(b) => {
-                    bins_of.push(edge_bins.len() as u32);
-                    edge_bins.push(b);
-                }
+            if let Some(b) = bins {
+                held.bins = edge_bins.len() as u32;
+                edge_bins.push(b);
             }
+            records.push(held);
         }
         let plan = plan_groups(db.sizes(), db.density(), opts.multiple_grids);
         // Each object's group, worked out once (each grid's build looks
         // at every object twice).
-        let group: Vec<u8> = bboxes
-            .iter()
-            .map(|b| plan.partition.group(b) as u8)
-            .collect();
+        let mut group: Vec<u8> = Vec::with_capacity(n);
+        objects.each_bbox(&mut |_, b| group.push(plan.partition.group(&b) as u8));
         let mut grids = Vec::with_capacity(plan.bounds.len());
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(trace::thread_count(opts))
@@ -173,14 +228,18 @@ impl<'t> DfScene<'t> {
                 (0, GridRes::Fixed(r)) => r,
                 _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
-            grids.push(ObjectGrid::build(&bboxes, bounds, res, &pool, |id| {
+            grids.push(ObjectGrid::build(objects, bounds, res, &pool, |id| {
                 group[id] as usize == g
             })?);
         }
-        for (id, b) in bboxes.iter().enumerate() {
-            if !grids[group[id] as usize].spec.holds(b) {
-                return Err(crate::grid::outside_its_grid(db, id as u64));
+        let mut outside = None;
+        objects.each_bbox(&mut |id, b| {
+            if outside.is_none() && !grids[group[id as usize] as usize].spec.holds(&b) {
+                outside = Some(id);
             }
+        });
+        if let Some(id) = outside {
+            return Err(crate::grid::outside_its_grid(db, id as u64));
         }
         let eps = epsilon(&db.bbox(), opts.precision);
         // Single precision rounds a position to about 6e-8 of its size;
@@ -203,13 +262,10 @@ impl<'t> DfScene<'t> {
         }
         let slack = 1e-5 * scale;
         Ok(DfScene {
-            shapes,
-            bboxes,
-            prep_of,
+            objects,
+            records,
             preps,
-            bins_of,
             edge_bins,
-            material_of,
             materials: header.materials.clone(),
             grids,
             shade: ShadeScene::new(header, opts.max_depth, eps),
@@ -219,27 +275,82 @@ impl<'t> DfScene<'t> {
         })
     }
 
-    /// Prepared test data of object `id`, if any was kept.
+    /// Prepared test data of a record, if any was kept.
     #[inline(always)]
-    pub fn prep(&self, id: u32) -> Option<&Prepared> {
-        match self.prep_of[id as usize] {
+    fn prep(&self, h: &Held) -> Option<&Prepared> {
+        match h.prep {
             PLAIN => None,
             i => Some(&self.preps[i as usize]),
         }
     }
 
-    /// Nearest `t` in `(t_min, t_max)` at which `ray` meets object `id`:
-    /// the object's kind's test, through its prepared data.
+    /// Number of objects.
+    pub fn len(&self) -> usize {
+        self.objects.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.objects.is_empty()
+    }
+
+    /// Object `id`, ready to be tested.
     #[inline(always)]
-    pub fn intersect<R: Real>(&self, id: u32, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
-        let i = id as usize;
-        match (self.bins_of[i], &self.shapes[i]) {
-            (PLAIN, shape) => shape.intersect(self.prep(id), &self.bboxes[i], ray, t_min, t_max),
-            (b, Shape::Polygon(p)) => {
-                self.edge_bins[b as usize].intersect(p.vertices, &self.bboxes[i], ray, t_min, t_max)
-            }
-            (_, shape) => shape.intersect(self.prep(id), &self.bboxes[i], ray, t_min, t_max),
+    pub fn candidate(&self, id: u32) -> Candidate<'_, 't> {
+        match self.objects.slot(id) {
+            Slot::Face(f) => Candidate::Face {
+                kind: if f.patch {
+                    ShapeKind::Patch
+                } else {
+                    ShapeKind::Polygon
+                },
+                v: self.objects.positions(&f),
+            },
+            Slot::Record(r) => Candidate::Record(&self.records[r as usize]),
         }
+    }
+
+    /// Tests object `id` (counting the test by kind): the nearest `t` in
+    /// `(t_min, t_max)` at which `ray` meets it.
+    #[inline(always)]
+    pub fn test<R: Real>(
+        &self,
+        id: u32,
+        ray: &RayQ<R>,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> Option<R> {
+        let c = self.candidate(id);
+        tests.add(c.kind());
+        c.intersect(self, ray, t_min, t_max)
+    }
+
+    /// The surface of object `id` at `ray`'s hit at `t`, and its material.
+    pub fn surface(&self, id: u32, ray: &RayQ<f64>, t: f64) -> (Surface, &Material) {
+        let (surface, material) = match self.objects.slot(id) {
+            Slot::Face(f) => {
+                let vertices = self.objects.positions(&f);
+                let shape = if f.patch {
+                    let normals = self.objects.normals(&f);
+                    Shape::Patch(Patch {
+                        vertices: &vertices,
+                        normals: &normals,
+                    })
+                    .surface(ray, t)
+                } else {
+                    Shape::Polygon(Polygon {
+                        vertices: &vertices,
+                    })
+                    .surface(ray, t)
+                };
+                (shape, f.material)
+            }
+            Slot::Record(r) => {
+                let h = &self.records[r as usize];
+                (h.shape.surface(ray, t), h.material)
+            }
+        };
+        (surface, &self.materials[material as usize])
     }
 
     pub fn grid_stats(&self) -> Vec<GridStat> {
@@ -271,7 +382,7 @@ pub fn render(
 ) -> Result<DfOutput, Error> {
     let t0 = Instant::now();
     progress.set_message("loading objects, building grids");
-    let objects = ObjectTable::load(db, progress)?;
+    let objects = ObjectStore::load(db, progress)?;
     let scene = DfScene::new(db, &objects, opts)?;
     let preprocess = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
@@ -355,7 +466,7 @@ mod tests {
     fn a_crowded_grid_of_one_voxel_gives_the_same_image() {
         let dir = tempfile::tempdir().unwrap();
         let db = crowd(dir.path());
-        let objects = ObjectTable::load(&db, &NoProgress).unwrap();
+        let objects = ObjectStore::load(&db, &NoProgress).unwrap();
         for precision in [Precision::Double, Precision::Single] {
             let opts = RenderOptions {
                 width: 32,
@@ -379,7 +490,7 @@ mod tests {
                 });
                 b
             });
-            let one = ObjectGrid::build(&s.bboxes, &all, [1, 1, 1], &pool, |_| true).unwrap();
+            let one = ObjectGrid::build(&objects, &all, [1, 1, 1], &pool, |_| true).unwrap();
             assert!(one.single_cell() && one.nested_voxels == 1);
             s.grids.push(one);
             let (got, ..) = trace::render(&s, &opts, &NoProgress).unwrap();

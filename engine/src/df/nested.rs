@@ -20,6 +20,7 @@
 //! wins does not depend on the order of the tests (nearest, ties to the
 //! smaller id).
 
+use super::object_grid::Boxes;
 use crate::math::Vec3;
 use crate::scene::Aabb;
 
@@ -74,6 +75,11 @@ impl Hierarchies {
         self.objects.reserve_exact(objects);
     }
 
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.nodes.len() * size_of::<Node>() + self.objects.len() * 4
+    }
+
     /// Nodes in all the hierarchies.
     pub fn nodes(&self) -> usize {
         self.nodes.len()
@@ -109,10 +115,10 @@ impl Hierarchies {
     /// and one pass, where splitting by the widest spread of centres at
     /// each level moved every object once per level (and cost the dragon
     /// scene twice the build time for the same number of tests).
-    pub fn build(&mut self, ids: &[u32], bboxes: &[Aabb]) -> u32 {
+    pub fn build(&mut self, ids: &[u32], boxes: &(impl Boxes + ?Sized)) -> u32 {
         let mut centres = Aabb::EMPTY;
         for &id in ids {
-            centres.add_point(centre(&bboxes[id as usize]));
+            centres.add_point(centre(&boxes.bbox(id)));
         }
         let scale: [f32; 3] = std::array::from_fn(|i| {
             let e = centres.max[i] - centres.min[i];
@@ -121,7 +127,7 @@ impl Hierarchies {
         let mut order: Vec<(u32, u32)> = ids
             .iter()
             .map(|&id| {
-                let c = centre(&bboxes[id as usize]);
+                let c = centre(&boxes.bbox(id));
                 let q: [u32; 3] = std::array::from_fn(|i| {
                     (((c[i] - centres.min[i]) * scale[i]) as u32).min(1023)
                 });
@@ -136,16 +142,16 @@ impl Hierarchies {
             first: 0,
             count: 0,
         });
-        self.split(root, &order, bboxes);
+        self.split(root, &order, boxes);
         NESTED | root as u32
     }
 
     /// Makes `node` the tree of `items` (in curve order); returns its box.
-    fn split(&mut self, node: usize, items: &[(u32, u32)], bboxes: &[Aabb]) -> Aabb {
+    fn split(&mut self, node: usize, items: &[(u32, u32)], boxes: &(impl Boxes + ?Sized)) -> Aabb {
         if items.len() <= LEAF {
             let mut bbox = Aabb::EMPTY;
             for &(_, id) in items {
-                bbox.union(&bboxes[id as usize]);
+                bbox.union(&boxes.bbox(id));
             }
             self.nodes[node] = Node {
                 bbox,
@@ -168,8 +174,8 @@ impl Hierarchies {
         let blank = self.nodes[node];
         self.nodes.push(blank);
         self.nodes.push(blank);
-        let a = self.split(left, &items[..mid], bboxes);
-        let b = self.split(left + 1, &items[mid..], bboxes);
+        let a = self.split(left, &items[..mid], boxes);
+        let b = self.split(left + 1, &items[mid..], boxes);
         let mut bbox = a;
         bbox.union(&b);
         // The axis along which the children lie furthest apart orders
@@ -317,7 +323,7 @@ mod tests {
         let boxes = unit_boxes(1000);
         let ids: Vec<u32> = (0..1000).collect();
         let mut h = Hierarchies::default();
-        let e = h.build(&ids, &boxes);
+        let e = h.build(&ids, boxes.as_slice());
         assert_ne!(e & NESTED, 0);
         let mut seen = vec![0u32; 1000];
         // Descend everywhere, carrying the box entered last: each object
@@ -351,7 +357,7 @@ mod tests {
         let boxes = unit_boxes(1000);
         let ids: Vec<u32> = (0..1000).collect();
         let mut h = Hierarchies::default();
-        let e = h.build(&ids, &boxes);
+        let e = h.build(&ids, boxes.as_slice());
         let o = Vec3::new(-1.0, 3.25, 4.25);
         let d = Vec3::new(1.0, 0.0, 0.0);
         let inv = Vec3::new(1.0, f64::INFINITY, f64::INFINITY);
@@ -417,7 +423,7 @@ mod tests {
         ];
         let ids: Vec<u32> = (0..100).collect();
         let mut h = Hierarchies::default();
-        let e = h.build(&ids, &boxes);
+        let e = h.build(&ids, boxes.as_slice());
         let mut n = 0;
         h.visit(e, 0, (), &mut |x| {
             if let Entry::Object(..) = x {

@@ -1,18 +1,68 @@
 use super::nested::{Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use crate::error::Error;
 use crate::grid::GridSpec;
+use crate::objects::ObjectStore;
 use crate::scene::Aabb;
 use rayon::prelude::*;
 
+/// Objects' bounding boxes by id, as a grid's build reads them.
+pub trait Boxes: Sync {
+    fn count(&self) -> usize;
+    fn bbox(&self, id: u32) -> Aabb;
+
+    /// Gives `f` every object's id and box, in id order.
+    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
+        for id in 0..self.count() as u32 {
+            f(id, self.bbox(id));
+        }
+    }
+}
+
+impl Boxes for [Aabb] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    fn bbox(&self, id: u32) -> Aabb {
+        self[id as usize]
+    }
+}
+
+impl Boxes for ObjectStore {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    #[inline]
+    fn bbox(&self, id: u32) -> Aabb {
+        ObjectStore::bbox(self, id)
+    }
+
+    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
+        self.each_bbox(f)
+    }
+}
+
 /// A uniform grid listing, per voxel, the objects whose bounding box
-/// overlaps it: one flat array of object ids and the start of each voxel's
-/// run (count, prefix-sum, fill), in object id order within a voxel. A
-/// voxel listing more than [`MIN_OBJECTS`] objects lists instead one entry
-/// tagged [`NESTED`], a hierarchy of boxes over them (see [`super::nested`]).
+/// overlaps it: one flat array of object ids and the start of each
+/// listing voxel's run (mark, count, prefix-sum, fill), in object id order
+/// within a voxel. A voxel listing more than [`MIN_OBJECTS`] objects lists
+/// instead one entry tagged [`NESTED`], a hierarchy of boxes over them
+/// (see [`super::nested`]).
+///
+/// Only voxels that list something have a start: a bit per voxel says
+/// which, and a count per 64 voxels ranks them. A grid sized for a
+/// surface is mostly empty voxels; a start for each of them cost the
+/// dragon 16 bytes per triangle, more than its triangles.
 pub struct ObjectGrid {
     pub spec: GridSpec,
-    pub start: Vec<u32>,
-    pub items: Vec<u32>,
+    /// A bit per voxel, set if it lists anything.
+    occupied: Vec<u64>,
+    /// Listing voxels before each word of `occupied`.
+    before: Vec<u32>,
+    /// Start in `items` of each listing voxel's entries, and their end.
+    start: Vec<u32>,
+    items: Vec<u32>,
     pub objects: u64,
     nested: Hierarchies,
     /// Voxels with a hierarchy, and the object entries they replace.
@@ -24,7 +74,7 @@ impl ObjectGrid {
     /// Builds the grid over `bounds` for the objects (by id) `member` selects;
     /// `pool` builds the crowded voxels' hierarchies.
     pub fn build(
-        bboxes: &[Aabb],
+        boxes: &(impl Boxes + ?Sized),
         bounds: &Aabb,
         res: [u32; 3],
         pool: &rayon::ThreadPool,
@@ -32,16 +82,12 @@ impl ObjectGrid {
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
         let cells = spec.cells();
-        let mut count = vec![0u32; cells + 1];
-        let mut total: u64 = 0;
-        let mut n = 0u64;
         let each = |f: &mut dyn FnMut(u32, usize)| {
-            for (id, b) in bboxes.iter().enumerate() {
-                let id = id as u32;
+            boxes.each(&mut |id, b| {
                 if !member(id as usize) {
-                    continue;
+                    return;
                 }
-                if let Some((lo, hi)) = spec.cell_range(b) {
+                if let Some((lo, hi)) = spec.cell_range(&b) {
                     for z in lo[2]..=hi[2] {
                         for y in lo[1]..=hi[1] {
                             let row = spec.index([lo[0], y, z]);
@@ -51,10 +97,12 @@ impl ObjectGrid {
                         }
                     }
                 }
-            }
+            })
         };
+        let mut occupied = vec![0u64; cells.div_ceil(64)];
+        let mut total: u64 = 0;
         each(&mut |_, c| {
-            count[c] += 1;
+            occupied[c >> 6] |= 1 << (c & 63);
             total += 1;
         });
         if total > u32::MAX as u64 {
@@ -62,43 +110,66 @@ impl ObjectGrid {
                 "the grid would list {total} object-voxel pairs; choose a coarser --grid-res"
             )));
         }
-        // Exclusive prefix sum: count becomes each voxel's start.
+        let mut listing = 0u32;
+        let before: Vec<u32> = occupied
+            .iter()
+            .map(|w| {
+                let b = listing;
+                listing += w.count_ones();
+                b
+            })
+            .collect();
+        let rank = |c: usize| {
+            let w = occupied[c >> 6];
+            before[c >> 6] as usize + (w & ((1 << (c & 63)) - 1)).count_ones() as usize
+        };
+        let mut start = vec![0u32; listing as usize + 1];
+        each(&mut |_, c| start[rank(c)] += 1);
+        // Exclusive prefix sum: counts become each listing voxel's start.
         let mut acc = 0u32;
-        for c in count.iter_mut() {
+        for c in start.iter_mut() {
             let k = *c;
             *c = acc;
             acc += k;
         }
-        let mut fill = count.clone();
+        let mut fill = start.clone();
         let mut items = vec![0u32; total as usize];
-        let mut last = u32::MAX;
+        let (mut n, mut last) = (0u64, u32::MAX);
         each(&mut |id, c| {
-            items[fill[c] as usize] = id;
-            fill[c] += 1;
+            let k = rank(c);
+            items[fill[k] as usize] = id;
+            fill[k] += 1;
             if id != last {
                 last = id;
                 n += 1;
             }
         });
+        drop(fill);
         let mut grid = ObjectGrid {
             spec,
-            start: count,
+            occupied,
+            before,
+            start,
             items,
             objects: n,
             nested: Hierarchies::default(),
             nested_voxels: 0,
             nested_entries: 0,
         };
-        grid.nest(bboxes, pool)?;
+        grid.nest(boxes, pool)?;
         Ok(grid)
     }
 
     /// Gives each voxel of more than [`MIN_OBJECTS`] objects a hierarchy,
     /// the voxels shared out among the threads of `pool`.
-    fn nest(&mut self, bboxes: &[Aabb], pool: &rayon::ThreadPool) -> Result<(), Error> {
-        let cells = self.start.len() - 1;
-        let crowded: Vec<usize> = (0..cells)
-            .filter(|&c| self.cell(c).len() > MIN_OBJECTS)
+    fn nest(
+        &mut self,
+        boxes: &(impl Boxes + ?Sized),
+        pool: &rayon::ThreadPool,
+    ) -> Result<(), Error> {
+        // By listing voxel (the index of its start).
+        let crowded: Vec<usize> = (0..self.start.len() - 1)
+            .filter(|&k| self.list(k).len() > MIN_OBJECTS)
             .collect();
         if crowded.is_empty() {
             return Ok(());
@@ -110,7 +181,7 @@ impl ObjectGrid {
                 .map(|&c| {
                     let ids = &items[start[c] as usize..start[c + 1] as usize];
                     let mut h = Hierarchies::default();
-                    h.build(ids, bboxes);
+                    h.build(ids, boxes);
                     h
                 })
                 .collect()
@@ -158,14 +229,36 @@ impl ObjectGrid {
 
     #[inline(always)]
     pub fn single_cell(&self) -> bool {
-        self.start.len() == 2
+        self.spec.res == [1, 1, 1]
+    }
+
+    /// The entries of the `k`th listing voxel.
+    #[inline(always)]
+    fn list(&self, k: usize) -> &[u32] {
+        &self.items[self.start[k] as usize..self.start[k + 1] as usize]
     }
 
     /// The entries of voxel `index`: object ids, and hierarchies tagged
     /// [`NESTED`] (see [`ObjectGrid::visit`]).
     #[inline(always)]
     pub fn cell(&self, index: usize) -> &[u32] {
-        &self.items[self.start[index] as usize..self.start[index + 1] as usize]
+        let (w, bit) = (self.occupied[index >> 6], 1u64 << (index & 63));
+        if w & bit == 0 {
+            return &[];
+        }
+        self.list(self.before[index >> 6] as usize + (w & (bit - 1)).count_ones() as usize)
+    }
+
+    /// Entries listed, and voxels listing any.
+    pub fn sizes(&self) -> (usize, usize) {
+        (self.items.len(), self.start.len() - 1)
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> u64 {
+        (8 * self.occupied.len()
+            + 4 * (self.before.len() + self.start.len() + self.items.len())
+            + self.nested.bytes()) as u64
     }
 
     /// Gives `f` the objects of voxel `index` with state `state`: listed
@@ -192,5 +285,83 @@ impl ObjectGrid {
             }
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every voxel lists exactly the objects whose box overlaps it, in id
+    /// order, whether it is the first or last of its word of 64 voxels,
+    /// and an empty voxel lists none; a crowded voxel lists one
+    /// hierarchy.
+    #[test]
+    fn each_voxel_lists_the_objects_overlapping_it() {
+        let mut x: u64 = 5;
+        let mut next = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 40) as f32 / (1u64 << 24) as f32
+        };
+        // Small boxes spread thinly, some wide ones, and a crowd in one
+        // corner.
+        let mut boxes: Vec<Aabb> = (0..300)
+            .map(|i| {
+                let c = [next(), next(), next()];
+                let r = if i % 50 == 0 { 0.3 } else { 0.01 };
+                Aabb {
+                    min: c.map(|v| v - r),
+                    max: c.map(|v| v + r),
+                }
+            })
+            .collect();
+        boxes.extend((0..100).map(|_| Aabb {
+            min: [0.001; 3],
+            max: [0.002; 3],
+        }));
+        let bounds = Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        for res in [[1, 1, 1], [7, 9, 10], [64, 3, 2], [13, 13, 13]] {
+            let g = ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, |_| true).unwrap();
+            let mut listing = 0;
+            for index in 0..g.spec.cells() {
+                let want: Vec<u32> = (0..boxes.len() as u32)
+                    .filter(|&id| {
+                        g.spec
+                            .cell_range(&boxes[id as usize])
+                            .is_some_and(|(lo, hi)| {
+                                (lo[0]..=hi[0]).any(|x| {
+                                    (lo[1]..=hi[1]).any(|y| {
+                                        (lo[2]..=hi[2]).any(|z| g.spec.index([x, y, z]) == index)
+                                    })
+                                })
+                            })
+                    })
+                    .collect();
+                listing += !want.is_empty() as usize;
+                let got = g.cell(index);
+                if want.len() > MIN_OBJECTS {
+                    assert!(
+                        got.len() == 1 && got[0] & NESTED != 0,
+                        "{res:?} voxel {index}"
+                    );
+                } else {
+                    assert_eq!(got, want.as_slice(), "{res:?} voxel {index}");
+                }
+            }
+            assert_eq!(g.sizes().1, listing, "{res:?}");
+            assert!(
+                res == [1, 1, 1] || listing < g.spec.cells(),
+                "{res:?}: no empty voxel"
+            );
+        }
     }
 }

@@ -652,7 +652,12 @@ pub fn nearest<R: Real>(
                 Entry::Object(id, lm) => {
                     if sc.mail[id as usize] != stamp {
                         sc.mail[id as usize] = stamp;
-                        LaneTests::new(s, id).nearest(rays, lm, best, &mut sc.tests);
+                        LaneTests::new(s, s.candidate(id), id).nearest(
+                            rays,
+                            lm,
+                            best,
+                            &mut sc.tests,
+                        );
                     }
                     Some(lm)
                 }
@@ -679,13 +684,18 @@ pub fn nearest<R: Real>(
                         .filter(|&lm| lm != 0),
                     Entry::Object(id, lm) => {
                         let i = id as usize;
-                        if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
+                        if sc.mail[i] == stamp {
+                            return Some(lm);
+                        }
+                        let c = s.candidate(id);
+                        let bbox = c.bbox();
+                        if !slab.meets(&bbox) {
                             return Some(lm);
                         }
                         sc.mail[i] = stamp;
-                        let t = lm & plan.lanes_meeting(&s.bboxes[i]);
+                        let t = lm & plan.lanes_meeting(&bbox);
                         if t != 0 {
-                            found |= LaneTests::new(s, id).nearest(rays, t, best, &mut sc.tests);
+                            found |= LaneTests::new(s, c, id).nearest(rays, t, best, &mut sc.tests);
                         }
                         Some(lm)
                     }
@@ -762,7 +772,11 @@ pub fn occluded<R: Real>(
                         sc.mail[id as usize] = stamp;
                         let mut t = lm & *m;
                         let before = t;
-                        if LaneTests::new(s, id).blocks(rays, &mut t, &mut sc.tests) {
+                        if LaneTests::new(s, s.candidate(id), id).blocks(
+                            rays,
+                            &mut t,
+                            &mut sc.tests,
+                        ) {
                             *last = id;
                             *m &= !(before & !t);
                         }
@@ -788,16 +802,21 @@ pub fn occluded<R: Real>(
                         .filter(|&lm| lm != 0),
                     Entry::Object(id, lm) => {
                         let i = id as usize;
-                        if sc.mail[i] == stamp || !slab.meets(&s.bboxes[i]) {
+                        if sc.mail[i] == stamp {
+                            return Some(lm);
+                        }
+                        let c = s.candidate(id);
+                        let bbox = c.bbox();
+                        if !slab.meets(&bbox) {
                             return Some(lm);
                         }
                         sc.mail[i] = stamp;
-                        let mut t = lm & live & plan.lanes_meeting(&s.bboxes[i]);
+                        let mut t = lm & live & plan.lanes_meeting(&bbox);
                         if t == 0 {
                             return Some(lm);
                         }
                         let before = t;
-                        if LaneTests::new(s, id).blocks(rays, &mut t, &mut sc.tests) {
+                        if LaneTests::new(s, c, id).blocks(rays, &mut t, &mut sc.tests) {
                             *last = id;
                             live &= !(before & !t);
                             blocked |= before & !t;

@@ -98,9 +98,7 @@ fn test_nearest<R: Real>(
         return;
     }
     *m = stamp;
-    let shape = &s.shapes[id as usize];
-    sc.tests.add(shape.kind());
-    if let Some(t) = s.intersect(id, q, rmin, best.upper[lane]) {
+    if let Some(t) = s.test(id, q, rmin, best.upper[lane], &mut sc.tests) {
         best.offer(lane, t, id);
     }
 }
@@ -203,7 +201,5 @@ fn blocks<R: Real>(
         return false;
     }
     *m = stamp;
-    let shape = &s.shapes[id as usize];
-    sc.tests.add(shape.kind());
-    s.intersect(id, q, rmin, rmax).is_some()
+    s.test(id, q, rmin, rmax, &mut sc.tests).is_some()
 }

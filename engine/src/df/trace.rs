@@ -165,7 +165,7 @@ fn render_in<R: Real>(
             .enumerate()
             .map_init(
                 || {
-                    let mut sc = Scratch::<R>::new(scene.shapes.len(), lights, max_depth);
+                    let mut sc = Scratch::<R>::new(scene.len(), lights, max_depth);
                     sc.profile = opts.profile;
                     sc
                 },
@@ -312,14 +312,12 @@ fn trace_packet<R: Real>(
         let (slot, weight) = (carry.slot[i], carry.weight[i]);
         // Objects of the database are the only primitives here.
         if let Some(id) = best.prim[i].object_index() {
-            let id = id as usize;
             if depth == 1 {
                 sc.rays.eye_hit_rays += 1;
             }
             let (o, d) = (rays.o(i), rays.d(i));
-            let surf = s.shapes[id].surface(&RayQ::from_vec3(o, d), best.t[i]);
+            let (surf, mat) = s.surface(id, &RayQ::from_vec3(o, d), best.t[i]);
             points[i] = surf.p;
-            let mat = &s.materials[s.material_of[id] as usize];
             shade(
                 &s.shade,
                 d,
@@ -495,7 +493,7 @@ fn occluded_all<R: Real>(
     let cached = sc.shadow_cache[slot];
     let mut open = all;
     if cached != NO_OBJECT {
-        LaneTests::new(s, cached).blocks(rays, &mut open, &mut sc.tests);
+        LaneTests::new(s, s.candidate(cached), cached).blocks(rays, &mut open, &mut sc.tests);
     }
     let mut lit = open;
     let mut rest = open;

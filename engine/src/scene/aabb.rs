@@ -42,6 +42,24 @@ impl Aabb {
         ]
     }
 
+    /// The box of a triangle's corners by plain comparisons, whose result
+    /// is the same on every machine (`f32::min` leaves open which of +0
+    /// and -0 it returns). A version 4 database packs a face only if this
+    /// is the box its record holds, so the box can be rebuilt rather than
+    /// kept, bit for bit.
+    #[inline(always)]
+    pub fn of_face(v: &[[f32; 3]; 3]) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for a in 0..3 {
+            let x = [v[0][a], v[1][a], v[2][a]];
+            let lo = if x[1] < x[0] { x[1] } else { x[0] };
+            b.min[a] = if x[2] < lo { x[2] } else { lo };
+            let hi = if x[1] > x[0] { x[1] } else { x[0] };
+            b.max[a] = if x[2] > hi { x[2] } else { hi };
+        }
+        b
+    }
+
     pub fn add_point(&mut self, p: [f32; 3]) {
         for i in 0..3 {
             self.min[i] = self.min[i].min(p[i]);

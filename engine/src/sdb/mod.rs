@@ -27,8 +27,9 @@ mod read_ahead;
 mod reader;
 mod writer;
 
+pub use format::RECORD_HEADER_WORDS;
 pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
-pub use packed::PackCounts;
+pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};

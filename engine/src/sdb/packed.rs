@@ -27,6 +27,7 @@
 //! version 3 file. A face whose stored box is not the one its vertices
 //! imply, and a lone face, stay records.
 
+use crate::scene::Aabb;
 use crate::shapes::ShapeKind;
 
 /// The codes in a run's first word where a record has its kind; no kind
@@ -129,17 +130,8 @@ fn unkey(k: u32) -> u32 {
 /// record's very bits.
 #[inline(always)]
 fn face_box(c: &[Corner; 3]) -> [u32; 6] {
-    let mut b = [0u32; 6];
-    for a in 0..3 {
-        let x = c.map(|p| f32::from_bits(p[a]));
-        let lo = if x[1] < x[0] { x[1] } else { x[0] };
-        let lo = if x[2] < lo { x[2] } else { lo };
-        let hi = if x[1] > x[0] { x[1] } else { x[0] };
-        let hi = if x[2] > hi { x[2] } else { hi };
-        b[a] = lo.to_bits();
-        b[3 + a] = hi.to_bits();
-    }
-    b
+    let v = c.map(|p| [p[0], p[1], p[2]].map(f32::from_bits));
+    Aabb::of_face(&v).to_array().map(f32::to_bits)
 }
 
 /// The record of a face of `material` with corners `c`.
@@ -288,56 +280,58 @@ impl CornerIndex {
     }
 }
 
-/// Builds runs from a block's records; reused across blocks.
+/// Consecutive faces of one kind and material gathered with their
+/// distinct corners (at most [`MAX_RUN_VERTICES`]): what a writer stores
+/// as a run, and what the depth-first tracer holds in memory for a mesh.
 #[derive(Default)]
-pub struct Packer {
-    /// The run being gathered: its faces, material, first record's word
-    /// offset, distinct corners and each face's corner indices.
+pub struct RunGather {
+    /// The faces' kind, material and first record's word offset (none
+    /// while the run is empty).
     face: Option<Face>,
     material: u32,
     first: usize,
     corners: Vec<Corner>,
     local: CornerIndex,
     faces: Vec<[u8; 3]>,
-    pub counts: PackCounts,
 }
 
-impl Packer {
-    /// Stores the block whose records are `records` (as a writer built
-    /// them) into `out`, with runs for its triangles and patches.
-    pub fn pack(&mut self, records: &[u32], out: &mut Vec<u32>) {
-        out.clear();
-        self.clear();
-        let mut pos = 0;
-        while pos < records.len() {
-            let head = records[pos];
-            let kind = ShapeKind::from_u8((head & 0xff) as u8).expect("a record the writer built");
-            let len = RECORD_HEADER_WORDS
-                + kind
-                    .payload_words(head >> 8)
-                    .expect("a record the writer built");
-            let r = &records[pos..pos + len];
-            if !self.take(r, pos) {
-                self.close(records, out);
-                if !self.take(r, pos) {
-                    out.extend_from_slice(r);
-                }
-            }
-            pos += len;
-        }
-        self.close(records, out);
-    }
-
-    fn clear(&mut self) {
+impl RunGather {
+    pub fn clear(&mut self) {
         self.face = None;
         self.corners.clear();
         self.local.clear();
         self.faces.clear();
     }
 
-    /// Adds the record at `pos` to the run if it is a face that fits;
-    /// `false` leaves the run as it was.
-    fn take(&mut self, r: &[u32], pos: usize) -> bool {
+    pub fn is_empty(&self) -> bool {
+        self.face.is_none()
+    }
+
+    /// Whether the run's faces are patches (a normal per corner).
+    pub fn is_patch(&self) -> bool {
+        self.face == Some(Face::Patch)
+    }
+
+    pub fn material(&self) -> u32 {
+        self.material
+    }
+
+    /// The distinct corners as bits: position, then normal (zeros for a
+    /// triangle).
+    pub fn corners(&self) -> &[[u32; 6]] {
+        &self.corners
+    }
+
+    /// Each face's three indices into [`Self::corners`].
+    pub fn faces(&self) -> &[[u8; 3]] {
+        &self.faces
+    }
+
+    /// Adds the record `r` (at word `pos` of its block) to the run if it is
+    /// a face whose box is the one its vertices imply, of the run's kind
+    /// and material, and its new corners fit; `false` leaves the run as it
+    /// was.
+    pub fn take(&mut self, r: &[u32], pos: usize) -> bool {
         let Some(face) = Face::of_head(r[0]) else {
             return false;
         };
@@ -381,20 +375,54 @@ impl Packer {
         self.faces.push(idx);
         true
     }
+}
+
+/// Builds runs from a block's records; reused across blocks.
+#[derive(Default)]
+pub struct Packer {
+    run: RunGather,
+    pub counts: PackCounts,
+}
+
+impl Packer {
+    /// Stores the block whose records are `records` (as a writer built
+    /// them) into `out`, with runs for its triangles and patches.
+    pub fn pack(&mut self, records: &[u32], out: &mut Vec<u32>) {
+        out.clear();
+        self.run.clear();
+        let mut pos = 0;
+        while pos < records.len() {
+            let head = records[pos];
+            let kind = ShapeKind::from_u8((head & 0xff) as u8).expect("a record the writer built");
+            let len = RECORD_HEADER_WORDS
+                + kind
+                    .payload_words(head >> 8)
+                    .expect("a record the writer built");
+            let r = &records[pos..pos + len];
+            if !self.run.take(r, pos) {
+                self.close(records, out);
+                if !self.run.take(r, pos) {
+                    out.extend_from_slice(r);
+                }
+            }
+            pos += len;
+        }
+        self.close(records, out);
+    }
 
     /// Writes the run gathered so far (a lone face as its record).
     fn close(&mut self, records: &[u32], out: &mut Vec<u32>) {
-        let Some(face) = self.face else {
+        let Some(face) = self.run.face else {
             return;
         };
-        let n = self.faces.len();
+        let n = self.run.faces.len();
         if n == 1 {
-            out.extend_from_slice(&records[self.first..self.first + face.record_words()]);
+            out.extend_from_slice(&records[self.run.first..self.run.first + face.record_words()]);
         } else {
             let numbers = face.numbers();
             let mut lo = [u32::MAX; 6];
             let mut hi = [0u32; 6];
-            for c in &self.corners {
+            for c in &self.run.corners {
                 for a in 0..numbers {
                     lo[a] = lo[a].min(key(c[a]));
                     hi[a] = hi[a].max(key(c[a]));
@@ -409,8 +437,8 @@ impl Packer {
                 }
             });
             out.push(face.code() | (n as u32) << 8);
-            out.push(self.material);
-            out.push(self.corners.len() as u32);
+            out.push(self.run.material);
+            out.push(self.run.corners.len() as u32);
             for w in width[..numbers].chunks(3) {
                 out.push(w[0] | w[1] << 8 | w[2] << 16);
             }
@@ -420,13 +448,13 @@ impl Packer {
                 acc: 0,
                 bits: 0,
             };
-            for c in &self.corners {
+            for c in &self.run.corners {
                 for a in 0..numbers {
                     w.put(key(c[a]) - lo[a], width[a]);
                 }
             }
             w.finish();
-            for quad in self.faces.as_flattened().chunks(4) {
+            for quad in self.run.faces.as_flattened().chunks(4) {
                 let mut b = [0u8; 4];
                 b[..quad.len()].copy_from_slice(quad);
                 out.push(u32::from_le_bytes(b));
@@ -434,7 +462,7 @@ impl Packer {
             self.counts.runs += 1;
             self.counts.run_triangles += n as u64;
         }
-        self.clear();
+        self.run.clear();
     }
 }
 

@@ -13,10 +13,11 @@ use crate::common;
 
 use sray_engine::intersect::RayQ;
 use sray_engine::math::{Real, Vec3};
-use sray_engine::objects::ObjectTable;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, Precision, ShadeScene, Spawn, epsilon, shade};
+use sray_engine::scene::Aabb;
 use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::shapes::OwnedShape;
 use sray_engine::shapes::intersect;
 use sray_engine::source::SceneSource;
 
@@ -34,10 +35,28 @@ struct Tally {
     lost_blockers: u64,
 }
 
+/// Every object of a database, each owning its geometry: a brute-force
+/// search needs no grid.
+struct Objects(Vec<(OwnedShape, Aabb, u32)>);
+
+impl Objects {
+    fn load(db: &Database) -> Objects {
+        let mut all = Vec::new();
+        let mut scan = db.scan().unwrap();
+        while let Some(b) = scan.next_block().unwrap() {
+            all.extend(
+                b.objects()
+                    .map(|o| (OwnedShape::from_shape(&o.shape), o.bbox, o.material)),
+            );
+        }
+        Objects(all)
+    }
+}
+
 /// Nearest hit of `ray` in `(t_min, t_max)` over all objects, ties to the
 /// smaller id as in the tracers.
 fn nearest<R: Real>(
-    objs: &ObjectTable,
+    objs: &Objects,
     ray: &RayQ<f64>,
     t_min: f64,
     t_max: f64,
@@ -45,15 +64,15 @@ fn nearest<R: Real>(
 ) -> Option<(u32, f64)> {
     let q = ray.cast::<R>();
     let mut best: Option<(u32, f64)> = None;
-    for id in 0..objs.len() as u32 {
+    for (id, (shape, bbox, _)) in objs.0.iter().enumerate() {
+        let id = id as u32;
         if Some(id) == skip {
             continue;
         }
-        let o = objs.get(id);
         let limit = best.map_or(t_max, |b| b.1);
         if let Some(t) = intersect::<R>(
-            &o.shape,
-            &o.bbox,
+            &shape.shape(),
+            bbox,
             &q,
             R::from_f64(t_min),
             R::from_f64(limit),
@@ -67,12 +86,7 @@ fn nearest<R: Real>(
     best
 }
 
-fn measure<R: Real>(
-    db: &Database,
-    objs: &ObjectTable,
-    precision: Precision,
-    eps_scale: f64,
-) -> Tally {
+fn measure<R: Real>(db: &Database, objs: &Objects, precision: Precision, eps_scale: f64) -> Tally {
     let h = db.scene();
     let eps = epsilon(&db.bbox(), precision) * eps_scale;
     let size = db.bbox().diagonal();
@@ -86,9 +100,9 @@ fn measure<R: Real>(
             let Some((id, t)) = nearest::<R>(objs, &eye, 0.0, f64::INFINITY, None) else {
                 continue;
             };
-            let o = objs.get(id);
-            let surf = o.shape.surface(&eye, t);
-            let m = &h.materials[o.material as usize];
+            let (shape, _, material) = &objs.0[id as usize];
+            let surf = shape.shape().surface(&eye, t);
+            let m = &h.materials[*material as usize];
             let mut spawned: Vec<(Vec3, f64, bool)> = Vec::new();
             shade(&sc, d, 1, 1.0, &surf, m, &mut |s| match s {
                 Spawn::Shadow { dir, dist, .. } => spawned.push((dir, dist, true)),
@@ -133,7 +147,7 @@ fn secondary_rays_do_not_find_their_own_surface() {
             .unwrap();
         w.finish().unwrap();
         let db = Database::open(&path).unwrap();
-        let objs = ObjectTable::load(&db, &NoProgress).unwrap();
+        let objs = Objects::load(&db);
         let runs = [
             ("double", measure::<f64>(&db, &objs, Precision::Double, 1.0)),
             ("single", measure::<f32>(&db, &objs, Precision::Single, 1.0)),
