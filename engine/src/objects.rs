@@ -6,8 +6,8 @@
 //! way, with a decoded view and a box per object, the full Stanford dragon
 //! took 205 bytes per triangle. Here consecutive triangles of one material
 //! (and triangular patches) are gathered as the writer gathers a version 4
-//! run ([`RunGather`]): their distinct corners once, then three one-byte
-//! indices per face. A face's box is not kept: it is rebuilt from the
+//! run ([`RunGather`]), but into runs of up to 65,536 corners: their
+//! distinct corners once, then three two-byte indices per face. A face's box is not kept: it is rebuilt from the
 //! corners by [`Aabb::of_face`], and a face is gathered only if that box is
 //! the one its record holds, so every tracer sees the same numbers, bit for
 //! bit, whichever way a database was written (version 3 records are
@@ -24,6 +24,12 @@ use crate::sdb::{
     Database, MAX_RUN_VERTICES, ObjectRef, PackCounts, RECORD_HEADER_WORDS, RunGather,
     decode_record,
 };
+
+/// Most corners of a run held in memory: a mesh of up to this many
+/// vertices is one run whatever the order of its faces (runs of a file
+/// close at 256 corners, so a vertex on a run's edge is stored again;
+/// the dragon's 437,645 vertices took 1,024,854 corners that way).
+const RUN_CORNERS: usize = 1 << 16;
 
 /// Ids per entry of the segment lookup table.
 const GROUP_SHIFT: u32 = 4;
@@ -66,7 +72,7 @@ pub struct Face {
     /// Index in `points` of the run's first corner, and of this face's
     /// corners within the run.
     base: u32,
-    idx: [u8; 3],
+    idx: [u16; 3],
 }
 
 pub struct ObjectStore {
@@ -75,7 +81,7 @@ pub struct ObjectStore {
     /// The segment holding id `g << GROUP_SHIFT`, for each `g`.
     seg_at: Vec<u32>,
     /// Each object's corner indices within its run (zeros for records).
-    corners: Vec<[u8; 3]>,
+    corners: Vec<[u16; 3]>,
     /// The runs' distinct corners.
     points: Vec<[f32; 3]>,
     /// The records of the objects not held as faces, concatenated, and
@@ -85,9 +91,11 @@ pub struct ObjectStore {
 }
 
 impl ObjectStore {
-    /// Bytes an in-memory copy of `db` takes, at most: faces in runs as
-    /// three bytes and their runs' corners, every other object as its
-    /// record.
+    /// Bytes an in-memory copy of `db` takes, about: faces in runs as
+    /// six bytes and their runs' corners (at most those of the file's
+    /// runs, which close at 256 corners), every other object as its record
+    /// (patches' records are larger than the triangles' subtracted here,
+    /// their corners twice as large as counted).
     pub fn estimate_bytes(db: &Database) -> u64 {
         let PackCounts {
             runs,
@@ -100,7 +108,7 @@ impl ObjectStore {
             .decoded_bytes()
             .saturating_sub(run_triangles * face_record);
         let corners = (runs * MAX_RUN_VERTICES as u64).min(3 * run_triangles);
-        3 * n + 12 * corners + records + 4 * (n - run_triangles)
+        6 * n + 12 * corners + records + 4 * (n - run_triangles)
     }
 
     pub fn load(db: &Database, progress: &dyn Progress) -> Result<ObjectStore, Error> {
@@ -248,7 +256,7 @@ impl ObjectStore {
     pub fn bytes(&self) -> u64 {
         (self.segments.len() * size_of::<Segment>()
             + self.seg_at.len() * 4
-            + self.corners.len() * 3
+            + self.corners.len() * 6
             + self.points.len() * 12
             + self.words.len() * 4
             + self.offsets.len() * 4) as u64
@@ -266,7 +274,7 @@ impl ObjectStore {
 /// Gathers objects, in id order, into an [`ObjectStore`].
 struct Builder {
     store: ObjectStore,
-    run: RunGather,
+    run: RunGather<RUN_CORNERS>,
     /// Id of the run's first face.
     run_first: u32,
 }

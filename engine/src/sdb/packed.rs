@@ -223,30 +223,47 @@ pub struct PackCounts {
     pub run_triangles: u64,
 }
 
-/// Slots of [`CornerIndex`]: four per corner a run may have.
-const INDEX_SLOTS: usize = 4 * MAX_RUN_VERTICES;
-
 /// Where each distinct corner of the run being gathered is: open
 /// addressing over a table four times the largest run, emptied by a new
 /// stamp rather than by clearing it (a writer looks up three corners per
 /// triangle, a billion triangles for tetra 15).
 struct CornerIndex {
     stamp: u32,
-    /// Stamp and corner index of each slot; a slot of an older stamp is
-    /// empty.
-    slots: Box<[(u32, u8)]>,
+    /// Stamp and corner index of each slot (a power of two of them); a
+    /// slot of an older stamp is empty.
+    slots: Box<[(u32, u16)]>,
 }
 
-impl Default for CornerIndex {
-    fn default() -> CornerIndex {
-        CornerIndex {
-            stamp: 1,
-            slots: vec![(0, 0); INDEX_SLOTS].into_boxed_slice(),
-        }
-    }
-}
+/// Slots an index starts with: four per corner of a written run.
+const FIRST_SLOTS: usize = 4 * MAX_RUN_VERTICES;
 
 impl CornerIndex {
+    fn new() -> CornerIndex {
+        CornerIndex {
+            stamp: 1,
+            slots: vec![(0, 0); FIRST_SLOTS].into_boxed_slice(),
+        }
+    }
+
+    /// Makes room for `more` corners beyond `corners` (keeping at most a
+    /// quarter of the slots full), doubling the table as a large run
+    /// grows: a scene of a few triangles does not pay for the table of a
+    /// run of 65,536 corners.
+    fn reserve(&mut self, corners: &[Corner], more: usize) {
+        if 4 * (corners.len() + more) <= self.slots.len() {
+            return;
+        }
+        let size = (4 * (corners.len() + more)).next_power_of_two();
+        self.slots = vec![(0, 0); size].into_boxed_slice();
+        self.stamp = 1;
+        for (i, c) in corners.iter().enumerate() {
+            let slot = self
+                .find(&corners[..i], c)
+                .expect_err("corners are distinct");
+            self.insert(slot, i as u16);
+        }
+    }
+
     fn clear(&mut self) {
         self.stamp = self.stamp.wrapping_add(1);
         if self.stamp == 0 {
@@ -257,11 +274,12 @@ impl CornerIndex {
 
     /// The index of `c` among `corners`, or the empty slot where it goes.
     #[inline]
-    fn find(&self, corners: &[Corner], c: &Corner) -> Result<u8, usize> {
+    fn find(&self, corners: &[Corner], c: &Corner) -> Result<u16, usize> {
         let h = c.iter().fold(0u64, |h, &w| {
             (h.rotate_left(5) ^ w as u64).wrapping_mul(0x517c_c1b7_2722_0a95)
         });
-        let mut slot = (h >> 32) as usize % INDEX_SLOTS;
+        let mask = self.slots.len() - 1;
+        let mut slot = (h >> 32) as usize & mask;
         // At most a quarter of the slots are full: the probe ends.
         loop {
             let (stamp, i) = self.slots[slot];
@@ -271,20 +289,20 @@ impl CornerIndex {
             if corners[i as usize] == *c {
                 return Ok(i);
             }
-            slot = (slot + 1) % INDEX_SLOTS;
+            slot = (slot + 1) & mask;
         }
     }
 
-    fn insert(&mut self, slot: usize, i: u8) {
+    fn insert(&mut self, slot: usize, i: u16) {
         self.slots[slot] = (self.stamp, i);
     }
 }
 
 /// Consecutive faces of one kind and material gathered with their
-/// distinct corners (at most [`MAX_RUN_VERTICES`]): what a writer stores
-/// as a run, and what the depth-first tracer holds in memory for a mesh.
-#[derive(Default)]
-pub struct RunGather {
+/// distinct corners (at most `MOST`, at most 65,536): what a writer stores
+/// as a run (of at most [`MAX_RUN_VERTICES`]), and what the depth-first
+/// tracer holds in memory for a mesh (larger runs).
+pub struct RunGather<const MOST: usize> {
     /// The faces' kind, material and first record's word offset (none
     /// while the run is empty).
     face: Option<Face>,
@@ -292,10 +310,24 @@ pub struct RunGather {
     first: usize,
     corners: Vec<Corner>,
     local: CornerIndex,
-    faces: Vec<[u8; 3]>,
+    faces: Vec<[u16; 3]>,
 }
 
-impl RunGather {
+impl<const MOST: usize> Default for RunGather<MOST> {
+    fn default() -> Self {
+        const { assert!(MOST <= 1 << 16, "corner indices are 16 bits") };
+        RunGather {
+            face: None,
+            material: 0,
+            first: 0,
+            corners: Vec::new(),
+            local: CornerIndex::new(),
+            faces: Vec::new(),
+        }
+    }
+}
+
+impl<const MOST: usize> RunGather<MOST> {
     pub fn clear(&mut self) {
         self.face = None;
         self.corners.clear();
@@ -323,7 +355,7 @@ impl RunGather {
     }
 
     /// Each face's three indices into [`Self::corners`].
-    pub fn faces(&self) -> &[[u8; 3]] {
+    pub fn faces(&self) -> &[[u16; 3]] {
         &self.faces
     }
 
@@ -336,42 +368,53 @@ impl RunGather {
             return false;
         };
         let g = &r[RECORD_HEADER_WORDS..];
-        let corners: [Corner; 3] = std::array::from_fn(|i| {
-            std::array::from_fn(|a| match (a, face) {
-                (0..3, _) => g[3 * i + a],
-                (_, Face::Patch) => g[9 + 3 * i + a - 3],
-                (_, Face::Triangle) => 0,
-            })
-        });
+        let mut corners = [[0u32; 6]; 3];
+        for (i, c) in corners.iter_mut().enumerate() {
+            c[..3].copy_from_slice(&g[3 * i..3 * i + 3]);
+            if face == Face::Patch {
+                c[3..].copy_from_slice(&g[9 + 3 * i..12 + 3 * i]);
+            }
+        }
         if face_box(&corners)[..] != r[2..RECORD_HEADER_WORDS] {
             return false;
         }
         if self.face.is_some_and(|f| f != face) || (self.face.is_some() && r[1] != self.material) {
             return false;
         }
-        let new = (0..3)
-            .filter(|&i| {
-                self.local.find(&self.corners, &corners[i]).is_err()
-                    && !corners[..i].contains(&corners[i])
-            })
-            .count();
-        if self.corners.len() + new > MAX_RUN_VERTICES {
+        // Each corner looked up once; a new one again only when it goes
+        // in (an earlier corner of the face may have taken its slot).
+        let mut found = [Ok(0), Ok(0), Ok(0)];
+        let mut new = 0;
+        for i in 0..3 {
+            found[i] = self.local.find(&self.corners, &corners[i]);
+            if found[i].is_err() && !corners[..i].contains(&corners[i]) {
+                new += 1;
+            }
+        }
+        if self.corners.len() + new > MOST {
             return false;
         }
+        self.local.reserve(&self.corners, new);
         if self.face.is_none() {
             self.face = Some(face);
             self.material = r[1];
             self.first = pos;
         }
-        let idx = corners.map(|c| match self.local.find(&self.corners, &c) {
-            Ok(i) => i,
-            Err(slot) => {
-                let i = self.corners.len() as u8;
-                self.local.insert(slot, i);
-                self.corners.push(c);
-                i
-            }
-        });
+        let mut idx = [0u16; 3];
+        for i in 0..3 {
+            idx[i] = match found[i] {
+                Ok(k) => k,
+                Err(_) => match self.local.find(&self.corners, &corners[i]) {
+                    Ok(k) => k,
+                    Err(slot) => {
+                        let k = self.corners.len() as u16;
+                        self.local.insert(slot, k);
+                        self.corners.push(corners[i]);
+                        k
+                    }
+                },
+            };
+        }
         self.faces.push(idx);
         true
     }
@@ -380,7 +423,7 @@ impl RunGather {
 /// Builds runs from a block's records; reused across blocks.
 #[derive(Default)]
 pub struct Packer {
-    run: RunGather,
+    run: RunGather<MAX_RUN_VERTICES>,
     pub counts: PackCounts,
 }
 
@@ -456,7 +499,10 @@ impl Packer {
             w.finish();
             for quad in self.run.faces.as_flattened().chunks(4) {
                 let mut b = [0u8; 4];
-                b[..quad.len()].copy_from_slice(quad);
+                for (b, &i) in b.iter_mut().zip(quad) {
+                    // A run of at most 256 corners: indices are a byte.
+                    *b = i as u8;
+                }
                 out.push(u32::from_le_bytes(b));
             }
             self.counts.runs += 1;

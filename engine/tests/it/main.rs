@@ -18,6 +18,7 @@ mod common;
 mod breadth_first;
 mod crowded_voxels;
 mod database;
+mod df_memory;
 mod edge_cases;
 mod invariance;
 mod mesh_readers;
