@@ -106,6 +106,7 @@ pub fn write_database(
             opts.memory
         },
         spill_dir: opts.tmp_dir.map(Path::to_path_buf),
+        camera_index: opts.setup.camera_index,
     };
     let mut s = SetupSink::new(w, opts.setup);
     let summary = scene.stream_into_with(&mut s, progress, &mesh_opts)?;

@@ -214,11 +214,31 @@ fn sniff_off(head: &[u8]) -> Sniff {
     Sniff::No
 }
 
+/// glTF 2.0: a GLB file starts with `glTF`; a `.gltf` file is JSON with
+/// an `asset` object.
+pub static GLTF: MeshFormat = MeshFormat {
+    name: "gltf",
+    extensions: &["gltf", "glb"],
+    sniff: sniff_gltf,
+    read: crate::mesh::gltf_scene::read_gltf,
+};
+
+fn sniff_gltf(head: &[u8]) -> Sniff {
+    let text = head.trim_ascii_start();
+    if head.starts_with(b"glTF")
+        || (text.starts_with(b"{") && head.windows(7).any(|w| w == b"\"asset\""))
+    {
+        Sniff::Yes
+    } else {
+        Sniff::No
+    }
+}
+
 /// Every scene file format sray reads (object databases aside, which are
 /// rendered in place rather than read as a scene stream). NFF, which has
 /// no signature, comes first: of formats that only find a file plausible,
 /// the first wins.
-pub static FORMATS: &[&dyn SceneFormat] = &[&Nff, &PLY, &OBJ, &OFF];
+pub static FORMATS: &[&dyn SceneFormat] = &[&Nff, &PLY, &OBJ, &OFF, &GLTF];
 
 /// Where a scene comes from.
 #[derive(Clone)]

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 #[derive(Args, Debug)]
 pub struct ConvertArgs {
-    /// The scene: a scene file (.nff, .ply, .obj, .off, any of them .gz or
+    /// The scene: a scene file (.nff, .ply, .obj, .off, .gltf, .glb, any of them .gz or
     /// .zst compressed), an .sdb file, or spd:NAME:SIZE
     pub scene: String,
     /// Output file: .sdb for an object database, .nff for NFF text
@@ -100,6 +100,7 @@ pub fn write_scene(
                     opts.memory
                 },
                 spill_dir: opts.tmp_dir.map(Path::to_path_buf),
+                camera_index: opts.setup.camera_index,
             };
             {
                 let mut s = SetupSink::new(&mut w, opts.setup);

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// A scene file (.nff, .ply, .obj, .off, any of them .gz or .zst
+    /// A scene file (.nff, .ply, .obj, .off, .gltf, .glb, any of them .gz or .zst
     /// compressed) or an .sdb file
     pub file: PathBuf,
     /// Print one JSON object on stdout
@@ -40,6 +40,7 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
             None => sray_engine::sys::default_memory_budget(),
         },
         spill_dir: a.tmp_dir.clone(),
+        camera_index: None,
     };
     let info = scene_info_with(&a.file, &bar, &opts)?;
     bar.finish();

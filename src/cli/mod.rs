@@ -29,13 +29,13 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Render a scene (.nff, .ply, .obj, .off, .sdb or spd:NAME:SIZE) to a PNG or OpenEXR image
+    /// Render a scene (.nff, .ply, .obj, .off, .gltf, .glb, .sdb or spd:NAME:SIZE) to a PNG or OpenEXR image
     Render(render::RenderArgs),
     /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
     Gen(gen_cmd::GenArgs),
-    /// Convert a scene (.nff, .ply, .obj, .off, .sdb or spd:NAME:SIZE) to an object database or NFF
+    /// Convert a scene (.nff, .ply, .obj, .off, .gltf, .glb, .sdb or spd:NAME:SIZE) to an object database or NFF
     Convert(convert::ConvertArgs),
-    /// Describe a scene file (.nff, .ply, .obj, .off or .sdb)
+    /// Describe a scene file (.nff, .ply, .obj, .off, .gltf, .glb or .sdb)
     Info(info_cmd::InfoArgs),
     /// Read a whole object database, checking every block, and report the read speed
     Verify(verify::VerifyArgs),

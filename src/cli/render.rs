@@ -31,6 +31,10 @@ pub struct SetupArgs {
     /// The material of every object, as NFF's f line: r,g,b,Kd,Ks,shine,T,ior
     #[arg(long, allow_hyphen_values = true, value_name = "r,g,b,Kd,Ks,shine,T,ior", value_parser = parse_material)]
     pub material: Option<Material>,
+    /// The camera of a glTF scene to look through, by its index among the
+    /// file's cameras (default: the first one a node places)
+    #[arg(long, value_name = "N")]
+    pub camera_index: Option<usize>,
 }
 
 impl SetupArgs {
@@ -46,13 +50,14 @@ impl SetupArgs {
             lights: self.light.clone(),
             material: self.material,
             image,
+            camera_index: self.camera_index,
         })
     }
 }
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// The scene: a scene file (.nff, .ply, .obj, .off, any of them .gz or
+    /// The scene: a scene file (.nff, .ply, .obj, .off, .gltf, .glb, any of them .gz or
     /// .zst compressed), an .sdb file, or spd:NAME:SIZE (e.g. spd:balls:4)
     pub scene: String,
     /// Output image: .png (8-bit RGB) or .exr (OpenEXR, linear 32-bit float

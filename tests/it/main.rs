@@ -21,6 +21,7 @@ mod common;
 
 mod cli_bad_input;
 mod cli_bench;
+mod cli_gltf;
 mod cli_image;
 mod cli_limits;
 mod cli_meshes;

@@ -1,4 +1,5 @@
-//! Polygon meshes: PLY, OBJ and OFF files, streamed in bounded memory.
+//! Polygon meshes: PLY, OBJ and OFF files, streamed in bounded memory;
+//! and glTF 2.0 scenes of placed meshes ([`gltf_scene`]).
 //!
 //! A mesh file is a table of vertices and faces that refer to them by
 //! index, anywhere in the file. Each reader parses its format into a
@@ -15,6 +16,7 @@
 
 pub mod builder;
 pub mod geometry;
+pub mod gltf_scene;
 mod mtl;
 pub mod obj;
 pub mod off;
@@ -34,6 +36,9 @@ pub struct MeshOptions {
     /// Where tables and sort runs spill (the system's temp directory if
     /// `None`).
     pub spill_dir: Option<PathBuf>,
+    /// A glTF scene's camera to look through (see
+    /// [`crate::scene::setup::Setup::camera_index`]).
+    pub camera_index: Option<usize>,
 }
 
 impl Default for MeshOptions {
@@ -41,6 +46,7 @@ impl Default for MeshOptions {
         MeshOptions {
             memory: crate::sys::default_memory_budget(),
             spill_dir: None,
+            camera_index: None,
         }
     }
 }

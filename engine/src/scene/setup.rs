@@ -174,6 +174,9 @@ pub struct Setup {
     pub material: Option<Material>,
     /// Width and height of the image the default view frames.
     pub image: [u32; 2],
+    /// Which of a glTF file's cameras to look through (its index among
+    /// the file's cameras; the first one a node places if `None`).
+    pub camera_index: Option<usize>,
 }
 
 impl Default for Setup {
@@ -183,6 +186,7 @@ impl Default for Setup {
             lights: Vec::new(),
             material: None,
             image: [512, 512],
+            camera_index: None,
         }
     }
 }
@@ -335,6 +339,7 @@ pub struct SetupSink<'a> {
     inner: &'a mut dyn SceneSink,
     setup: &'a Setup,
     saw_view: bool,
+    saw_light: bool,
     saw_background: bool,
     lights_sent: bool,
     material_sent: bool,
@@ -346,6 +351,7 @@ impl<'a> SetupSink<'a> {
             inner,
             setup,
             saw_view: false,
+            saw_light: false,
             saw_background: false,
             lights_sent: false,
             material_sent: false,
@@ -396,6 +402,7 @@ impl SceneSink for SetupSink<'_> {
     }
 
     fn light(&mut self, light: &Light) -> Result<(), Error> {
+        self.saw_light = true;
         if self.setup.lights.is_empty() {
             self.inner.light(light)
         } else {
@@ -442,7 +449,9 @@ impl SceneSink for SetupSink<'_> {
             self.saw_background = true;
             self.inner.background(DEFAULT_BACKGROUND)?;
         }
-        if self.setup.lights.is_empty() {
+        // A scene file's own lights (glTF) stand; a bare mesh gets the
+        // default ones.
+        if self.setup.lights.is_empty() && !self.saw_light {
             self.lights_sent = true;
             for l in default_lights(bounds, &view) {
                 self.inner.light(&l)?;

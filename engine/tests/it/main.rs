@@ -20,6 +20,7 @@ mod crowded_voxels;
 mod database;
 mod df_memory;
 mod edge_cases;
+mod gltf_scenes;
 mod invariance;
 mod mesh_readers;
 mod nff_reader;

@@ -43,6 +43,7 @@ fn read_with(
     let opts = MeshOptions {
         memory,
         spill_dir: None,
+        camera_index: None,
     };
     let s = match f {
         Fmt::Ply => {

@@ -63,9 +63,11 @@ impl Progress for Quiet {
 /// runs of 16 records; the others resolve faces in memory. Creating the
 /// spill files dominates a run's time (run with TMPDIR=/dev/shm), so the
 /// disk path gets a share, not half.
+#[allow(dead_code)] // not every target reads with options
 pub fn options(data: &[u8]) -> MeshOptions {
     MeshOptions {
         memory: if data.len() % 4 == 1 { 0 } else { 64 << 20 },
         spill_dir: None,
+        camera_index: None,
     }
 }
