@@ -52,6 +52,9 @@ pub fn read_gltf(
     progress: &dyn Progress,
     opts: &MeshOptions,
 ) -> Result<MeshSummary, Error> {
+    // Progress is the file's bytes: the document and a GLB's buffer are
+    // read whole before anything is emitted (external buffers are read by
+    // the gltf crate, unreported).
     let mut bytes = Vec::new();
     crate::input::open(path, progress)?
         .reader
@@ -198,7 +201,6 @@ pub fn read_gltf_bytes(
         ..Default::default()
     };
     let mut current: Option<Material> = None;
-    progress.set_unit("triangles");
     for p in &placed {
         let Some(mesh) = p.node.mesh().filter(|_| p.draws) else {
             continue;
@@ -319,7 +321,6 @@ pub fn read_gltf_bytes(
                 }
                 summary.objects += 1;
             }
-            progress.inc(indices.len() as u64 / 3);
         }
     }
     warnings.report(name, progress);
