@@ -83,3 +83,24 @@ pub fn bf_render_with(
     let out = bf::render(db, o, &b, &NoProgress).unwrap();
     (out.frame.to_rgb8(), out.stats)
 }
+
+/// Writes `src` to a database at `path` as `sray convert` does (a mesh
+/// gets its default view and lights); `runs: false` writes version 3
+/// records instead of version 4 triangle runs.
+pub fn write_converted(
+    src: &sray_engine::source::SceneSource,
+    path: &std::path::Path,
+    c: sray_engine::sdb::Compression,
+    runs: bool,
+) {
+    use sray_engine::scene::setup::{Setup, SetupSink};
+    let mut w = sray_engine::sdb::DbWriter::create(path, c).unwrap();
+    if !runs {
+        w = w.without_runs();
+    }
+    let setup = Setup::default();
+    let mut s = SetupSink::new(&mut w, &setup);
+    src.stream_into(&mut s, &NoProgress).unwrap();
+    s.finish().unwrap();
+    w.finish().unwrap();
+}

@@ -7,7 +7,6 @@ use sray_engine::Error;
 use sray_engine::info::scene_info;
 use sray_engine::progress::NoProgress;
 use sray_engine::scene::recorder::Recorder;
-use sray_engine::scene::setup::{Setup, SetupSink};
 use sray_engine::sdb::{Compression, Database, DbWriter};
 use sray_engine::source::{SceneSource, stream_database};
 use sray_engine::spd::SpdScene;
@@ -494,16 +493,7 @@ fn triangle_runs_read_back_the_records_of_version_3_bit_for_bit() {
         for c in [Compression::None, Compression::Zstd(3)] {
             let (old, new) = (dir.path().join("v3.sdb"), dir.path().join("v4.sdb"));
             for (path, runs) in [(&old, false), (&new, true)] {
-                let mut w = DbWriter::create(path, c).unwrap();
-                if !runs {
-                    w = w.without_runs();
-                }
-                // A mesh's default view and lights, as `sray convert` gives.
-                let setup = Setup::default();
-                let mut s = SetupSink::new(&mut w, &setup);
-                src.stream_into(&mut s, &NoProgress).unwrap();
-                s.finish().unwrap();
-                w.finish().unwrap();
+                common::write_converted(&src, path, c, runs);
             }
             let (a, b) = (Database::open(&old).unwrap(), Database::open(&new).unwrap());
             assert_eq!((a.version(), b.version()), (3, 4));

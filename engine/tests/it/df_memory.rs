@@ -9,8 +9,7 @@ use sray_engine::df::DfScene;
 use sray_engine::objects::ObjectStore;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::RenderOptions;
-use sray_engine::scene::setup::{Setup, SetupSink};
-use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::sdb::{Compression, Database};
 use sray_engine::source::SceneSource;
 use sray_engine::spd::SpdScene;
 
@@ -52,15 +51,7 @@ fn meshes_take_few_bytes_per_triangle_in_memory() {
     for (name, src, most) in sources {
         for runs in [true, false] {
             let path = dir.path().join("m.sdb");
-            let mut w = DbWriter::create(&path, Compression::None).unwrap();
-            if !runs {
-                w = w.without_runs();
-            }
-            let setup = Setup::default();
-            let mut s = SetupSink::new(&mut w, &setup);
-            src.stream_into(&mut s, &NoProgress).unwrap();
-            s.finish().unwrap();
-            w.finish().unwrap();
+            common::write_converted(&src, &path, Compression::None, runs);
             let db = Database::open(&path).unwrap();
             let store = ObjectStore::load(&db, &NoProgress).unwrap();
             let opts = RenderOptions {
