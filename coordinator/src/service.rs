@@ -716,7 +716,11 @@ impl<'a> Receiver<'a> {
                     if r.ray != want {
                         return Err(format!("result for ray {} where ray {want} was due", r.ray));
                     }
-                    if !r.prim.is_none() && (r.prim.0 >= self.input.objects || !r.t.is_finite()) {
+                    // An instance's hit names its record (and the model's
+                    // primitive, checked when it is shaded).
+                    if !r.prim.is_none()
+                        && (r.prim.world_index() as u64 >= self.input.objects || !r.t.is_finite())
+                    {
                         return Err(format!(
                             "ray {}: no object {} at distance {}",
                             r.ray, r.prim.0, r.t

@@ -22,6 +22,30 @@ impl PrimId {
         PrimId(index as u64)
     }
 
+    /// Primitive `prim` of the model placed by instance `index` (the
+    /// database's object `index`, an instance record). Every such id is
+    /// above every plain object's; among them the order is by primitive,
+    /// then by instance, so that within one instance the smaller primitive
+    /// wins a tie, as it does within the model itself.
+    #[inline(always)]
+    pub const fn instance(index: u32, prim: u32) -> PrimId {
+        PrimId(((prim as u64 + 1) << 32) | index as u64)
+    }
+
+    /// The database object the primitive belongs to: the object itself,
+    /// or the instance record that places it.
+    #[inline(always)]
+    pub fn world_index(self) -> u32 {
+        self.0 as u32
+    }
+
+    /// `(instance, primitive)` if this is a primitive of a placed model.
+    #[inline(always)]
+    pub fn instance_parts(self) -> Option<(u32, u32)> {
+        let hi = (self.0 >> 32) as u32;
+        (hi != 0 && !self.is_none()).then(|| (self.0 as u32, hi - 1))
+    }
+
     #[inline(always)]
     pub fn is_none(self) -> bool {
         self == PrimId::NONE
@@ -79,5 +103,14 @@ mod tests {
         assert!(Hit::NONE.loses_to(1e300, PrimId::object(u32::MAX)));
         assert!(PrimId::object(u32::MAX) < PrimId(1 << 32));
         assert_eq!(PrimId(1 << 32).object_index(), None);
+        let p = PrimId::instance(7, 3);
+        assert_eq!(p.instance_parts(), Some((7, 3)));
+        assert_eq!(p.world_index(), 7);
+        assert_eq!(p.object_index(), None);
+        assert_eq!(PrimId::object(7).instance_parts(), None);
+        assert_eq!(PrimId::NONE.instance_parts(), None);
+        assert!(PrimId::instance(9, 2) < PrimId::instance(1, 3));
+        assert!(PrimId::instance(1, 2) < PrimId::instance(9, 2));
+        assert!(PrimId::object(u32::MAX - 1) < PrimId::instance(0, 0));
     }
 }

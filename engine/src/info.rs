@@ -71,6 +71,61 @@ pub struct SceneInfo {
     pub density_entries: Option<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dense_regions: Option<Vec<Region>>,
+    /// Object database only (version 5): the models stored once, each
+    /// with the instances placing it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub models: Option<Vec<ModelInfo>>,
+    /// Object database with models only: the triangles the scene renders,
+    /// each instance counting its model's (`triangles` counts those
+    /// stored).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub placed_triangles: Option<u64>,
+}
+
+/// A model of a database: stored once, placed by its instances.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ModelInfo {
+    pub triangles: u64,
+    pub vertices: u64,
+    /// Bytes of the model's own database inside the file.
+    pub bytes: u64,
+    pub instances: u64,
+}
+
+/// The models of `db`, and the triangles its instances place (one scan
+/// of the world's objects, to count each model's instances).
+fn model_infos(db: &Database) -> Result<Option<(Vec<ModelInfo>, u64)>, Error> {
+    if db.models().is_empty() {
+        return Ok(None);
+    }
+    let mut instances = vec![0u64; db.models().len()];
+    let mut scan = db.scan()?;
+    while let Some(block) = scan.next_block()? {
+        for o in block.objects() {
+            if let Shape::Instance(i) = o.shape
+                && let Some(n) = instances.get_mut(i.model() as usize)
+            {
+                *n += 1;
+            }
+        }
+    }
+    let mut out = Vec::with_capacity(instances.len());
+    let mut placed = 0u64;
+    for (m, &n) in instances.iter().enumerate() {
+        let mdb = db.open_model(m)?;
+        let (triangles, vertices) = match (mdb.triangles(), mdb.vertices()) {
+            (Some(t), Some(v)) => (t, v),
+            _ => scan_counts(&mdb)?,
+        };
+        placed += triangles * n;
+        out.push(ModelInfo {
+            triangles,
+            vertices,
+            bytes: db.models()[m].bytes,
+            instances: n,
+        });
+    }
+    Ok(Some((out, placed)))
 }
 
 /// A dense region of a database (see [`crate::grid::Partition`]).
@@ -144,10 +199,16 @@ pub fn scene_info_with(
     if is_database(path)? {
         let db = Database::open(path)?;
         let (bbox_min, bbox_max) = bbox_fields(db.bbox(), db.origin());
-        let (triangles, vertices) = match (db.triangles(), db.vertices()) {
+        let (mut triangles, mut vertices) = match (db.triangles(), db.vertices()) {
             (Some(t), Some(v)) => (t, v),
             _ => scan_counts(&db)?,
         };
+        let models = model_infos(&db)?;
+        if let Some((m, _)) = &models {
+            // Stored: the world's and each model's once.
+            triangles += m.iter().map(|m| m.triangles).sum::<u64>();
+            vertices += m.iter().map(|m| m.vertices).sum::<u64>();
+        }
         return Ok(SceneInfo {
             format: "sdb",
             objects: db.object_count(),
@@ -175,6 +236,10 @@ pub fn scene_info_with(
             version: Some(db.version()),
             density_entries: db.density().map(|d| d.entries.len() as u64),
             dense_regions: dense_regions(&db),
+            placed_triangles: models
+                .as_ref()
+                .map(|(_, p)| triangles - models_stored(&models) + p),
+            models: models.map(|(m, _)| m),
         });
     }
     let format = detect_format(path)?;
@@ -211,7 +276,16 @@ pub fn scene_info_with(
         version: None,
         density_entries: None,
         dense_regions: None,
+        models: None,
+        placed_triangles: None,
     })
+}
+
+/// Triangles the models store.
+fn models_stored(models: &Option<(Vec<ModelInfo>, u64)>) -> u64 {
+    models
+        .as_ref()
+        .map_or(0, |(m, _)| m.iter().map(|m| m.triangles).sum())
 }
 
 /// Counts what a scene stream holds, as the database writer would store it.

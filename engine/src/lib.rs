@@ -21,6 +21,7 @@ pub mod intersect;
 pub mod job;
 pub mod math;
 pub mod mesh;
+pub mod models;
 pub mod nff;
 pub mod objects;
 pub mod paging;

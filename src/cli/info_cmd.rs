@@ -103,6 +103,24 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
     if let Some(v) = i.version {
         println!("  version      {v}");
     }
+    if let Some(models) = &i.models {
+        println!(
+            "  models       {} stored once, {} triangles placed by {} instances",
+            models.len(),
+            i.placed_triangles.unwrap_or(0),
+            i.counts.get(ShapeKind::Instance)
+        );
+        for (k, m) in models.iter().enumerate() {
+            println!(
+                "    model {k}: {} triangles, {} vertices, {} bytes ({:.1} per triangle), {} instances",
+                m.triangles,
+                m.vertices,
+                m.bytes,
+                m.bytes as f64 / m.triangles.max(1) as f64,
+                m.instances
+            );
+        }
+    }
     match (&i.density_entries, &i.dense_regions) {
         (Some(n), Some(regions)) => {
             println!(

@@ -35,6 +35,10 @@ pub struct SetupArgs {
     /// file's cameras (default: the first one a node places)
     #[arg(long, value_name = "N")]
     pub camera_index: Option<usize>,
+    /// Write every placement of a glTF mesh as a copy of its own instead
+    /// of storing the mesh once as a model placed by instances
+    #[arg(long)]
+    pub flatten_instances: bool,
 }
 
 impl SetupArgs {
@@ -51,6 +55,7 @@ impl SetupArgs {
             material: self.material,
             image,
             camera_index: self.camera_index,
+            flatten_instances: self.flatten_instances,
         })
     }
 }

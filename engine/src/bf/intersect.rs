@@ -39,10 +39,11 @@ use crate::grid::{Dda, DdaSave, GridSpec};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
 use crate::math::{Real, Vec3, Vec3Ext};
+use crate::models::{Models, Placement};
 use crate::progress::Progress;
 use crate::render::KindCounts;
 use crate::sdb::{Block, Database, ObjectRef};
-use crate::shapes::Prepared;
+use crate::shapes::{Prepared, Shape};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -322,6 +323,8 @@ pub struct IntersectStats {
 /// What the intersection stage is given.
 pub struct IntersectSetup<'a> {
     pub db: &'a Database,
+    /// The models the database's instances place.
+    pub models: &'a Models,
     pub grids: &'a mut VoxelGrids,
     pub store: StorePlan,
     /// Ray slots in memory.
@@ -901,6 +904,7 @@ pub fn intersect_rays<R: Real>(
         // near.
         if regs > 0 {
             let grids = &*setup.grids;
+            let models = setup.models;
             let carry = setup.carry;
             let touched = &*touched;
             let region = &region;
@@ -916,7 +920,7 @@ pub fn intersect_rays<R: Real>(
                         pool.install(|| {
                             shards
                                 .par_iter_mut()
-                                .for_each(|sh| scan_block(sh, block, found, grids, carry));
+                                .for_each(|sh| scan_block(sh, block, found, grids, models, carry));
                         });
                     }
                     Ok(())
@@ -1108,6 +1112,7 @@ fn scan_block<R: Real>(
     block: &Block<'_>,
     candidates: &[Candidate],
     grids: &VoxelGrids,
+    models: &Models,
     carry: bool,
 ) {
     for c in candidates {
@@ -1122,8 +1127,9 @@ fn scan_block<R: Real>(
         let grid = &grids.grids[g];
         let dense = sh.regs[g].is_dense();
         // Decoded on the first ray to test, and then kept.
-        let mut object: Option<(ObjectRef<'_>, Option<Prepared>)> = None;
-        let prim = PrimId::object(c.index);
+        let mut object: Option<(ObjectRef<'_>, Option<Prepared>, Option<Placement>)> = None;
+        let index = c.index;
+        let prim = PrimId::object(index);
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 let row = grid.spec.index([0, y, z]);
@@ -1159,16 +1165,52 @@ fn scan_block<R: Real>(
                             let Some(o) = block.object_at(c.at, c.index) else {
                                 return;
                             };
-                            object = Some((o, o.shape.prepare()));
+                            let placement = match &o.shape {
+                                Shape::Instance(i) => Some(Placement::of(i)),
+                                _ => None,
+                            };
+                            object = Some((o, o.shape.prepare(), placement));
                         }
-                        let Some((o, pr)) = &object else {
+                        let Some((o, pr, placement)) = &object else {
                             continue;
                         };
                         sh.counts.tests.add(o.shape.kind());
                         let q = &sh.q[slot as usize];
-                        if let Some(t) =
-                            o.shape.intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
-                        {
+                        let found = match placement {
+                            None => o
+                                .shape
+                                .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
+                                .map(|t| (t, prim)),
+                            Some(pl) => {
+                                let c = &sh.cold[slot as usize];
+                                if s.shadow {
+                                    models
+                                        .blocks(
+                                            pl,
+                                            q,
+                                            c.o,
+                                            c.d,
+                                            s.t_min,
+                                            s.upper,
+                                            &mut sh.counts.tests,
+                                        )
+                                        .then_some((s.upper, prim))
+                                } else {
+                                    models
+                                        .nearest(
+                                            pl,
+                                            q,
+                                            c.o,
+                                            c.d,
+                                            s.t_min,
+                                            s.upper,
+                                            &mut sh.counts.tests,
+                                        )
+                                        .map(|(t, p)| (t, PrimId::instance(index, p)))
+                                }
+                            }
+                        };
+                        if let Some((t, prim)) = found {
                             let t = t.to_f64();
                             if s.shadow {
                                 s.blocked = true;
@@ -1180,10 +1222,20 @@ fn scan_block<R: Real>(
                                     // Exactly what the shading join would
                                     // compute from the ray and this hit.
                                     let c = &mut sh.cold[slot as usize];
-                                    let surf = o.shape.surface(&RayQ::from_vec3(c.o, c.d), t);
+                                    let ray = RayQ::from_vec3(c.o, c.d);
+                                    let (surf, material) = match (placement, prim.instance_parts())
+                                    {
+                                        (Some(pl), Some((_, p))) => {
+                                            match models.surface(pl, p, &ray, t) {
+                                                Some(found) => found,
+                                                None => continue,
+                                            }
+                                        }
+                                        _ => (o.shape.surface(&ray, t), o.material),
+                                    };
                                     c.ng = surf.ng;
                                     c.ns = surf.ns;
-                                    c.material = o.material;
+                                    c.material = material;
                                 }
                             }
                         }

@@ -9,9 +9,11 @@ use super::records::{HitRec, Outcome, RayKind, RayRec, SPAWN_SLOTS};
 use crate::error::Error;
 use crate::intersect::{RayQ, Surface};
 use crate::math::Vec3;
+use crate::models::{Models, Placement};
 use crate::render::{RayCounts, ShadeScene, Spawn, shade, to_fixed};
 use crate::scene::Material;
 use crate::sdb::{Database, ObjectRef};
+use crate::shapes::Shape;
 use crate::spill::ExternalSorter;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -28,6 +30,8 @@ pub struct ShadeStats {
 
 pub struct ShadeSetup<'a> {
     pub db: &'a Database,
+    /// The models the database's instances place.
+    pub models: &'a Models,
     /// The hit set's memory, reused from round to round.
     pub set: &'a mut Vec<HitRec>,
     /// Hits with their surfaces, waiting to be shaded in order.
@@ -365,16 +369,17 @@ fn shade_set(
     counts: &mut RayCounts,
     st: &mut ShadeStats,
 ) -> Result<(), Error> {
-    // Hits arrive in ray order; a stable sort by object keeps that order
-    // within each object.
-    crate::spill::radix_sort_by_key(set, |h| h.prim.0, setup.radix);
+    // Hits arrive in ray order; a stable sort by object (an instance's
+    // hits by the instance record) keeps that order within each object.
+    let key = |h: &HitRec| h.prim.world_index() as u64;
+    crate::spill::radix_sort_by_key(set, key, setup.radix);
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;
     while at < set.len() {
         // A block holding none of the hit objects is passed over unread.
         if let Some(end) = scan.next_block_end()
-            && set[at].prim.0 >= end
+            && key(&set[at]) >= end
             && scan.skip_block()?
         {
             continue;
@@ -384,13 +389,13 @@ fn shade_set(
         };
         let first = block.first_object;
         let end = first + block.object_count as u64;
-        let stop = at + set[at..].partition_point(|h| h.prim.0 < end);
+        let stop = at + set[at..].partition_point(|h| key(h) < end);
         if stop == at {
             continue;
         }
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
-        let (materials, shade_scene) = (setup.materials, setup.shade);
+        let (materials, shade_scene, models) = (setup.materials, setup.shade, setup.models);
         let chunks = pool.current_num_threads().max(1) * 4;
         let chunk = (stop - at).div_ceil(chunks).max(64);
         let n_chunks = (stop - at).div_ceil(chunk);
@@ -406,8 +411,16 @@ fn shade_set(
                     o.rays.clear();
                     o.counts = RayCounts::default();
                     for h in hits {
-                        let obj = &objs[(h.prim.0 - first) as usize];
-                        shade_hit(materials, shade_scene, h, obj, &mut o.rays, &mut o.counts);
+                        let obj = &objs[(key(h) - first) as usize];
+                        shade_hit(
+                            materials,
+                            shade_scene,
+                            models,
+                            h,
+                            obj,
+                            &mut o.rays,
+                            &mut o.counts,
+                        );
                     }
                 })
         });
@@ -426,10 +439,12 @@ fn shade_set(
     Ok(())
 }
 
-/// Shades one hit found by the join: the surface from the object.
+/// Shades one hit found by the join: the surface from the object (or,
+/// for an instance, from its model's primitive, placed).
 fn shade_hit(
     materials: &[Material],
     shade_scene: &ShadeScene,
+    models: &Models,
     h: &HitRec,
     obj: &ObjectRef<'_>,
     out: &mut Vec<RayRec>,
@@ -438,8 +453,19 @@ fn shade_hit(
     let r = &h.ray;
     let o = Vec3::from_array(r.o);
     let d = Vec3::from_array(r.d);
-    let surf = obj.shape.surface(&RayQ::from_vec3(o, d), h.t);
-    let mat = &materials[obj.material as usize];
+    let ray = RayQ::from_vec3(o, d);
+    let (surf, material) = match (&obj.shape, h.prim.instance_parts()) {
+        (Shape::Instance(i), Some((_, p))) => {
+            match models.surface(&Placement::of(i), p, &ray, h.t) {
+                Some(found) => found,
+                // Results are checked against the database before they
+                // are shaded; a primitive past its model cannot come here.
+                None => return,
+            }
+        }
+        _ => (obj.shape.surface(&ray, h.t), obj.material),
+    };
+    let mat = &materials[material as usize];
     shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
 }
 

@@ -21,8 +21,10 @@ use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS
 use crate::error::Error;
 use crate::hit::PrimId;
 use crate::math::Real;
+use crate::models::Models;
 use crate::progress::Progress;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
+use crate::scene::Material;
 use crate::sdb::Database;
 use crate::spill::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
 use std::time::Instant;
@@ -152,6 +154,10 @@ pub struct Tracer<'db, R: Real> {
     pub eps: f64,
     shading: super::Shading,
     shade_scene: ShadeScene,
+    /// The models the database's instances place, held for the render.
+    pub models: Models,
+    /// The world's materials followed by the models'.
+    materials: Vec<Material>,
     slots: Slots<R>,
     /// Intersection passes read their blocks on a thread of their own.
     read_ahead: bool,
@@ -185,6 +191,9 @@ impl<'db, R: Real> Tracer<'db, R> {
         progress: &dyn Progress,
     ) -> Result<Self, Error> {
         opts.validate()?;
+        // Models are held whole (their triangles and grids), out of the
+        // budget like the voxel flags.
+        let models = Models::load(db, progress)?;
         let (specs, partition) = super::plan_grids(db, opts, bf.memory);
         if specs.len() > MAX_GRIDS {
             return Err(Error::Invalid(format!(
@@ -196,7 +205,8 @@ impl<'db, R: Real> Tracer<'db, R> {
         // voxels), and per block its voxel boxes (one per grid) and its
         // place in the file (which let passes skip it).
         let voxels: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-        let cells = voxels
+        let cells = models.bytes()
+            + voxels
             + voxels / 16
             + specs.len() as u64 * 4096
             + db.block_count()
@@ -258,6 +268,8 @@ impl<'db, R: Real> Tracer<'db, R> {
             eps,
             shading: bf.shading,
             shade_scene,
+            materials: models.material_table(&db.scene().materials),
+            models,
             slots: Slots::new(threads),
             dense_buf: Vec::new(),
             spare_rays: Vec::new(),
@@ -325,6 +337,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         }
         let mut setup = IntersectSetup {
             db: self.db,
+            models: &self.models,
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
@@ -456,11 +469,12 @@ impl<'db, R: Real> Tracer<'db, R> {
         );
         let mut setup = ShadeSetup {
             db: self.db,
+            models: &self.models,
             set: &mut self.set_buf,
             carried: &mut self.carried_buf,
             outputs: &mut self.shade_outputs,
             radix: &mut self.radix,
-            materials: &self.db.scene().materials,
+            materials: &self.materials,
             shade: &self.shade_scene,
             set_cap: self.budget.shading_set_hits(self.shade_scene.lights.len()),
         };

@@ -3,6 +3,7 @@
 
 use super::packet::Hits;
 use super::{Candidate, DfScene};
+use crate::hit::PrimId;
 use crate::intersect::{RayQ, triangle};
 use crate::math::{Real, V3, Vec3, Vec3Ext};
 use crate::render::KindCounts;
@@ -181,15 +182,35 @@ impl<'a, 't> LaneTests<'a, 't> {
     /// gives `to` each hit: each lane's test is the scalar test of the
     /// object's kind.
     #[inline(always)]
-    fn hits<R: Real>(&self, rays: &Rays<R>, m: Mask, to: &mut impl LaneSink<R>) {
+    fn hits<R: Real>(
+        &self,
+        rays: &Rays<R>,
+        m: Mask,
+        to: &mut impl LaneSink<R>,
+        tests: &mut KindCounts,
+    ) {
         match &self.c {
+            Candidate::Instance(_, pl) => {
+                let models = &self.s.models;
+                for i in lanes(m) {
+                    let (q, lo, hi) = (&rays.q[i], rays.rmin[i], to.limit(i));
+                    let (o, d) = (rays.o(i), rays.d(i));
+                    if to.nearest() {
+                        if let Some((t, p)) = models.nearest(pl, q, o, d, lo, hi, tests) {
+                            to.hit(i, t, PrimId::instance(self.id, p));
+                        }
+                    } else if models.blocks(pl, q, o, d, lo, hi, tests) {
+                        to.hit(i, hi, PrimId::NONE);
+                    }
+                }
+            }
             Candidate::Face { v, .. } => {
                 let [a, b, c] = *v;
                 for i in lanes(m) {
                     if let Some(t) =
                         triangle::intersect(a, b, c, &rays.q[i], rays.rmin[i], to.limit(i))
                     {
-                        to.hit(i, t);
+                        to.hit(i, t, PrimId::object(self.id));
                     }
                 }
             }
@@ -198,7 +219,7 @@ impl<'a, 't> LaneTests<'a, 't> {
                     for i in lanes(m) {
                         let (q, lo, hi) = (&rays.q[i], rays.rmin[i], to.limit(i));
                         if let Some(t) = SphereKind::intersect(sp, None, &h.bbox, q, lo, hi) {
-                            to.hit(i, t);
+                            to.hit(i, t, PrimId::object(self.id));
                         }
                     }
                 }
@@ -208,7 +229,7 @@ impl<'a, 't> LaneTests<'a, 't> {
                         if let Some(t) =
                             triangle::intersect(a, b, c, &rays.q[i], rays.rmin[i], to.limit(i))
                         {
-                            to.hit(i, t);
+                            to.hit(i, t, PrimId::object(self.id));
                         }
                     }
                 }
@@ -216,7 +237,7 @@ impl<'a, 't> LaneTests<'a, 't> {
                     for i in lanes(m) {
                         let (q, lo, hi) = (&rays.q[i], rays.rmin[i], to.limit(i));
                         if let Some(t) = self.c.intersect(self.s, q, lo, hi) {
-                            to.hit(i, t);
+                            to.hit(i, t, PrimId::object(self.id));
                         }
                     }
                 }
@@ -235,12 +256,8 @@ impl<'a, 't> LaneTests<'a, 't> {
         tests: &mut KindCounts,
     ) -> Mask {
         tests.add_n(self.c.kind(), m.count_ones() as u64);
-        let mut to = Nearest {
-            best,
-            id: self.id,
-            won: 0,
-        };
-        self.hits(rays, m, &mut to);
+        let mut to = Nearest { best, won: 0 };
+        self.hits(rays, m, &mut to, tests);
         to.won
     }
 
@@ -253,7 +270,7 @@ impl<'a, 't> LaneTests<'a, 't> {
             rmax: &rays.rmax,
             hit: 0,
         };
-        self.hits(rays, *m, &mut to);
+        self.hits(rays, *m, &mut to, tests);
         *m &= !to.hit;
         to.hit != 0
     }
@@ -262,13 +279,14 @@ impl<'a, 't> LaneTests<'a, 't> {
 /// Where [`LaneTests::hits`] gets each lane's limit and puts its hits.
 trait LaneSink<R> {
     fn limit(&self, i: usize) -> R;
-    fn hit(&mut self, i: usize, t: R);
+    fn hit(&mut self, i: usize, t: R, prim: PrimId);
+    /// Whether it keeps the nearest hit (not any hit at all).
+    fn nearest(&self) -> bool;
 }
 
 /// Hits offered to each lane's best so far.
 struct Nearest<'b, R> {
     best: &'b mut Hits<R>,
-    id: u32,
     won: Mask,
 }
 
@@ -279,8 +297,12 @@ impl<R: Real> LaneSink<R> for Nearest<'_, R> {
     }
 
     #[inline(always)]
-    fn hit(&mut self, i: usize, t: R) {
-        self.won |= (self.best.offer(i, t, self.id) as Mask) << i;
+    fn hit(&mut self, i: usize, t: R, prim: PrimId) {
+        self.won |= (self.best.offer(i, t, prim) as Mask) << i;
+    }
+
+    fn nearest(&self) -> bool {
+        true
     }
 }
 
@@ -297,8 +319,12 @@ impl<R: Real> LaneSink<R> for Blocked<'_, R> {
     }
 
     #[inline(always)]
-    fn hit(&mut self, i: usize, _: R) {
+    fn hit(&mut self, i: usize, _: R, _: PrimId) {
         self.hit |= 1 << i;
+    }
+
+    fn nearest(&self) -> bool {
+        false
     }
 }
 

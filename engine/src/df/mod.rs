@@ -11,13 +11,17 @@ mod polygon;
 mod single;
 mod trace;
 
+pub(crate) use nested::{Entry, NESTED, high_first, ray_meets};
+pub(crate) use object_grid::Boxes;
 pub use object_grid::ObjectGrid;
 
 use crate::error::Error;
 use crate::grid::{DEFAULT_DENSITY, GridStat, MAX_CELLS, choose_resolution, plan_groups};
+use crate::hit::PrimId;
 use crate::intersect::RayQ;
 use crate::intersect::{Surface, triangle};
-use crate::math::Real;
+use crate::math::{Real, Vec3};
+use crate::models::{Models, Placement};
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
 use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
@@ -48,6 +52,10 @@ pub struct DfScene<'t> {
     /// rays skip a candidate only when it lies at least this far from them.
     pub slack: f64,
     pub tune: Tune,
+    /// The models instances place, and each instance's placement (by
+    /// `Held::placement`).
+    pub models: Models,
+    placements: Vec<Placement>,
 }
 
 /// An object held as a record, decoded.
@@ -61,6 +69,8 @@ pub struct Held<'t> {
     /// Index into `edge_bins` of a many-sided polygon's binned edges, or
     /// `PLAIN`.
     bins: u32,
+    /// Index into `placements` of an instance's, or `PLAIN`.
+    placement: u32,
 }
 
 /// One object, ready to be tested: a face's corners, or a decoded record.
@@ -72,6 +82,8 @@ pub enum Candidate<'a, 't> {
         v: [[f32; 3]; 3],
     },
     Record(&'a Held<'t>),
+    /// A model placed by an instance record.
+    Instance(&'a Held<'t>, &'a Placement),
 }
 
 impl Candidate<'_, '_> {
@@ -80,6 +92,7 @@ impl Candidate<'_, '_> {
         match self {
             Candidate::Face { kind, .. } => *kind,
             Candidate::Record(h) => h.shape.kind(),
+            Candidate::Instance(..) => ShapeKind::Instance,
         }
     }
 
@@ -87,16 +100,66 @@ impl Candidate<'_, '_> {
     pub fn bbox(&self) -> Aabb {
         match self {
             Candidate::Face { v, .. } => Aabb::of_face(v),
-            Candidate::Record(h) => h.bbox,
+            Candidate::Record(h) | Candidate::Instance(h, _) => h.bbox,
+        }
+    }
+
+    /// The nearest hit in `(t_min, t_max)` of the ray (`ray`, and its
+    /// origin `o` and direction `d` in `f64`, which an instance's model
+    /// walk takes) on object `id`: the distance and the primitive hit.
+    /// Tests of a placed model's triangles count in `tests`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn hit<R: Real>(
+        &self,
+        s: &DfScene,
+        ray: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        id: u32,
+        tests: &mut KindCounts,
+    ) -> Option<(R, PrimId)> {
+        match self {
+            Candidate::Instance(_, pl) => s
+                .models
+                .nearest(pl, ray, o, d, t_min, t_max, tests)
+                .map(|(t, p)| (t, PrimId::instance(id, p))),
+            _ => self
+                .intersect(s, ray, t_min, t_max)
+                .map(|t| (t, PrimId::object(id))),
+        }
+    }
+
+    /// Whether the object blocks the ray anywhere in `(t_min, t_max)`
+    /// (see [`Candidate::hit`]).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn blocks<R: Real>(
+        &self,
+        s: &DfScene,
+        ray: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> bool {
+        match self {
+            Candidate::Instance(_, pl) => s.models.blocks(pl, ray, o, d, t_min, t_max, tests),
+            _ => self.intersect(s, ray, t_min, t_max).is_some(),
         }
     }
 
     /// Nearest `t` in `(t_min, t_max)` at which `ray` meets the object:
     /// its kind's test, through its prepared data. A face's test is a
-    /// three-vertex polygon's and a three-vertex patch's.
+    /// three-vertex polygon's and a three-vertex patch's. An instance is
+    /// tested by [`Candidate::hit`] alone (this finds nothing).
     #[inline(always)]
     pub fn intersect<R: Real>(&self, s: &DfScene, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
         match self {
+            Candidate::Instance(..) => None,
             Candidate::Face { v, .. } => triangle::intersect(v[0], v[1], v[2], ray, t_min, t_max),
             Candidate::Record(h) => match (h.bins, &h.shape) {
                 (PLAIN, shape) => shape.intersect(s.prep(h), &h.bbox, ray, t_min, t_max),
@@ -169,6 +232,7 @@ impl<'t> DfScene<'t> {
     pub fn new(
         db: &Database,
         objects: &'t ObjectStore,
+        models: Models,
         opts: &RenderOptions,
     ) -> Result<DfScene<'t>, Error> {
         opts.validate()?;
@@ -183,6 +247,7 @@ impl<'t> DfScene<'t> {
         let mut records = Vec::with_capacity(objects.records());
         let mut preps = Vec::new();
         let mut edge_bins = Vec::new();
+        let mut placements = Vec::new();
         for id in 0..n as u32 {
             let Slot::Record(r) = objects.slot(id) else {
                 continue;
@@ -202,7 +267,20 @@ impl<'t> DfScene<'t> {
                 material: o.material,
                 prep: PLAIN,
                 bins: PLAIN,
+                placement: PLAIN,
             };
+            if let Shape::Instance(i) = &o.shape {
+                if i.model() as usize >= models.len() {
+                    return Err(Error::Invalid(format!(
+                        "{}: object {id} places model {}, of {}",
+                        db.path().display(),
+                        i.model(),
+                        models.len()
+                    )));
+                }
+                held.placement = placements.len() as u32;
+                placements.push(Placement::of(i));
+            }
             if let Some(p) = prep {
                 held.prep = preps.len() as u32;
                 preps.push(p);
@@ -266,12 +344,14 @@ impl<'t> DfScene<'t> {
             records,
             preps,
             edge_bins,
-            materials: header.materials.clone(),
+            materials: models.material_table(&header.materials),
             grids,
             shade: ShadeScene::new(header, opts.max_depth, eps),
             camera: Camera::new(&header.view, opts.width, opts.height)?,
             slack,
             tune: Tune::default(),
+            models,
+            placements,
         })
     }
 
@@ -305,24 +385,72 @@ impl<'t> DfScene<'t> {
                 },
                 v: self.objects.positions(&f),
             },
-            Slot::Record(r) => Candidate::Record(&self.records[r as usize]),
+            Slot::Record(r) => {
+                let h = &self.records[r as usize];
+                match h.placement {
+                    PLAIN => Candidate::Record(h),
+                    p => Candidate::Instance(h, &self.placements[p as usize]),
+                }
+            }
         }
     }
 
-    /// Tests object `id` (counting the test by kind): the nearest `t` in
-    /// `(t_min, t_max)` at which `ray` meets it.
+    /// Tests object `id` (counting the test by kind): the nearest hit in
+    /// `(t_min, t_max)` of the ray (see [`Candidate::hit`]).
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub fn test<R: Real>(
         &self,
         id: u32,
         ray: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
         t_min: R,
         t_max: R,
         tests: &mut KindCounts,
-    ) -> Option<R> {
+    ) -> Option<(R, PrimId)> {
         let c = self.candidate(id);
         tests.add(c.kind());
-        c.intersect(self, ray, t_min, t_max)
+        c.hit(self, ray, o, d, t_min, t_max, id, tests)
+    }
+
+    /// Whether object `id` blocks the ray in `(t_min, t_max)` (counting
+    /// the test by kind).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    pub fn test_blocks<R: Real>(
+        &self,
+        id: u32,
+        ray: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> bool {
+        let c = self.candidate(id);
+        tests.add(c.kind());
+        c.blocks(self, ray, o, d, t_min, t_max, tests)
+    }
+
+    /// The surface of primitive `prim` at `ray`'s hit at `t`, and its
+    /// material: an object's, or a placed model's triangle's.
+    pub fn surface_of(
+        &self,
+        prim: PrimId,
+        ray: &RayQ<f64>,
+        t: f64,
+    ) -> Option<(Surface, &Material)> {
+        match prim.instance_parts() {
+            None => Some(self.surface(prim.object_index()?, ray, t)),
+            Some((i, p)) => match self.candidate(i) {
+                Candidate::Instance(_, pl) => {
+                    let (surface, m) = self.models.surface(pl, p, ray, t)?;
+                    Some((surface, self.materials.get(m as usize)?))
+                }
+                _ => None,
+            },
+        }
     }
 
     /// The surface of object `id` at `ray`'s hit at `t`, and its material.
@@ -383,7 +511,8 @@ pub fn render(
     let t0 = Instant::now();
     progress.set_message("loading objects, building grids");
     let objects = ObjectStore::load(db, progress)?;
-    let scene = DfScene::new(db, &objects, opts)?;
+    let models = Models::load(db, progress)?;
+    let scene = DfScene::new(db, &objects, models, opts)?;
     let preprocess = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let (frame, rays, tests, intersect) = trace::render(&scene, opts, progress)?;
@@ -476,9 +605,9 @@ mod tests {
                 precision,
                 ..Default::default()
             };
-            let plain = DfScene::new(&db, &objects, &opts).unwrap();
+            let plain = DfScene::new(&db, &objects, Models::default(), &opts).unwrap();
             let (want, ..) = trace::render(&plain, &opts, &NoProgress).unwrap();
-            let mut s = DfScene::new(&db, &objects, &opts).unwrap();
+            let mut s = DfScene::new(&db, &objects, Models::default(), &opts).unwrap();
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(1)
                 .build()

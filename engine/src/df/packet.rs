@@ -599,11 +599,10 @@ impl<R: Real> Hits<R> {
         }
     }
 
-    /// Offers lane `i` a hit at `t` on object `id`; whether it won.
+    /// Offers lane `i` a hit at `t` on primitive `prim`; whether it won.
     #[inline(always)]
-    pub fn offer(&mut self, i: usize, t: R, id: u32) -> bool {
+    pub fn offer(&mut self, i: usize, t: R, prim: PrimId) -> bool {
         let t = t.to_f64();
-        let prim = PrimId::object(id);
         if self.hit(i).loses_to(t, prim) {
             self.t[i] = t;
             self.prim[i] = prim;

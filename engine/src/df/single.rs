@@ -59,7 +59,7 @@ pub fn nearest_in<R: Real>(
                 ray_meets(o, inv, t_min, best.upper[lane].to_f64(), b, pad).then_some(())
             }
             Entry::Object(id, ()) => {
-                test_nearest(s, sc, stamp, q, rmin, id, best, lane);
+                test_nearest(s, sc, stamp, q, o, d, rmin, id, best, lane);
                 Some(())
             }
         });
@@ -82,12 +82,15 @@ pub fn nearest_in<R: Real>(
 
 /// Tests one candidate for the nearest hit, unless this ray tested it
 /// already (mailbox).
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn test_nearest<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     stamp: u32,
     q: &RayQ<R>,
+    o: Vec3,
+    d: Vec3,
     rmin: R,
     id: u32,
     best: &mut Hits<R>,
@@ -98,8 +101,8 @@ fn test_nearest<R: Real>(
         return;
     }
     *m = stamp;
-    if let Some(t) = s.test(id, q, rmin, best.upper[lane], &mut sc.tests) {
-        best.offer(lane, t, id);
+    if let Some((t, prim)) = s.test(id, q, o, d, rmin, best.upper[lane], &mut sc.tests) {
+        best.offer(lane, t, prim);
     }
 }
 
@@ -125,7 +128,7 @@ pub fn occluded<R: Real>(
     }
     let (rmin, rmax) = (R::from_f64(t_min), R::from_f64(t_max));
     let cached = sc.shadow_cache[slot];
-    if cached != NO_OBJECT && blocks(s, sc, stamp, q, rmin, rmax, cached) {
+    if cached != NO_OBJECT && blocks(s, sc, stamp, q, o, d, rmin, rmax, cached) {
         return true;
     }
     for g in s.grids.iter().rev() {
@@ -163,7 +166,7 @@ pub fn blocker_in<R: Real>(
         g.visit(cell, hf, (), &mut |e| match e {
             Entry::Box(b, ()) => ray_meets(o, inv, t_min, t_max, b, pad).then_some(()),
             Entry::Object(id, ()) => {
-                if blocks(s, sc, stamp, q, rmin, rmax, id) {
+                if blocks(s, sc, stamp, q, o, d, rmin, rmax, id) {
                     found = id;
                 }
                 (found == NO_OBJECT).then_some(())
@@ -186,12 +189,15 @@ pub fn blocker_in<R: Real>(
 }
 
 /// Whether object `id` blocks the shadow ray, unless tested already.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn blocks<R: Real>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     stamp: u32,
     q: &RayQ<R>,
+    o: Vec3,
+    d: Vec3,
     rmin: R,
     rmax: R,
     id: u32,
@@ -201,5 +207,5 @@ fn blocks<R: Real>(
         return false;
     }
     *m = stamp;
-    s.test(id, q, rmin, rmax, &mut sc.tests).is_some()
+    s.test_blocks(id, q, o, d, rmin, rmax, &mut sc.tests)
 }

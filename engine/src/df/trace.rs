@@ -310,13 +310,16 @@ fn trace_packet<R: Real>(
     let mut ends = [0u32; LANES];
     for i in 0..rays.n {
         let (slot, weight) = (carry.slot[i], carry.weight[i]);
-        // Objects of the database are the only primitives here.
-        if let Some(id) = best.prim[i].object_index() {
+        let (o, d) = (rays.o(i), rays.d(i));
+        let hit = best.hit(i);
+        if let Some((surf, mat)) = hit
+            .is_some()
+            .then(|| s.surface_of(hit.prim, &RayQ::from_vec3(o, d), hit.t))
+            .flatten()
+        {
             if depth == 1 {
                 sc.rays.eye_hit_rays += 1;
             }
-            let (o, d) = (rays.o(i), rays.d(i));
-            let (surf, mat) = s.surface(id, &RayQ::from_vec3(o, d), best.t[i]);
             points[i] = surf.p;
             shade(
                 &s.shade,

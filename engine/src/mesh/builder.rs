@@ -222,6 +222,10 @@ pub struct MeshSummary {
     pub objects: u64,
     /// Whether the external join ran (the vertices did not fit).
     pub joined_on_disk: bool,
+    /// Models stored once (glTF meshes placed more than once), and the
+    /// instances placing them.
+    pub models: u64,
+    pub instances: u64,
 }
 
 /// Collects a mesh as a reader parses it (phase 1); [`MeshBuilder::finish`]

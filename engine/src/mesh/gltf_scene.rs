@@ -36,11 +36,12 @@
 use super::builder::NEUTRAL;
 use super::{MeshOptions, MeshSummary, Warnings};
 use crate::error::Error;
+use crate::models::{place_normal, place_point};
 use crate::progress::Progress;
 use crate::scene::setup::{DEFAULT_BACKGROUND, default_lights};
 use crate::scene::{Light, Material, MeshFacts, SceneSink, View};
 use crate::shapes::{Patch, Polygon, Shape};
-use glam::{DMat3, DMat4, DVec3};
+use glam::{DAffine3, DMat4, DVec3};
 use gltf::mesh::Mode;
 use std::io::Read;
 use std::path::Path;
@@ -127,18 +128,45 @@ pub fn read_gltf_bytes(
     let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(|d| &d.0[..]);
     gpu_instances(&doc, &mut placed, &buffers, get).map_err(&bad)?;
 
+    // A mesh drawn by more than one placement is a model, stored once and
+    // placed by instances, when the output keeps models; else (and for
+    // a mesh drawn once) each placement writes its own copy.
+    let mut uses = vec![0usize; doc.meshes().count()];
+    for p in placed.iter().filter(|p| p.draws) {
+        if let Some(m) = p.node.mesh() {
+            uses[m.index()] += 1;
+        }
+    }
+    let takes_models = sink.takes_models();
+    let is_model = |m: &gltf::Mesh<'_>| takes_models && uses[m.index()] > 1;
+    let mesh_vertices = |m: &gltf::Mesh<'_>| -> u64 {
+        m.primitives()
+            .filter_map(|p| p.get(&gltf::Semantic::Positions))
+            .map(|a| a.count() as u64)
+            .sum()
+    };
+
     // Bounds of every placed primitive, from its positions.
     let mut bounds = Bounds::default();
+    // The vertices the world stores (a copy's each time); a model's are
+    // its own facts.
+    let model_vertices: u64 = doc
+        .meshes()
+        .filter(is_model)
+        .map(|m| mesh_vertices(&m))
+        .sum();
     let mut vertices = 0u64;
     for p in &placed {
         if let Some(mesh) = p.node.mesh().filter(|_| p.draws) {
+            if !is_model(&mesh) {
+                vertices += mesh_vertices(&mesh);
+            }
             for prim in mesh.primitives() {
                 let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
                     continue;
                 };
                 check_accessor(&pos, &buffers).map_err(&bad)?;
                 check_vec3(&pos).map_err(&bad)?;
-                vertices += pos.count() as u64;
                 let reader = prim.reader(get);
                 for v in reader.read_positions().into_iter().flatten() {
                     bounds.add(p.world.transform_point3(DVec3::from(v.map(f64::from))));
@@ -197,130 +225,46 @@ pub fn read_gltf_bytes(
     })?;
 
     let mut summary = MeshSummary {
-        vertices,
+        vertices: vertices + model_vertices,
         ..Default::default()
     };
-    let mut current: Option<Material> = None;
+    let models: Vec<gltf::Mesh<'_>> = doc.meshes().filter(is_model).collect();
+    let mut model_of: Vec<Option<u32>> = vec![None; uses.len()];
+    let mut out = Emit {
+        buffers: &buffers,
+        sink,
+        current: None,
+        summary: &mut summary,
+        warnings: &mut warnings,
+        bad: &bad,
+    };
+    {
+        for mesh in models {
+            out.sink.begin_model()?;
+            out.sink.mesh(&MeshFacts {
+                vertices: mesh_vertices(&mesh),
+                bounds: None,
+                up: None,
+            })?;
+            out.current = None;
+            out.mesh(&mesh, None, mesh.index())?;
+            let model = out.sink.end_model()?;
+            out.current = None;
+            model_of[mesh.index()] = Some(model.index);
+            out.summary.models += 1;
+        }
+    }
     for p in &placed {
         let Some(mesh) = p.node.mesh().filter(|_| p.draws) else {
             continue;
         };
-        let normal_map = DMat3::from_mat4(p.world).inverse().transpose();
-        for prim in mesh.primitives() {
-            let what = || format!("mesh {} primitive {}", mesh.index(), prim.index());
-            let mode = prim.mode();
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
-                return Err(bad(format!(
-                    "{}: {mode:?} primitives are not supported (only triangles, strips and fans)",
-                    what()
-                )));
+        let placement = DAffine3::from_mat4(p.world);
+        match model_of[mesh.index()] {
+            Some(model) => {
+                out.sink.instance(model, &placement)?;
+                out.summary.instances += 1;
             }
-            let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
-                warnings.add("a primitive without positions is skipped", what);
-                continue;
-            };
-            let reader = prim.reader(get);
-            let positions: Vec<[f32; 3]> = reader
-                .read_positions()
-                .ok_or_else(|| bad(format!("{}: positions cannot be read", what())))?
-                .map(|v| {
-                    let w = p.world.transform_point3(DVec3::from(v.map(f64::from)));
-                    w.to_array().map(|c| c as f32)
-                })
-                .collect();
-            // A number that is not finite, in the file or once placed (a
-            // transform too large for single precision).
-            if let Some(k) = positions
-                .iter()
-                .position(|v| !v.iter().all(|c| c.is_finite()))
-            {
-                return Err(bad(format!(
-                    "{}: vertex {k} is not a finite point once placed by node {}",
-                    what(),
-                    p.node.index()
-                )));
-            }
-            let normals: Option<Vec<[f32; 3]>> = match prim.get(&gltf::Semantic::Normals) {
-                Some(n) => {
-                    check_accessor(&n, &buffers).map_err(&bad)?;
-                    check_vec3(&n).map_err(&bad)?;
-                    if n.count() != pos.count() {
-                        return Err(bad(format!(
-                            "{}: {} normals for {} positions",
-                            what(),
-                            n.count(),
-                            pos.count()
-                        )));
-                    }
-                    reader.read_normals().map(|it| {
-                        it.map(|v| {
-                            // A normal that cannot be normalised (zero, or
-                            // not finite) is taken as none (zero).
-                            let n = (normal_map * DVec3::from(v.map(f64::from)))
-                                .try_normalize()
-                                .unwrap_or(DVec3::ZERO);
-                            n.to_array().map(|c| c as f32)
-                        })
-                        .collect()
-                    })
-                }
-                None => None,
-            };
-            let indices: Vec<u32> = match prim.indices() {
-                Some(a) => {
-                    check_accessor(&a, &buffers).map_err(&bad)?;
-                    use gltf::accessor::DataType::{U8, U16, U32};
-                    if a.dimensions() != gltf::accessor::Dimensions::Scalar
-                        || !matches!(a.data_type(), U8 | U16 | U32)
-                    {
-                        return Err(bad(format!(
-                            "{}: indices (accessor {}) must be unsigned integers",
-                            what(),
-                            a.index()
-                        )));
-                    }
-                    let read = reader
-                        .read_indices()
-                        .ok_or_else(|| bad(format!("{}: indices cannot be read", what())))?;
-                    let v: Vec<u32> = read.into_u32().collect();
-                    if let Some(&i) = v.iter().find(|&&i| i as usize >= positions.len()) {
-                        return Err(bad(format!(
-                            "{}: index {i} is past its {} vertices",
-                            what(),
-                            positions.len()
-                        )));
-                    }
-                    v
-                }
-                None => (0..positions.len() as u32).collect(),
-            };
-            let m = material(&prim.material(), &mut warnings);
-            if current != Some(m) {
-                sink.material(&m)?;
-                current = Some(m);
-            }
-            for t in triangles(mode, &indices) {
-                summary.faces += 1;
-                let v = t.map(|i| positions[i as usize]);
-                if !super::geometry::has_area(v[0], v[1], v[2]) {
-                    summary.degenerate += 1;
-                    continue;
-                }
-                match &normals {
-                    Some(n) => {
-                        let n = t.map(|i| n[i as usize]);
-                        sink.object(&Shape::Patch(Patch {
-                            vertices: &v,
-                            normals: &n,
-                        }))?
-                    }
-                    None => sink.object(&Shape::Polygon(Polygon { vertices: &v }))?,
-                }
-                summary.objects += 1;
-            }
+            None => out.mesh(&mesh, Some(&placement), p.node.index())?,
         }
     }
     warnings.report(name, progress);
@@ -351,6 +295,156 @@ fn percent_decodes_to_utf8(uri: &str) -> bool {
         }
     }
     std::str::from_utf8(&out).is_ok()
+}
+
+/// Writes meshes' triangles into a sink.
+struct Emit<'e, 'b> {
+    buffers: &'b [gltf::buffer::Data],
+    sink: &'e mut dyn SceneSink,
+    /// The material the sink has now.
+    current: Option<Material>,
+    summary: &'e mut MeshSummary,
+    warnings: &'e mut Warnings,
+    bad: &'e dyn Fn(String) -> Error,
+}
+
+impl Emit<'_, '_> {
+    /// Writes the triangles of `mesh` placed by `placement` (node `node`
+    /// places it), or, without a placement, as they are in the file (a
+    /// model's). A placed corner is [`place_point`] of the file's, a
+    /// placed normal [`place_normal`] of the file's: exactly what an
+    /// instance of the model computes, so that a copy and an instance are
+    /// the same triangles. A model keeps the file's normals (a normal that
+    /// is not finite as zero), to be placed by each instance.
+    fn mesh(
+        &mut self,
+        mesh: &gltf::Mesh<'_>,
+        placement: Option<&DAffine3>,
+        node: usize,
+    ) -> Result<(), Error> {
+        let bad = self.bad;
+        let buffers = self.buffers;
+        let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(|d| &d.0[..]);
+        let normal_map = placement.map(|m| m.matrix3.inverse().transpose());
+        for prim in mesh.primitives() {
+            let what = || format!("mesh {} primitive {}", mesh.index(), prim.index());
+            let mode = prim.mode();
+            if !matches!(
+                mode,
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) {
+                return Err(bad(format!(
+                    "{}: {mode:?} primitives are not supported (only triangles, strips and fans)",
+                    what()
+                )));
+            }
+            let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
+                self.warnings
+                    .add("a primitive without positions is skipped", what);
+                continue;
+            };
+            let reader = prim.reader(get);
+            let positions: Vec<[f32; 3]> = reader
+                .read_positions()
+                .ok_or_else(|| bad(format!("{}: positions cannot be read", what())))?
+                .map(|v| match placement {
+                    Some(m) => place_point(m, v),
+                    None => v,
+                })
+                .collect();
+            // A number that is not finite, in the file or once placed (a
+            // transform too large for single precision).
+            if let Some(k) = positions
+                .iter()
+                .position(|v| !v.iter().all(|c| c.is_finite()))
+            {
+                return Err(bad(format!(
+                    "{}: vertex {k} is not a finite point once placed by node {node}",
+                    what(),
+                )));
+            }
+            let normals: Option<Vec<[f32; 3]>> = match prim.get(&gltf::Semantic::Normals) {
+                Some(n) => {
+                    check_accessor(&n, buffers).map_err(bad)?;
+                    check_vec3(&n).map_err(bad)?;
+                    if n.count() != pos.count() {
+                        return Err(bad(format!(
+                            "{}: {} normals for {} positions",
+                            what(),
+                            n.count(),
+                            pos.count()
+                        )));
+                    }
+                    reader.read_normals().map(|it| {
+                        it.map(|v| match &normal_map {
+                            // A normal that cannot be normalised (zero, or
+                            // not finite) is taken as none (zero).
+                            Some(nm) => place_normal(nm, v),
+                            None if v.iter().all(|c| c.is_finite()) => v,
+                            None => [0.0; 3],
+                        })
+                        .collect()
+                    })
+                }
+                None => None,
+            };
+            let indices: Vec<u32> = match prim.indices() {
+                Some(a) => {
+                    check_accessor(&a, buffers).map_err(bad)?;
+                    use gltf::accessor::DataType::{U8, U16, U32};
+                    if a.dimensions() != gltf::accessor::Dimensions::Scalar
+                        || !matches!(a.data_type(), U8 | U16 | U32)
+                    {
+                        return Err(bad(format!(
+                            "{}: indices (accessor {}) must be unsigned integers",
+                            what(),
+                            a.index()
+                        )));
+                    }
+                    let read = reader
+                        .read_indices()
+                        .ok_or_else(|| bad(format!("{}: indices cannot be read", what())))?;
+                    let v: Vec<u32> = read.into_u32().collect();
+                    if let Some(&i) = v.iter().find(|&&i| i as usize >= positions.len()) {
+                        return Err(bad(format!(
+                            "{}: index {i} is past its {} vertices",
+                            what(),
+                            positions.len()
+                        )));
+                    }
+                    v
+                }
+                None => (0..positions.len() as u32).collect(),
+            };
+            let m = material(&prim.material(), self.warnings);
+            if self.current != Some(m) {
+                self.sink.material(&m)?;
+                self.current = Some(m);
+            }
+            for t in triangles(mode, &indices) {
+                self.summary.faces += 1;
+                let v = t.map(|i| positions[i as usize]);
+                if !super::geometry::has_area(v[0], v[1], v[2]) {
+                    self.summary.degenerate += 1;
+                    continue;
+                }
+                match &normals {
+                    Some(n) => {
+                        let n = t.map(|i| n[i as usize]);
+                        self.sink.object(&Shape::Patch(Patch {
+                            vertices: &v,
+                            normals: &n,
+                        }))?
+                    }
+                    None => self
+                        .sink
+                        .object(&Shape::Polygon(Polygon { vertices: &v }))?,
+                }
+                self.summary.objects += 1;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A node of the scene with its world transform.

@@ -177,6 +177,9 @@ pub struct Setup {
     /// Which of a glTF file's cameras to look through (its index among
     /// the file's cameras; the first one a node places if `None`).
     pub camera_index: Option<usize>,
+    /// Write each placement of a glTF mesh as a copy of its own, not as
+    /// an instance of a model stored once.
+    pub flatten_instances: bool,
 }
 
 impl Default for Setup {
@@ -187,6 +190,7 @@ impl Default for Setup {
             material: None,
             image: [512, 512],
             camera_index: None,
+            flatten_instances: false,
         }
     }
 }
@@ -343,6 +347,8 @@ pub struct SetupSink<'a> {
     saw_background: bool,
     lights_sent: bool,
     material_sent: bool,
+    /// `material_sent` of the world while a model is being written.
+    world_material_sent: bool,
 }
 
 impl<'a> SetupSink<'a> {
@@ -355,6 +361,7 @@ impl<'a> SetupSink<'a> {
             saw_background: false,
             lights_sent: false,
             material_sent: false,
+            world_material_sent: false,
         }
     }
 
@@ -433,6 +440,27 @@ impl SceneSink for SetupSink<'_> {
 
     fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
         self.inner.origin(origin)
+    }
+
+    fn begin_model(&mut self) -> Result<(), Error> {
+        self.inner.begin_model()?;
+        // A model has its own materials: the override goes to it too.
+        self.world_material_sent = std::mem::replace(&mut self.material_sent, false);
+        Ok(())
+    }
+
+    fn end_model(&mut self) -> Result<crate::sdb::ModelRef, Error> {
+        let r = self.inner.end_model()?;
+        self.material_sent = self.world_material_sent;
+        Ok(r)
+    }
+
+    fn instance(&mut self, model: u32, m: &glam::DAffine3) -> Result<(), Error> {
+        self.inner.instance(model, m)
+    }
+
+    fn takes_models(&self) -> bool {
+        !self.setup.flatten_instances && self.inner.takes_models()
     }
 
     fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {

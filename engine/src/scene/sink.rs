@@ -1,6 +1,8 @@
 use super::{Light, Material, MeshFacts, View};
 use crate::Error;
+use crate::sdb::ModelRef;
 use crate::shapes::Shape;
+use glam::DAffine3;
 
 /// Receives a scene as a stream, in file order: the scene readers and the
 /// SPD generators produce into it; the object-database writer, the NFF
@@ -38,5 +40,31 @@ pub trait SceneSink {
     /// [`crate::scene::setup`]).
     fn mesh(&mut self, _facts: &MeshFacts) -> Result<(), Error> {
         Ok(())
+    }
+
+    /// Starts a model: the materials and objects until
+    /// [`SceneSink::end_model`] form it (triangles only, relative to the
+    /// model's own origin), stored once and placed by
+    /// [`SceneSink::instance`]. A sink that cannot keep models refuses
+    /// (the default); a source then places copies instead.
+    fn begin_model(&mut self) -> Result<(), Error> {
+        Err(Error::Scene("this output cannot hold models".into()))
+    }
+
+    /// Ends the model begun last; what its instances refer to.
+    fn end_model(&mut self) -> Result<ModelRef, Error> {
+        Err(Error::Scene("this output cannot hold models".into()))
+    }
+
+    /// Places model `model` (an [`SceneSink::end_model`] index) by `m`,
+    /// from the model's coordinates to the stream's. The instance is one
+    /// object of the stream.
+    fn instance(&mut self, _model: u32, _m: &DAffine3) -> Result<(), Error> {
+        Err(Error::Scene("this output cannot hold models".into()))
+    }
+
+    /// Whether [`SceneSink::begin_model`] is accepted.
+    fn takes_models(&self) -> bool {
+        false
     }
 }

@@ -21,6 +21,14 @@ pub const VERSION_DENSITY: u32 = 3;
 /// consecutive triangles as runs ([`super::packed`]); the header records
 /// the records' size once expanded (`decoded_bytes`).
 pub const VERSION_PACKED: u32 = 4;
+/// Version 5: as version 4, with models stored once and placed by
+/// instance records. Each model is a version 4 database of its own,
+/// appended after the tables (which list where); `models_bytes` in the
+/// header is their total size. Written only when a scene has models, so
+/// that every other scene stays readable by an sray of version 4.
+pub const VERSION_MODELS: u32 = 5;
+/// Limit on the models of one database.
+pub const MAX_MODELS: usize = 1 << 20;
 /// Header flag: `vertices` is the size of a mesh's vertex table.
 pub const FLAG_MESH: u32 = 1;
 /// Header flag: `triangles` and `vertices` are recorded (files written
@@ -139,7 +147,9 @@ pub struct RawHeader {
     /// The largest block as stored, before compression (version 4: runs
     /// packed; before it, `block_raw_max`).
     pub block_stored_max: u32,
-    pub reserved: [u32; 2],
+    /// Bytes of the models appended after the tables (version 5), two
+    /// words, low first; zero before (reserved words).
+    pub models_bytes: [u32; 2],
     /// CRC-32 of the 252 bytes before it.
     pub header_crc: u32,
 }

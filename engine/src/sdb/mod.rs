@@ -33,4 +33,4 @@ pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
-pub use writer::{DbWriter, WRITE_BUFFER, WriteSummary};
+pub use writer::{DbWriter, ModelRef, WRITE_BUFFER, WriteSummary};

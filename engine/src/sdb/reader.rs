@@ -68,6 +68,23 @@ pub struct Database {
     /// the first complete scan: later scans may pass over a block without
     /// reading it ([`Scan::skip_block`]). Shared by clones.
     layout: Arc<OnceLock<Vec<BlockSpan>>>,
+    /// Where this database starts in its file: 0, or a model's place
+    /// inside the file of the database that places it.
+    base: u64,
+    /// The models this database places (version 5).
+    models: Vec<ModelEntry>,
+}
+
+/// One model of a version 5 database: a database of its own inside the
+/// file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelEntry {
+    /// Where it starts, relative to the placing database's start.
+    pub offset: u64,
+    pub bytes: u64,
+    /// The margin, in the model's units, its grid keeps around each
+    /// triangle (see [`crate::models`]).
+    pub pad: f64,
 }
 
 /// One block's place in the file.
@@ -89,15 +106,69 @@ pub struct DbStats {
 
 impl Database {
     pub fn open(path: &Path) -> Result<Database, Error> {
+        Self::open_at(path, 0, None)
+    }
+
+    /// Model `m` of this database, as a database of its own.
+    pub fn open_model(&self, m: usize) -> Result<Database, Error> {
+        let e = self.models.get(m).ok_or_else(|| Error::Database {
+            file: self.path.clone(),
+            location: "tables".into(),
+            message: format!(
+                "model {m} is not in the database ({} models)",
+                self.models.len()
+            ),
+        })?;
+        let db = Self::open_at(&self.path, self.base + e.offset, Some(e.bytes))?;
+        if db.stamp != self.stamp {
+            return Err(Error::Database {
+                file: self.path.clone(),
+                location: "file".into(),
+                message: "the database changed on disk while it was in use; start the render again"
+                    .into(),
+            });
+        }
+        if !db.models.is_empty() || db.counts.get(ShapeKind::Instance) != 0 {
+            return Err(Error::Database {
+                file: self.path.clone(),
+                location: format!("model {m}"),
+                message: "a model places models of its own (models do not nest)".into(),
+            });
+        }
+        Ok(db)
+    }
+
+    /// The models this database places.
+    pub fn models(&self) -> &[ModelEntry] {
+        &self.models
+    }
+
+    /// Opens the database of `len` bytes (the rest of the file if `None`)
+    /// that starts at byte `base` of `path`.
+    fn open_at(path: &Path, base: u64, len: Option<u64>) -> Result<Database, Error> {
         let mut f = File::open(path).at(path)?;
         let meta = f.metadata().at(path)?;
-        let file_bytes = meta.len();
-        let stamp = (file_bytes, meta.modified().ok());
+        let stamp = (meta.len(), meta.modified().ok());
         let err = |location: &str, message: String| Error::Database {
             file: path.to_path_buf(),
-            location: location.into(),
+            location: if base == 0 {
+                location.into()
+            } else {
+                format!("model at byte {base}, {location}")
+            },
             message,
         };
+        let file_bytes = match len {
+            Some(l) if base.checked_add(l).is_some_and(|e| e <= meta.len()) => l,
+            Some(_) => {
+                return Err(err(
+                    "header",
+                    "the model lies past the end of the file".into(),
+                ));
+            }
+            None => meta.len(),
+        };
+        f.seek(SeekFrom::Start(base)).at(path)?;
         let mut hb = [0u8; HEADER_BYTES];
         let got = read_up_to(&mut f, &mut hb).at(path)?;
         if got < 8 || hb[..8] != MAGIC {
@@ -113,11 +184,11 @@ impl Database {
             ));
         }
         let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-        if !(VERSION..=VERSION_PACKED).contains(&h.version) {
+        if !(VERSION..=VERSION_MODELS).contains(&h.version) {
             return Err(err(
                 "header",
                 format!(
-                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_PACKED}); regenerate it with `sray convert` or `sray gen`",
+                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_MODELS}); regenerate it with `sray convert` or `sray gen`",
                     h.version
                 ),
             ));
@@ -136,7 +207,14 @@ impl Database {
         if h.header_bytes as usize != HEADER_BYTES || h.block_raw_max as usize > MAX_BLOCK_RAW {
             return Err(err("header", "unsupported header or block size".into()));
         }
-        let tables_end = h.tables_offset.checked_add(h.tables_len);
+        let models_bytes = join64(h.models_bytes[0], h.models_bytes[1]);
+        if h.version < VERSION_MODELS && models_bytes != 0 {
+            return Err(err("header", "reserved words are not zero".into()));
+        }
+        let tables_end = h
+            .tables_offset
+            .checked_add(h.tables_len)
+            .and_then(|e| e.checked_add(models_bytes));
         if h.tables_offset < HEADER_BYTES as u64 || tables_end.is_none() {
             return Err(err("header", "tables offset is out of range".into()));
         }
@@ -145,7 +223,7 @@ impl Database {
                 "header",
                 format!(
                     "file is truncated or has trailing bytes: it is {file_bytes} bytes, the header says {}",
-                    h.tables_offset + h.tables_len
+                    h.tables_offset + h.tables_len + models_bytes
                 ),
             ));
         }
@@ -165,7 +243,7 @@ impl Database {
             return Err(err("header", "object counts are inconsistent".into()));
         }
         let mut tables = vec![0u8; h.tables_len as usize];
-        f.seek(SeekFrom::Start(h.tables_offset)).at(path)?;
+        f.seek(SeekFrom::Start(base + h.tables_offset)).at(path)?;
         f.read_exact(&mut tables).at(path)?;
         if VERIFY_CHECKSUMS && crc32fast::hash(&tables) != h.tables_crc {
             return Err(err(
@@ -173,8 +251,30 @@ impl Database {
                 "checksum mismatch: the tables are corrupt".into(),
             ));
         }
-        let (mut scene, sizes, density) = decode_tables(&tables, h.version >= VERSION_DENSITY)
-            .ok_or_else(|| err("tables", "malformed tables".into()))?;
+        let (mut scene, sizes, density, models) = decode_tables(
+            &tables,
+            h.version >= VERSION_DENSITY,
+            h.version >= VERSION_MODELS,
+        )
+        .ok_or_else(|| err("tables", "malformed tables".into()))?;
+        // Each model lies after the tables, in order, and they fill the
+        // rest of the file.
+        let mut at = h.tables_offset + h.tables_len;
+        for (i, m) in models.iter().enumerate() {
+            if m.offset != at
+                || m.bytes < HEADER_BYTES as u64
+                || !(m.pad.is_finite() && m.pad >= 0.0)
+            {
+                return Err(err("tables", format!("model {i} is out of place")));
+            }
+            at += m.bytes;
+        }
+        if at != file_bytes || (h.version >= VERSION_MODELS && models.is_empty()) {
+            return Err(err("tables", "the models do not fill the file".into()));
+        }
+        if counts_instances(&h) > 0 && models.is_empty() {
+            return Err(err("tables", "instances with no models".into()));
+        }
         let origin = h.origin();
         if !origin.iter().all(|c| c.is_finite()) {
             return Err(err("header", "the origin is not finite".into()));
@@ -265,6 +365,8 @@ impl Database {
             stamp,
             verified: Arc::new(AtomicBool::new(false)),
             layout: Arc::new(OnceLock::new()),
+            base,
+            models,
         })
     }
 
@@ -425,7 +527,7 @@ impl Database {
                     .into(),
             });
         }
-        file.seek(SeekFrom::Start(HEADER_BYTES as u64))
+        file.seek(SeekFrom::Start(self.base + HEADER_BYTES as u64))
             .at(&self.path)?;
         let decompressor = match self.compression {
             Compression::None => None,
@@ -464,10 +566,19 @@ fn read_up_to(f: &mut File, buf: &mut [u8]) -> std::io::Result<usize> {
 
 /// The tables: the scene's header, the size summary, and (`density`: in a
 /// version 3 file) the density summary.
-fn decode_tables(
-    buf: &[u8],
-    density: bool,
-) -> Option<(SceneHeader, SizeSummary, Option<DensitySummary>)> {
+/// Instance records the header counts.
+fn counts_instances(h: &RawHeader) -> u64 {
+    h.counts[ShapeKind::Instance as usize]
+}
+
+type Tables = (
+    SceneHeader,
+    SizeSummary,
+    Option<DensitySummary>,
+    Vec<ModelEntry>,
+);
+
+fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Option<Tables> {
     let mut d = Dec { buf, pos: 0 };
     let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
     let from = v3(&mut d)?;
@@ -539,7 +650,10 @@ fn decode_tables(
             return None;
         }
         let n = d.u32()? as usize;
-        if n > MAX_DENSITY_ENTRIES || n * 40 != d.remaining() {
+        if n > MAX_DENSITY_ENTRIES
+            || n * 40 > d.remaining()
+            || (!with_models && n * 40 != d.remaining())
+        {
             return None;
         }
         let mut entries = Vec::with_capacity(n);
@@ -573,6 +687,22 @@ fn decode_tables(
     } else {
         None
     };
+    let mut models = Vec::new();
+    if with_models {
+        let n = d.u32()? as usize;
+        if n > MAX_MODELS || n * 32 != d.remaining() {
+            return None;
+        }
+        for _ in 0..n {
+            let offset = d.u64()?;
+            let bytes = d.u64()?;
+            let pad = d.f64()?;
+            if d.u64()? != 0 {
+                return None;
+            }
+            models.push(ModelEntry { offset, bytes, pad });
+        }
+    }
     Some((
         SceneHeader {
             view,
@@ -582,6 +712,7 @@ fn decode_tables(
         },
         sizes,
         density,
+        models,
     ))
 }
 
@@ -694,7 +825,7 @@ impl Scan<'_> {
             return Ok(false);
         };
         self.file
-            .seek(SeekFrom::Start(span.end))
+            .seek(SeekFrom::Start(self.db.base + span.end))
             .map_err(|e| Error::io(&self.db.path, e))?;
         self.stats.blocks_skipped += 1;
         self.offset = span.end;

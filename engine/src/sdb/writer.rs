@@ -67,6 +67,31 @@ pub struct DbWriter {
     /// Vertices the polygons and patches list.
     listed_vertices: u64,
     triangles: u64,
+    /// The models written so far, each a database of its own in a
+    /// temporary file beside the output, appended at the end.
+    models: Vec<ModelPart>,
+    /// The model being written: objects and materials go to it.
+    open_model: Option<Box<DbWriter>>,
+}
+
+/// A finished model, waiting to be appended.
+struct ModelPart {
+    file: tempfile::NamedTempFile,
+    bytes: u64,
+    bbox: Aabb,
+    /// The largest `|M^-1| * |p|` over its instances (row-sum norm of the
+    /// inverse's linear part, largest coordinate of the placed box): how
+    /// far, in the model's units, the rounding of a placed vertex may
+    /// move it.
+    spread: f64,
+}
+
+/// A model of the scene, once written: what its instances refer to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelRef {
+    pub index: u32,
+    pub bbox: Aabb,
+    pub triangles: u64,
 }
 
 /// The output buffer of [`DbWriter::create`].
@@ -125,6 +150,8 @@ impl DbWriter {
             mesh_vertices: None,
             listed_vertices: 0,
             triangles: 0,
+            models: Vec::new(),
+            open_model: None,
         })
     }
 
@@ -271,19 +298,68 @@ impl DbWriter {
     }
 
     /// Completes the file and moves it into place.
-    pub fn finish(mut self) -> Result<WriteSummary, Error> {
+    pub fn finish(self) -> Result<WriteSummary, Error> {
+        let path = self.path.clone();
+        let (tmp, summary) = self.complete()?;
+        crate::fsutil::persist(tmp, &path)?;
+        Ok(summary)
+    }
+
+    /// Completes the file, leaving it in its temporary place.
+    fn complete(mut self) -> Result<(tempfile::NamedTempFile, WriteSummary), Error> {
+        if self.open_model.is_some() {
+            return Err(Error::Scene("a model was begun and not ended".into()));
+        }
         if self.view.is_none() {
             return Err(Error::Scene("the scene has no view ('v')".into()));
         }
         self.flush_block()?;
-        let tables = self.tables();
+        let mut tables = self.tables();
         let tables_offset = self.offset;
+        // The models' table closes the tables (version 5): where each
+        // model's database lies, relative to the start of this file.
+        if !self.models.is_empty() {
+            let mut e = Enc::default();
+            let table_bytes = 4 + self.models.len() * 32;
+            let mut at = tables_offset + (tables.len() + table_bytes) as u64;
+            e.u32(self.models.len() as u32);
+            for m in &self.models {
+                e.u64(at);
+                e.u64(m.bytes);
+                // The margin a model's grid keeps around each triangle,
+                // in its units (see `crate::models`).
+                let extent = (0..3)
+                    .map(|i| (m.bbox.max[i] - m.bbox.min[i]) as f64)
+                    .fold(0.0, f64::max);
+                e.f64(1e-5 * extent + 1e-5 * m.spread);
+                e.u64(0);
+                at += m.bytes;
+            }
+            debug_assert_eq!(e.0.len(), table_bytes);
+            tables.extend(e.0);
+        }
         let path = self.path.clone();
         self.out().write_all(&tables).at(path)?;
+        let mut models_bytes = 0u64;
+        for m in &mut self.models {
+            let path = self.path.clone();
+            let f = m.file.as_file_mut();
+            f.seek(SeekFrom::Start(0)).at(&path)?;
+            let n = std::io::copy(f, self.out.as_mut().expect("open")).at(&path)?;
+            if n != m.bytes {
+                return Err(Error::Scene(format!(
+                    "a model's database changed size while it was appended ({n} bytes of {})",
+                    m.bytes
+                )));
+            }
+            models_bytes += n;
+        }
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: if self.packer.is_some() {
+            version: if !self.models.is_empty() {
+                VERSION_MODELS
+            } else if self.packer.is_some() {
                 VERSION_PACKED
             } else {
                 VERSION_DENSITY
@@ -333,7 +409,7 @@ impl DbWriter {
             } else {
                 0
             },
-            reserved: [0; 2],
+            models_bytes: split64(models_bytes),
             header_crc: 0,
         };
         h.set_origin(self.origin);
@@ -345,19 +421,21 @@ impl DbWriter {
         let tmp = out
             .into_inner()
             .map_err(|e| Error::io(&path, e.into_error()))?;
-        let file_bytes = tables_offset + tables.len() as u64;
-        crate::fsutil::persist(tmp, &path)?;
-        Ok(WriteSummary {
-            path,
-            objects: self.objects,
-            counts: self.counts,
-            bbox: self.bbox,
-            file_bytes,
-            raw_bytes: self.raw_bytes,
-            decoded_bytes: self.decoded_bytes,
-            blocks: self.blocks,
-            runs: self.run_counts(),
-        })
+        let file_bytes = tables_offset + tables.len() as u64 + models_bytes;
+        Ok((
+            tmp,
+            WriteSummary {
+                path,
+                objects: self.objects,
+                counts: self.counts,
+                bbox: self.bbox,
+                file_bytes,
+                raw_bytes: self.raw_bytes,
+                decoded_bytes: self.decoded_bytes,
+                blocks: self.blocks,
+                runs: self.run_counts(),
+            },
+        ))
     }
 
     /// The scene header as it stands (for callers that render what they
@@ -372,7 +450,106 @@ impl DbWriter {
     }
 }
 
+impl DbWriter {
+    fn begin_model_impl(&mut self) -> Result<(), Error> {
+        if self.open_model.is_some() {
+            return Err(Error::Scene("a model begun inside another".into()));
+        }
+        if self.models.len() >= MAX_MODELS {
+            return Err(Error::Scene(format!("more than {MAX_MODELS} models")));
+        }
+        let mut w = DbWriter::create_with_buffer(&self.path, self.compression, 1 << 20)?;
+        if self.packer.is_none() {
+            w = w.without_runs();
+        }
+        self.open_model = Some(Box::new(w));
+        Ok(())
+    }
+
+    fn end_model_impl(&mut self) -> Result<ModelRef, Error> {
+        let mut w = self
+            .open_model
+            .take()
+            .ok_or_else(|| Error::Scene("a model ended that was not begun".into()))?;
+        // A model has no camera of its own; its tables need one.
+        w.view = Some(View {
+            from: [0.0, 0.0, 1.0],
+            at: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            angle: 45.0,
+            hither: 0.0,
+            resolution: [1, 1],
+        });
+        let (file, summary) = w.complete()?;
+        let index = self.models.len() as u32;
+        let bbox = summary.bbox;
+        self.models.push(ModelPart {
+            file,
+            bytes: summary.file_bytes,
+            bbox,
+            spread: 0.0,
+        });
+        Ok(ModelRef {
+            index,
+            bbox,
+            triangles: summary.counts.0.iter().sum(),
+        })
+    }
+
+    fn instance_impl(&mut self, model: u32, m: &glam::DAffine3) -> Result<(), Error> {
+        if self.open_model.is_some() {
+            return Err(Error::Scene(
+                "an instance inside a model (models do not nest)".into(),
+            ));
+        }
+        let part = self.models.get(model as usize).ok_or_else(|| {
+            Error::Scene(format!(
+                "an instance of model {model}, of {}",
+                self.models.len()
+            ))
+        })?;
+        if part.bbox.is_empty() {
+            // A model of no triangles: nothing to place.
+            return Ok(());
+        }
+        let words = crate::shapes::instance_words(model, &part.bbox, m);
+        let shape = Shape::Instance(crate::shapes::Instance { words: &words });
+        shape
+            .validate()
+            .map_err(|e| Error::Scene(format!("instance of model {model}: {e}")))?;
+        let placed = shape.bounds();
+        let reach = placed
+            .min
+            .iter()
+            .chain(&placed.max)
+            .fold(0.0f64, |a, &c| a.max((c as f64).abs()));
+        let inv = m.inverse().matrix3;
+        let norm = (0..3)
+            .map(|r| (0..3).map(|c| inv.col(c)[r].abs()).sum::<f64>())
+            .fold(0.0, f64::max);
+        let part = &mut self.models[model as usize];
+        part.spread = part.spread.max(norm * reach);
+        self.object(&shape)
+    }
+}
+
 impl SceneSink for DbWriter {
+    fn begin_model(&mut self) -> Result<(), Error> {
+        self.begin_model_impl()
+    }
+
+    fn end_model(&mut self) -> Result<ModelRef, Error> {
+        self.end_model_impl()
+    }
+
+    fn instance(&mut self, model: u32, m: &glam::DAffine3) -> Result<(), Error> {
+        self.instance_impl(model, m)
+    }
+
+    fn takes_models(&self) -> bool {
+        true
+    }
+
     fn background(&mut self, rgb: [f32; 3]) -> Result<(), Error> {
         self.background = rgb;
         Ok(())
@@ -392,6 +569,9 @@ impl SceneSink for DbWriter {
     }
 
     fn material(&mut self, m: &Material) -> Result<(), Error> {
+        if let Some(model) = self.open_model.as_mut() {
+            return model.material(m);
+        }
         self.material_statements += 1;
         let next = self.materials.len() as u32;
         let idx = *self.material_index.entry(m.key()).or_insert(next);
@@ -421,11 +601,24 @@ impl SceneSink for DbWriter {
     }
 
     fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
+        if let Some(model) = self.open_model.as_mut() {
+            return model.mesh(facts);
+        }
         self.mesh_vertices = Some(self.mesh_vertices.unwrap_or(0) + facts.vertices);
         Ok(())
     }
 
     fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
+        if let Some(model) = self.open_model.as_mut() {
+            if !matches!(shape, Shape::Polygon(_) | Shape::Patch(_)) || shape.count() != 3 {
+                return Err(Error::Scene(format!(
+                    "a model holds triangles only (a {} with count {} was given)",
+                    shape.kind().name(),
+                    shape.count()
+                )));
+            }
+            return model.object(shape);
+        }
         if self.objects >= u32::MAX as u64 {
             return Err(Error::Scene(format!("more than {} objects", u32::MAX)));
         }

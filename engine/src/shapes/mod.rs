@@ -278,6 +278,8 @@ kinds! {
     Patch = 2 => patch::PatchKind(Patch<'a>),
     /// An open cone or cylinder between two discs (NFF `c`).
     Cone = 3 => cone::ConeKind(Cone),
+    /// A model of the database placed by an affine transform.
+    Instance = 4 => instance::InstanceKind(Instance<'a>),
 }
 
 /// Nearest `t` in `(t_min, t_max)` at which `ray` meets `shape`, whose

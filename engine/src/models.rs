@@ -1,0 +1,472 @@
+//! Models placed by instances: triangles stored once, tested for every
+//! placement.
+//!
+//! A version 5 database stores each model once (a database of its own
+//! inside the file) and places it by instance records
+//! ([`crate::shapes::Instance`]). Both tracers hold the models in memory
+//! with a grid each, in the model's coordinates, and test a ray against an
+//! instance here: the ray is taken into the model's coordinates to walk
+//! the model's grid, and each triangle it finds is placed (its corners
+//! mapped to the world exactly as a copy of the model would have been
+//! written, `f32` of the `f64` product) and tested against the world ray.
+//! So an instance gives the same hits, bit for bit, as the copy it stands
+//! for, and both tracers, which call the same code, the same as each
+//! other.
+//!
+//! The model's grid lists each triangle by its box grown by a margin
+//! (`pad`, written with the model) that covers how far the rounding of a
+//! placed corner and of a hit may move a point, in the model's units: a
+//! triangle the world ray hits is listed in every voxel of the model's
+//! grid that the walk of the mapped ray crosses near the hit, and the
+//! walk's early exit (the nearest hit lies before the voxel's far side)
+//! cannot pass over a nearer one.
+
+use crate::df::{Boxes, Entry, NESTED, ObjectGrid, high_first, ray_meets};
+use crate::error::Error;
+use crate::grid::{DEFAULT_DENSITY, Dda, MAX_CELLS, choose_resolution};
+use crate::intersect::{RayQ, Surface, triangle};
+use crate::math::{Real, Vec3};
+use crate::objects::{ObjectStore, Slot};
+use crate::progress::Progress;
+use crate::scene::{Aabb, Material};
+use crate::sdb::Database;
+use crate::shapes::{Instance, KindCounts, Patch, Polygon, Shape, ShapeKind};
+use glam::{DAffine3, DMat3, DVec3};
+
+/// How a model is placed: the transform, its inverse (to walk the
+/// model's grid) and the map of normals.
+#[derive(Clone, Copy, Debug)]
+pub struct Placement {
+    pub model: u32,
+    m: DAffine3,
+    inv: DAffine3,
+    normal: DMat3,
+}
+
+impl Placement {
+    pub fn new(model: u32, m: DAffine3) -> Placement {
+        Placement {
+            model,
+            m,
+            inv: m.inverse(),
+            normal: m.matrix3.inverse().transpose(),
+        }
+    }
+
+    /// The placement an instance record holds (validated when read).
+    pub fn of(i: &Instance<'_>) -> Placement {
+        Placement::new(i.model(), i.transform())
+    }
+
+    /// A model's corner, placed: `f32` of the `f64` product. Copies of a
+    /// model (a glTF mesh written once per node) are placed by this same
+    /// function, so an instance and a copy have the same corners.
+    #[inline(always)]
+    pub fn point(&self, v: [f32; 3]) -> [f32; 3] {
+        place_point(&self.m, v)
+    }
+
+    /// A model's normal, placed: the inverse transpose, made unit length
+    /// (zero if it cannot be).
+    #[inline]
+    pub fn normal(&self, n: [f32; 3]) -> [f32; 3] {
+        place_normal(&self.normal, n)
+    }
+}
+
+/// `f32` of `m` applied to `v` in `f64`, summed in a fixed order.
+#[inline(always)]
+pub fn place_point(m: &DAffine3, v: [f32; 3]) -> [f32; 3] {
+    let (x, y, z) = (v[0] as f64, v[1] as f64, v[2] as f64);
+    let a = m.matrix3;
+    let t = m.translation;
+    [
+        (a.x_axis.x * x + a.y_axis.x * y + a.z_axis.x * z + t.x) as f32,
+        (a.x_axis.y * x + a.y_axis.y * y + a.z_axis.y * z + t.y) as f32,
+        (a.x_axis.z * x + a.y_axis.z * y + a.z_axis.z * z + t.z) as f32,
+    ]
+}
+
+/// A normal mapped by `normal_map` (a transform's inverse transpose) and
+/// made unit length, or zero if it cannot be.
+#[inline]
+pub fn place_normal(normal_map: &DMat3, n: [f32; 3]) -> [f32; 3] {
+    (*normal_map * DVec3::from(n.map(f64::from)))
+        .try_normalize()
+        .unwrap_or(DVec3::ZERO)
+        .to_array()
+        .map(|c| c as f32)
+}
+
+/// One model: its triangles and grid.
+pub struct Model {
+    objects: ObjectStore,
+    grid: ObjectGrid,
+    /// Its first material in the render's table (see
+    /// [`Models::materials`]).
+    material_base: u32,
+    /// Margin around each triangle's box in the grid, in model units.
+    pad: f64,
+}
+
+/// A model's triangles' boxes, grown by its margin.
+struct Padded<'a> {
+    objects: &'a ObjectStore,
+    pad: f32,
+}
+
+impl Boxes for Padded<'_> {
+    fn count(&self) -> usize {
+        self.objects.len()
+    }
+
+    fn bbox(&self, id: u32) -> Aabb {
+        self.grow(self.objects.bbox(id))
+    }
+
+    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
+        self.objects.each_bbox(&mut |id, b| f(id, self.grow(b)))
+    }
+}
+
+impl Padded<'_> {
+    fn grow(&self, b: Aabb) -> Aabb {
+        Aabb {
+            min: b.min.map(|c| (c - self.pad).next_down()),
+            max: b.max.map(|c| (c + self.pad).next_up()),
+        }
+    }
+}
+
+/// The models of a database, held for either tracer.
+#[derive(Default)]
+pub struct Models {
+    list: Vec<Model>,
+    /// The models' materials, after the world's in the render's table:
+    /// a model's material `k` is entry `material_base + k` there.
+    materials: Vec<Material>,
+}
+
+impl Models {
+    /// Reads and indexes every model of `db` (none for a database
+    /// without models).
+    pub fn load(db: &Database, progress: &dyn Progress) -> Result<Models, Error> {
+        let mut list = Vec::with_capacity(db.models().len());
+        let mut materials = Vec::new();
+        if db.models().is_empty() {
+            return Ok(Models { list, materials });
+        }
+        let world_materials = db.scene().materials.len();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(crate::sys::cpus())
+            .build()
+            .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
+        for (i, entry) in db.models().iter().enumerate() {
+            progress.set_message(&format!("loading model {} of {}", i + 1, db.models().len()));
+            let mdb = db.open_model(i)?;
+            let objects = ObjectStore::load(&mdb, progress)?;
+            let bad = |what: String| Error::Database {
+                file: db.path().to_path_buf(),
+                location: format!("model {i}"),
+                message: what,
+            };
+            if objects.len() >= NESTED as usize {
+                return Err(bad(format!(
+                    "{} triangles are too many for one model",
+                    objects.len()
+                )));
+            }
+            for id in 0..objects.len() as u32 {
+                if corners_of(&objects, id).is_none() {
+                    return Err(bad(format!("object {id} is not a triangle")));
+                }
+            }
+            let pad = entry.pad;
+            let padded = Padded {
+                objects: &objects,
+                pad: pad as f32,
+            };
+            let mut bounds = Aabb::EMPTY;
+            padded.each(&mut |_, b| bounds.union(&b));
+            let res = choose_resolution(&bounds, objects.len() as u64, DEFAULT_DENSITY, MAX_CELLS);
+            let grid = ObjectGrid::build(&padded, &bounds, res, &pool, |_| true)?;
+            let material_base = u32::try_from(world_materials + materials.len())
+                .ok()
+                .filter(|&b| b as usize + mdb.scene().materials.len() <= u32::MAX as usize)
+                .ok_or_else(|| bad("too many materials".into()))?;
+            materials.extend_from_slice(&mdb.scene().materials);
+            list.push(Model {
+                objects,
+                grid,
+                material_base,
+                pad,
+            });
+        }
+        Ok(Models { list, materials })
+    }
+
+    /// The models' materials, to follow the world's in the render's
+    /// table (the indices [`Models::surface`] gives refer to it).
+    pub fn materials(&self) -> &[Material] {
+        &self.materials
+    }
+
+    /// The world's materials followed by the models'.
+    pub fn material_table(&self, world: &[Material]) -> Vec<Material> {
+        let mut all = world.to_vec();
+        all.extend_from_slice(&self.materials);
+        all
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.list.len()
+    }
+
+    /// Bytes held: the models' triangles and grids.
+    pub fn bytes(&self) -> u64 {
+        self.list
+            .iter()
+            .map(|m| m.objects.bytes() + m.grid.bytes())
+            .sum::<u64>()
+            + 32 * self.materials.len() as u64
+    }
+
+    /// The model `pl` places, if the database has it.
+    fn model(&self, pl: &Placement) -> Option<&Model> {
+        self.list.get(pl.model as usize)
+    }
+
+    /// Triangles of each model.
+    pub fn triangles(&self) -> Vec<u64> {
+        self.list.iter().map(|m| m.objects.len() as u64).collect()
+    }
+
+    /// The nearest hit in `(t_min, t_max)` of the ray (`q`, and its origin
+    /// `o` and direction `d` in `f64`) on the model placed by `pl`: its
+    /// distance and the primitive, ties to the smaller primitive. Each
+    /// triangle tested counts in `tests` by its kind.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn nearest<R: Real>(
+        &self,
+        pl: &Placement,
+        q: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> Option<(R, u32)> {
+        let model = self.model(pl)?;
+        let mut best: Option<(R, u32)> = None;
+        let mut upper = t_max;
+        model.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
+            if let Some(t) = model.test(pl, id, q, t_min, upper, tests) {
+                let wins = match best {
+                    None => true,
+                    Some((bt, bid)) => t < bt || (t == bt && id < bid),
+                };
+                if wins {
+                    best = Some((t, id));
+                    upper = t.next_up();
+                }
+            }
+            // Keep walking while the best hit may lie beyond this voxel.
+            Walk::Go(best.map(|(t, _)| t.to_f64()))
+        });
+        best
+    }
+
+    /// Whether the model placed by `pl` blocks the ray anywhere in
+    /// `(t_min, t_max)`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn blocks<R: Real>(
+        &self,
+        pl: &Placement,
+        q: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> bool {
+        let Some(model) = self.model(pl) else {
+            return false;
+        };
+        let mut hit = false;
+        model.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
+            if model.test(pl, id, q, t_min, t_max, tests).is_some() {
+                hit = true;
+                Walk::Stop
+            } else {
+                Walk::Go(None)
+            }
+        });
+        hit
+    }
+
+    /// The surface of primitive `prim` of the model placed by `pl` where
+    /// `ray` meets it at `t`, and its material's index in the render's
+    /// table (see [`Models::materials`]): the surface of the copy of that
+    /// triangle the placement stands for.
+    pub fn surface(
+        &self,
+        pl: &Placement,
+        prim: u32,
+        ray: &RayQ<f64>,
+        t: f64,
+    ) -> Option<(Surface, u32)> {
+        let model = self.model(pl)?;
+        if prim as usize >= model.objects.len() {
+            return None;
+        }
+        let (v, n, material) = corners_of(&model.objects, prim)?;
+        let v = v.map(|p| pl.point(p));
+        let surface = match n {
+            Some(n) => {
+                let n = n.map(|x| pl.normal(x));
+                Shape::Patch(Patch {
+                    vertices: &v,
+                    normals: &n,
+                })
+                .surface(ray, t)
+            }
+            None => Shape::Polygon(Polygon { vertices: &v }).surface(ray, t),
+        };
+        Some((surface, model.material_base + material))
+    }
+}
+
+/// What a walk's visitor says after each triangle: stop, or go on with
+/// the best hit so far (if any), before which the walk may end.
+enum Walk {
+    Stop,
+    Go(Option<f64>),
+}
+
+impl Model {
+    /// Walks the model's grid along the ray mapped into the model's
+    /// coordinates, giving `f` each triangle listed in the voxels crossed
+    /// (a triangle may come more than once), nearest voxels first.
+    #[inline]
+    fn walk(
+        &self,
+        pl: &Placement,
+        o: Vec3,
+        d: Vec3,
+        t_min: f64,
+        t_max: f64,
+        f: &mut impl FnMut(u32) -> Walk,
+    ) {
+        let om = pl.inv.transform_point3(o);
+        let dm = pl.inv.transform_vector3(d);
+        let inv = Vec3::new(1.0 / dm.x, 1.0 / dm.y, 1.0 / dm.z);
+        let g = &self.grid;
+        let hf = high_first(dm);
+        let mut best: Option<f64> = None;
+        let mut stop = false;
+        let mut visit = |cell: usize, best: &mut Option<f64>, stop: &mut bool| {
+            g.visit(cell, hf, (), &mut |e| match e {
+                Entry::Box(b, ()) => {
+                    ray_meets(om, inv, t_min, best.unwrap_or(t_max), b, self.pad).then_some(())
+                }
+                Entry::Object(id, ()) => match f(id) {
+                    Walk::Stop => {
+                        *stop = true;
+                        None
+                    }
+                    Walk::Go(b) => {
+                        *best = b;
+                        Some(())
+                    }
+                },
+            });
+        };
+        if g.single_cell() {
+            visit(0, &mut best, &mut stop);
+            return;
+        }
+        let Some(mut w) = Dda::start(&g.spec, om, dm, inv, t_min, t_max) else {
+            return;
+        };
+        loop {
+            visit(w.index, &mut best, &mut stop);
+            if stop || best.is_some_and(|b| b < w.t_exit()) || !w.advance() {
+                break;
+            }
+        }
+    }
+
+    /// Tests triangle `id`, placed, against the world ray.
+    #[inline(always)]
+    fn test<R: Real>(
+        &self,
+        pl: &Placement,
+        id: u32,
+        q: &RayQ<R>,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> Option<R> {
+        let (v, kind) = match self.objects.slot(id) {
+            Slot::Face(f) => (
+                self.objects.positions(&f),
+                if f.patch {
+                    ShapeKind::Patch
+                } else {
+                    ShapeKind::Polygon
+                },
+            ),
+            Slot::Record(_) => {
+                let (v, n, _) = corners_of(&self.objects, id)?;
+                (
+                    v,
+                    if n.is_some() {
+                        ShapeKind::Patch
+                    } else {
+                        ShapeKind::Polygon
+                    },
+                )
+            }
+        };
+        tests.add(kind);
+        let [a, b, c] = v.map(|p| pl.point(p));
+        triangle::intersect(a, b, c, q, t_min, t_max)
+    }
+}
+
+/// Three corners (or normals) of a triangle.
+type Corners = [[f32; 3]; 3];
+
+/// A model triangle's corners, its normals if it is a patch, and its
+/// material; `None` if the object is not a triangle.
+fn corners_of(objects: &ObjectStore, id: u32) -> Option<(Corners, Option<Corners>, u32)> {
+    match objects.slot(id) {
+        Slot::Face(f) => Some((
+            objects.positions(&f),
+            f.patch.then(|| objects.normals(&f)),
+            f.material,
+        )),
+        Slot::Record(r) => {
+            let o = objects.record(r, id);
+            match o.shape {
+                Shape::Polygon(p) if p.vertices.len() == 3 => Some((
+                    [p.vertices[0], p.vertices[1], p.vertices[2]],
+                    None,
+                    o.material,
+                )),
+                Shape::Patch(p) if p.vertices.len() == 3 => Some((
+                    [p.vertices[0], p.vertices[1], p.vertices[2]],
+                    Some([p.normals[0], p.normals[1], p.normals[2]]),
+                    o.material,
+                )),
+                _ => None,
+            }
+        }
+    }
+}
