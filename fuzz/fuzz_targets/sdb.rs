@@ -1,6 +1,8 @@
 //! The object database reader on arbitrary bytes: opening, scanning every
-//! block and intersecting every record it accepts must end in a value or
-//! an error naming the block, never a panic or an unbounded allocation.
+//! block and intersecting every record it accepts, and loading the models
+//! of a version 5 file and testing each instance against its model, must
+//! end in a value or an error naming the block, never a panic or an
+//! unbounded allocation.
 //! Checksums are off in fuzzing builds (see `sdb::reader`), so mutations
 //! reach the decoding behind them.
 #![no_main]
@@ -9,7 +11,10 @@ use libfuzzer_sys::fuzz_target;
 use sray_engine::intersect::RayQ;
 use sray_engine::shapes::intersect;
 use sray_engine::math::Vec3;
+use sray_engine::models::{Models, Placement};
+use sray_engine::progress::NoProgress;
 use sray_engine::sdb::Database;
+use sray_engine::shapes::{KindCounts, Shape};
 use std::io::Write;
 
 fuzz_target!(|data: &[u8]| {
@@ -20,12 +25,27 @@ fuzz_target!(|data: &[u8]| {
     };
     let _ = db.bbox();
     let Ok(mut scan) = db.scan() else { return };
-    let ray = RayQ::from_vec3(Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
+    let (o, d) = (Vec3::new(-3.0, 0.1, 0.2), Vec3::new(1.0, 0.01, 0.02));
+    let ray = RayQ::from_vec3(o, d);
+    let mut placements = Vec::new();
     while let Ok(Some(block)) = scan.next_block() {
         for o in block.objects() {
             let _ = o.shape.prepare();
             let _ = intersect::<f64>(&o.shape, &o.bbox, &ray, 0.0, f64::INFINITY);
             let _ = (o.index, o.material);
+            if let Shape::Instance(i) = o.shape {
+                placements.push(Placement::of(&i));
+            }
         }
+    }
+    // Models are small in the seeds; a mutated count must not ask for
+    // more memory than the file backs.
+    let Ok(models) = Models::load(&db, &NoProgress) else { return };
+    let mut tests = KindCounts::default();
+    for pl in &placements {
+        if let Some((t, p)) = models.nearest(pl, &ray, o, d, 0.0, f64::INFINITY, &mut tests) {
+            let _ = models.surface(pl, p, &RayQ::from_vec3(o, d), t);
+        }
+        let _ = models.blocks(pl, &ray, o, d, 0.0, f64::INFINITY, &mut tests);
     }
 });

@@ -23,6 +23,7 @@ mod cli_bad_input;
 mod cli_bench;
 mod cli_gltf;
 mod cli_image;
+mod cli_instances;
 mod cli_limits;
 mod cli_meshes;
 mod cli_progress;

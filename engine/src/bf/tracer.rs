@@ -193,7 +193,9 @@ impl<'db, R: Real> Tracer<'db, R> {
         opts.validate()?;
         // Models are held whole (their triangles and grids), out of the
         // budget like the voxel flags.
+        let t_models = Instant::now();
         let models = Models::load(db, progress)?;
+        let models_seconds = t_models.elapsed().as_secs_f64();
         let (specs, partition) = super::plan_grids(db, opts, bf.memory);
         if specs.len() > MAX_GRIDS {
             return Err(Error::Invalid(format!(
@@ -245,7 +247,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");
         let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
-        let preprocess_seconds = t0.elapsed().as_secs_f64();
+        let preprocess_seconds = models_seconds + t0.elapsed().as_secs_f64();
         let stats = BfStats {
             memory_budget_bytes: bf.memory,
             db_scans: 1,

@@ -206,8 +206,18 @@ impl Default for Tune {
     }
 }
 
-/// Memory the depth-first tracer needs for `db`, roughly.
+/// Memory the depth-first tracer needs for `db`, roughly: the world's
+/// objects and grids, and each model's (a model that cannot be opened
+/// counts nothing here; the render says what is wrong with it).
 pub fn estimate_bytes(db: &Database) -> u64 {
+    estimate_one(db)
+        + (0..db.models().len())
+            .filter_map(|m| db.open_model(m).ok())
+            .map(|m| estimate_one(&m))
+            .sum::<u64>()
+}
+
+fn estimate_one(db: &Database) -> u64 {
     let n = db.object_count();
     let cells = (n as f64 * DEFAULT_DENSITY).min(MAX_CELLS as f64) as u64;
     let faces = db.run_counts().run_triangles;

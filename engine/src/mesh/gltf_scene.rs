@@ -8,8 +8,11 @@
 //!   A primitive with normals becomes patches (smooth shading, normals by
 //!   the inverse transpose), one without becomes triangles; a triangle of
 //!   no area is skipped and counted. A mesh several nodes place, or that a
-//!   node's `EXT_mesh_gpu_instancing` lists copies of, is written once per
-//!   placement (it is not yet stored once).
+//!   node's `EXT_mesh_gpu_instancing` lists copies of, is a model stored
+//!   once and placed by instances ([`crate::models`]) when the sink keeps
+//!   models (a database does; `--flatten-instances` and other sinks get a
+//!   copy per placement, placed by the same arithmetic, so both render
+//!   the same).
 //! - **Camera**: the first perspective camera a node places, or the one
 //!   `--camera-index N` names (`--camera` overrides any part). glTF's `yfov` is vertical; NFF's angle spans the
 //!   image's longer side, so the angle is widened by the camera's aspect

@@ -771,7 +771,16 @@ impl Scan<'_> {
     fn err(&self, message: impl Into<String>) -> Error {
         Error::Database {
             file: self.db.path.clone(),
-            location: format!("block {} (byte {})", self.next_index, self.offset),
+            location: if self.db.base == 0 {
+                format!("block {} (byte {})", self.next_index, self.offset)
+            } else {
+                format!(
+                    "model at byte {}, block {} (byte {})",
+                    self.db.base,
+                    self.next_index,
+                    self.db.base + self.offset
+                )
+            },
             message: message.into(),
         }
     }

@@ -21,6 +21,7 @@ mod database;
 mod df_memory;
 mod edge_cases;
 mod gltf_scenes;
+mod instances;
 mod invariance;
 mod mesh_readers;
 mod nff_reader;

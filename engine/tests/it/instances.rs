@@ -1,0 +1,269 @@
+//! Models stored once and placed by instances, against the same scene
+//! written as copies: a model of smooth and flat triangles in two
+//! materials, placed by rotations, non-uniform scales, a mirror, a shear
+//! and twice at exactly the same place (ties), the whole scene far from
+//! the origin (where placing a corner in `f32` rounds most), written as
+//! instances and as the copies those instances stand for.
+
+use crate::common::{bf_render, bf_render_with, df_render};
+use glam::{DAffine3, DMat3, DQuat, DVec3};
+use sray_engine::bf::{Shading, StoreNumber};
+use sray_engine::models::{place_normal, place_point};
+use sray_engine::render::{Precision, RenderOptions};
+use sray_engine::scene::{Light, Material, SceneSink, View};
+use sray_engine::sdb::{Compression, Database, DbWriter};
+use sray_engine::shapes::{Patch, Polygon, Shape, Sphere};
+use std::path::Path;
+
+/// Far from the origin: a corner placed there rounds to 2^-12.
+const FAR: f64 = 3000.0;
+
+/// A model's triangles: corners, and normals for the smooth ones, with
+/// their material (0 or 1).
+struct Tri {
+    v: [[f32; 3]; 3],
+    n: Option<[[f32; 3]; 3]>,
+    material: usize,
+}
+
+fn model() -> Vec<Tri> {
+    let mut x: u64 = 11;
+    let mut next = || {
+        x = x
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((x >> 11) as f64 / (1u64 << 53) as f64) as f32
+    };
+    let mut out = Vec::new();
+    // A bumpy sheet of smooth triangles (shared edges), and loose flat
+    // triangles above it.
+    let h = |i: usize, j: usize| 0.15 * ((i as f32 * 0.9).sin() + (j as f32 * 1.3).cos());
+    let n = 12;
+    for i in 0..n {
+        for j in 0..n {
+            let p = |a: usize, b: usize| [a as f32 / n as f32, h(a, b), b as f32 / n as f32];
+            let nrm = |a: usize, b: usize| [0.1 * a as f32 - 0.5, 1.0, 0.05 * b as f32];
+            for (a, b, c) in [
+                ((i, j), (i + 1, j), (i, j + 1)),
+                ((i + 1, j), (i + 1, j + 1), (i, j + 1)),
+            ] {
+                out.push(Tri {
+                    v: [p(a.0, a.1), p(b.0, b.1), p(c.0, c.1)],
+                    n: Some([nrm(a.0, a.1), nrm(b.0, b.1), nrm(c.0, c.1)]),
+                    material: 0,
+                });
+            }
+        }
+    }
+    for _ in 0..150 {
+        let c = [next(), 0.3 + 0.5 * next(), next()];
+        let v = std::array::from_fn(|_| std::array::from_fn(|k| c[k] + 0.12 * (next() - 0.5)));
+        out.push(Tri {
+            v,
+            n: None,
+            material: 1,
+        });
+    }
+    out
+}
+
+fn placements() -> Vec<DAffine3> {
+    let at = |x: f64, z: f64| DVec3::new(FAR + x, 0.0, z);
+    let mut p = vec![
+        DAffine3::from_translation(at(0.0, 0.0)),
+        DAffine3::from_scale_rotation_translation(
+            DVec3::new(1.3, 0.7, 0.9),
+            DQuat::from_rotation_y(0.7),
+            at(1.6, 0.2),
+        ),
+        // A mirror.
+        DAffine3::from_scale_rotation_translation(
+            DVec3::new(-1.0, 1.0, 1.0),
+            DQuat::from_rotation_y(-0.4),
+            at(-0.4, 1.6),
+        ),
+        // A shear.
+        DAffine3 {
+            matrix3: DMat3::from_cols(
+                DVec3::new(1.0, 0.0, 0.0),
+                DVec3::new(0.4, 1.0, 0.0),
+                DVec3::new(0.0, 0.3, 1.2),
+            ),
+            translation: at(1.5, 1.7),
+        },
+    ];
+    // The same place twice: every hit on the two is a tie.
+    p.push(p[1]);
+    p
+}
+
+fn header(w: &mut dyn SceneSink) {
+    w.view(&View {
+        from: [FAR + 0.9, 2.6, 4.6],
+        at: [FAR + 0.9, 0.2, 0.9],
+        up: [0.0, 1.0, 0.0],
+        angle: 45.0,
+        hither: 0.01,
+        resolution: [48, 48],
+    })
+    .unwrap();
+    w.background([0.1, 0.1, 0.2]).unwrap();
+    for position in [[FAR + 3.0, 6.0, 4.0], [FAR - 2.0, 4.0, 1.0]] {
+        w.light(&Light {
+            position,
+            color: None,
+        })
+        .unwrap();
+    }
+}
+
+const MATERIALS: [Material; 2] = [
+    Material {
+        color: [0.8, 0.5, 0.3],
+        kd: 0.7,
+        ks: 0.3,
+        shine: 20.0,
+        t: 0.0,
+        ior: 1.0,
+    },
+    Material {
+        color: [0.3, 0.6, 0.9],
+        kd: 0.5,
+        ks: 0.2,
+        shine: 8.0,
+        t: 0.3,
+        ior: 1.3,
+    },
+];
+
+/// Triangles of `tris` placed by `m` (the identity: as they are) into `w`.
+fn emit(w: &mut dyn SceneSink, tris: &[Tri], m: Option<&DAffine3>) {
+    let nm = m.map(|m| m.matrix3.inverse().transpose());
+    let mut current = usize::MAX;
+    for t in tris {
+        if t.material != current {
+            w.material(&MATERIALS[t.material]).unwrap();
+            current = t.material;
+        }
+        let v = t.v.map(|p| m.map_or(p, |m| place_point(m, p)));
+        match t.n {
+            Some(n) => {
+                let n = n.map(|x| nm.as_ref().map_or(x, |nm| place_normal(nm, x)));
+                w.object(&Shape::Patch(Patch {
+                    vertices: &v,
+                    normals: &n,
+                }))
+                .unwrap()
+            }
+            None => w.object(&Shape::Polygon(Polygon { vertices: &v })).unwrap(),
+        }
+    }
+}
+
+/// The scene as instances (a ground sphere, then the model's placements)
+/// or as copies.
+fn write(path: &Path, instances: bool) -> Database {
+    let tris = model();
+    let mut w = DbWriter::create(path, Compression::None).unwrap();
+    header(&mut w);
+    let model = instances.then(|| {
+        w.begin_model().unwrap();
+        emit(&mut w, &tris, None);
+        w.end_model().unwrap()
+    });
+    w.material(&MATERIALS[0]).unwrap();
+    w.object(&Shape::Sphere(Sphere {
+        center: [(FAR + 0.8) as f32, -100.0, 0.8],
+        radius: 99.9,
+    }))
+    .unwrap();
+    for p in placements() {
+        match &model {
+            Some(m) => w.instance(m.index, &p).unwrap(),
+            None => emit(&mut w, &tris, Some(&p)),
+        }
+    }
+    w.finish().unwrap();
+    Database::open(path).unwrap()
+}
+
+#[test]
+fn instances_render_as_the_copies_they_stand_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let inst = write(&dir.path().join("inst.sdb"), true);
+    let copies = write(&dir.path().join("copies.sdb"), false);
+    assert_eq!(inst.version(), 5);
+    assert_eq!(inst.models().len(), 1);
+    assert_eq!(inst.object_count(), 1 + placements().len() as u64);
+    assert_eq!(
+        copies.object_count(),
+        1 + (placements().len() * model().len()) as u64
+    );
+    for precision in [Precision::Double, Precision::Single] {
+        let o = RenderOptions {
+            width: 48,
+            height: 48,
+            max_depth: 3,
+            precision,
+            ..Default::default()
+        };
+        let (a, sa) = df_render(&inst, &o);
+        let (b, sb) = df_render(&copies, &o);
+        assert!(
+            a == b,
+            "{precision:?}: depth-first, instances and copies differ"
+        );
+        assert_eq!(sa.rays, sb.rays, "{precision:?}");
+        assert!(sa.rays.eye_hit_rays > 500, "{:?}", sa.rays);
+        assert!(
+            sa.intersection_tests_by_kind.0[4] > 0,
+            "no instance was tested"
+        );
+        // Breadth-first under a budget that takes several passes.
+        for (memory, shading) in [(6 << 20, Shading::Carry), (6 << 20, Shading::Join)] {
+            let (c, sc) = bf_render_with(&inst, &o, StoreNumber::Adaptive, memory, shading);
+            assert!(c == a, "{precision:?} {shading:?}: breadth-first differs");
+            assert_eq!(sc.rays, sa.rays, "{precision:?} {shading:?}");
+        }
+        let (d, _) = bf_render(&copies, &o, StoreNumber::Fixed(2), 6 << 20);
+        assert!(d == a, "{precision:?}: breadth-first copies differ");
+    }
+}
+
+#[test]
+fn models_are_refused_where_they_cannot_be() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("x.sdb");
+    let mut w = DbWriter::create(&path, Compression::None).unwrap();
+    header(&mut w);
+    let e = w.instance(3, &DAffine3::IDENTITY).unwrap_err().to_string();
+    assert!(e.contains("model 3"), "{e}");
+    w.begin_model().unwrap();
+    let e = w.begin_model().unwrap_err().to_string();
+    assert!(e.contains("inside another"), "{e}");
+    let e = w
+        .object(&Shape::Sphere(Sphere {
+            center: [0.0; 3],
+            radius: 1.0,
+        }))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("triangles only"), "{e}");
+    emit(&mut w, &model()[..4], None);
+    let e = w.instance(0, &DAffine3::IDENTITY).unwrap_err().to_string();
+    assert!(e.contains("do not nest"), "{e}");
+    let m = w.end_model().unwrap();
+    let e = w.end_model().unwrap_err().to_string();
+    assert!(e.contains("not begun"), "{e}");
+    let flat = DAffine3::from_scale(DVec3::new(1.0, 0.0, 1.0));
+    let e = w.instance(m.index, &flat).unwrap_err().to_string();
+    assert!(e.contains("cannot be inverted"), "{e}");
+    let huge = DAffine3::from_scale(DVec3::splat(1e40));
+    let e = w.instance(m.index, &huge).unwrap_err().to_string();
+    assert!(e.contains("single precision"), "{e}");
+    w.instance(m.index, &DAffine3::IDENTITY).unwrap();
+    w.begin_model().unwrap();
+    let e = w.finish().unwrap_err().to_string();
+    assert!(e.contains("not ended"), "{e}");
+    assert!(!path.exists(), "an unfinished database was left behind");
+}
