@@ -218,6 +218,15 @@ impl Models {
         all
     }
 
+    /// Bytes the models of `db` take once loaded, about (from their
+    /// headers, before reading them): their triangles and their grids.
+    pub fn estimate_bytes(db: &Database) -> u64 {
+        (0..db.models().len())
+            .filter_map(|m| db.open_model(m).ok())
+            .map(|m| ObjectStore::estimate_bytes(&m) + 24 * m.object_count())
+            .sum()
+    }
+
     pub fn is_empty(&self) -> bool {
         self.list.is_empty()
     }

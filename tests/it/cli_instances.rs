@@ -248,3 +248,26 @@ fn a_damaged_model_table_is_an_error() {
     let e = fails(d, &["verify", "flip.sdb"]);
     assert!(e.contains("flip.sdb") && e.contains("model"), "{e}");
 }
+
+#[test]
+fn a_budget_too_small_for_the_models_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(
+        d,
+        &[
+            "convert",
+            &fixture("spot4_smooth.glb"),
+            "-o",
+            "inst.sdb",
+            "--quiet",
+        ],
+    );
+    let e = fails(
+        d,
+        &[
+            "render", "inst.sdb", "--mode", "bf", "--memory", "600KiB", "-o", "x.png",
+        ],
+    );
+    assert!(e.contains("too small") && e.contains("models"), "{e}");
+}

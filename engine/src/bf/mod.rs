@@ -96,6 +96,8 @@ pub struct Budget {
     pub total: u64,
     pub frame: u64,
     pub voxel_flags: u64,
+    /// The models instances place, held for the render.
+    pub models: u64,
     pub io_buffers: u64,
     /// What the phases share.
     pub shared: u64,
@@ -146,7 +148,8 @@ const CACHE_SLOTS: u64 = 1 << 15;
 
 impl Budget {
     /// Splits `total` bytes for a render of `corners` pixel corners with
-    /// `cells` voxels, or explains the smallest budget that would do.
+    /// `cells` voxels and `models` bytes of models, or explains the
+    /// smallest budget that would do.
     /// `store` says how many registrations a ray slot plans for, and how
     /// far the last ray a shard admits may overrun its share; `threads`
     /// is the number of shards.
@@ -154,13 +157,14 @@ impl Budget {
         total: u64,
         frame: u64,
         cells: u64,
+        models: u64,
         scan_buffers: u64,
         store: &StorePlan,
         threads: usize,
     ) -> Result<Budget, Error> {
         let io = IO_BYTES + scan_buffers;
         let overrun = threads.max(1) as u64 * store.overrun() * REGISTRATION_BYTES as u64;
-        let fixed = frame + cells + io + overrun + slack(total);
+        let fixed = frame + cells + models + io + overrun + slack(total);
         let slot_bytes = slot_bytes::<R>() as u64 + store.planned() * REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
@@ -169,12 +173,17 @@ impl Budget {
         if total < minimum {
             return Err(Error::Invalid(format!(
                 "a memory budget of {} is too small for this render; it needs at least {} \
-                 (frame buffer {}, voxel flags {}, I/O buffers {}, {MIN_SLOTS} rays {}, \
+                 (frame buffer {}, voxel flags {}, {}I/O buffers {}, {MIN_SLOTS} rays {}, \
                  allocator slack {})",
                 fmt_bytes(total),
                 fmt_bytes(minimum),
                 fmt_bytes(frame),
                 fmt_bytes(cells),
+                if models > 0 {
+                    format!("models {}, ", fmt_bytes(models))
+                } else {
+                    String::new()
+                },
                 fmt_bytes(io),
                 fmt_bytes(min_shared),
                 fmt_bytes(slack(total)),
@@ -186,6 +195,7 @@ impl Budget {
             total,
             frame,
             voxel_flags: cells,
+            models,
             io_buffers: io,
             shared,
             slot_bytes,
@@ -521,12 +531,14 @@ mod tests {
             [10, 10, 10],
         )];
         let store = StorePlan::new(StoreNumber::Adaptive, &specs);
-        let e = Budget::plan::<f64>(1 << 20, 513 * 513 * 24, 1000, 1 << 17, &store, 2)
+        let e = Budget::plan::<f64>(1 << 20, 513 * 513 * 24, 1000, 0, 1 << 17, &store, 2)
             .unwrap_err()
             .to_string();
         assert!(e.contains("needs at least"), "{e}");
-        assert!(Budget::plan::<f64>(64 << 20, 513 * 513 * 24, 1000, 1 << 17, &store, 2).is_ok());
+        assert!(Budget::plan::<f64>(64 << 20, 513 * 513 * 24, 1000, 0, 1 << 17, &store, 2).is_ok());
         // A small image fits in a few hundred kilobytes.
-        assert!(Budget::plan::<f64>(600 << 10, 33 * 33 * 24, 20_000, 1 << 17, &store, 2).is_ok());
+        assert!(
+            Budget::plan::<f64>(600 << 10, 33 * 33 * 24, 20_000, 0, 1 << 17, &store, 2).is_ok()
+        );
     }
 }

@@ -194,6 +194,18 @@ impl<'db, R: Real> Tracer<'db, R> {
         // Models are held whole (their triangles and grids), out of the
         // budget like the voxel flags.
         let t_models = Instant::now();
+        // Refused before reading when they clearly cannot fit (the
+        // estimate errs high, up to 1.6 times on the dragon); else the
+        // budget's plan says, with the bytes they took.
+        let need = Models::estimate_bytes(db);
+        if need > 2 * bf.memory {
+            return Err(Error::Invalid(format!(
+                "the scene's models need about {} in memory, more than the budget of {}; \
+                 both tracers hold a model whole (raise --memory)",
+                crate::units::fmt_bytes(need),
+                crate::units::fmt_bytes(bf.memory)
+            )));
+        }
         let models = Models::load(db, progress)?;
         let models_seconds = t_models.elapsed().as_secs_f64();
         let (specs, partition) = super::plan_grids(db, opts, bf.memory);
@@ -207,8 +219,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         // voxels), and per block its voxel boxes (one per grid) and its
         // place in the file (which let passes skip it).
         let voxels: u64 = specs.iter().map(|s| s.cells() as u64).sum();
-        let cells = models.bytes()
-            + voxels
+        let cells = voxels
             + voxels / 16
             + specs.len() as u64 * 4096
             + db.block_count()
@@ -227,6 +238,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             bf.memory,
             super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
+            models.bytes(),
             db.scan_buffer_bytes() as u64
                 + if read_ahead {
                     crate::sdb::read_ahead_bytes(db)
