@@ -1206,6 +1206,7 @@ impl Arbiter {
                             store: self.store,
                             spill_dir: Some(self.shared.spill.path().to_path_buf()),
                             shading: sray_engine::bf::Shading::Join,
+                            models: Default::default(),
                         },
                         keep: false,
                         // Its inputs are files already.

@@ -25,6 +25,8 @@ pub struct RenderRequest {
     pub store: StoreNumber,
     /// Where the breadth-first tracer's shading gets surfaces.
     pub shading: Shading,
+    /// Whether the breadth-first tracer holds the models instances place.
+    pub models: crate::bf::ModelHolding,
     /// Where temporary databases and spilled rays go (default: the system's
     /// temp dir).
     pub tmp_dir: Option<PathBuf>,
@@ -233,6 +235,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
                     store: req.store,
                     spill_dir: req.tmp_dir.clone(),
                     shading: req.shading,
+                    models: req.models,
                 },
                 &*progress,
             )?;

@@ -138,10 +138,14 @@ impl Padded<'_> {
     }
 }
 
-/// The models of a database, held for either tracer.
+/// The models of a database: each held in memory ([`Models::load`]), or
+/// known by its materials and read when needed ([`Models::open`],
+/// [`Models::read_model`]).
 #[derive(Default)]
 pub struct Models {
-    list: Vec<Model>,
+    list: Vec<Option<Model>>,
+    /// Each model's first material in the render's table.
+    bases: Vec<u32>,
     /// The models' materials, after the world's in the render's table:
     /// a model's material `k` is entry `material_base + k` there.
     materials: Vec<Material>,
@@ -151,58 +155,75 @@ impl Models {
     /// Reads and indexes every model of `db` (none for a database
     /// without models).
     pub fn load(db: &Database, progress: &dyn Progress) -> Result<Models, Error> {
-        let mut list = Vec::with_capacity(db.models().len());
-        let mut materials = Vec::new();
-        if db.models().is_empty() {
-            return Ok(Models { list, materials });
+        let mut models = Models::open(db)?;
+        for m in 0..models.len() {
+            progress.set_message(&format!("loading model {} of {}", m + 1, models.len()));
+            models.list[m] = Some(models.read_model(db, m, progress)?);
         }
+        Ok(models)
+    }
+
+    /// The models of `db` by their materials alone: none is read.
+    pub fn open(db: &Database) -> Result<Models, Error> {
+        let n = db.models().len();
+        let mut models = Models {
+            list: (0..n).map(|_| None).collect(),
+            bases: Vec::with_capacity(n),
+            materials: Vec::new(),
+        };
         let world_materials = db.scene().materials.len();
+        for m in 0..n {
+            let mdb = db.open_model(m)?;
+            let base = u32::try_from(world_materials + models.materials.len())
+                .ok()
+                .filter(|&b| b as usize + mdb.scene().materials.len() <= u32::MAX as usize)
+                .ok_or_else(|| bad_model(db, m, "too many materials".into()))?;
+            models.bases.push(base);
+            models.materials.extend_from_slice(&mdb.scene().materials);
+        }
+        Ok(models)
+    }
+
+    /// Reads model `m` of `db` and builds its grid.
+    pub fn read_model(
+        &self,
+        db: &Database,
+        m: usize,
+        progress: &dyn Progress,
+    ) -> Result<Model, Error> {
+        let mdb = db.open_model(m)?;
+        let objects = ObjectStore::load(&mdb, progress)?;
+        if objects.len() >= NESTED as usize {
+            return Err(bad_model(
+                db,
+                m,
+                format!("{} triangles are too many for one model", objects.len()),
+            ));
+        }
+        for id in 0..objects.len() as u32 {
+            if corners_of(&objects, id).is_none() {
+                return Err(bad_model(db, m, format!("object {id} is not a triangle")));
+            }
+        }
+        let pad = db.models()[m].pad;
+        let padded = Padded {
+            objects: &objects,
+            pad: pad as f32,
+        };
+        let mut bounds = Aabb::EMPTY;
+        padded.each(&mut |_, b| bounds.union(&b));
+        let res = choose_resolution(&bounds, objects.len() as u64, DEFAULT_DENSITY, MAX_CELLS);
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(crate::sys::cpus())
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-        for (i, entry) in db.models().iter().enumerate() {
-            progress.set_message(&format!("loading model {} of {}", i + 1, db.models().len()));
-            let mdb = db.open_model(i)?;
-            let objects = ObjectStore::load(&mdb, progress)?;
-            let bad = |what: String| Error::Database {
-                file: db.path().to_path_buf(),
-                location: format!("model {i}"),
-                message: what,
-            };
-            if objects.len() >= NESTED as usize {
-                return Err(bad(format!(
-                    "{} triangles are too many for one model",
-                    objects.len()
-                )));
-            }
-            for id in 0..objects.len() as u32 {
-                if corners_of(&objects, id).is_none() {
-                    return Err(bad(format!("object {id} is not a triangle")));
-                }
-            }
-            let pad = entry.pad;
-            let padded = Padded {
-                objects: &objects,
-                pad: pad as f32,
-            };
-            let mut bounds = Aabb::EMPTY;
-            padded.each(&mut |_, b| bounds.union(&b));
-            let res = choose_resolution(&bounds, objects.len() as u64, DEFAULT_DENSITY, MAX_CELLS);
-            let grid = ObjectGrid::build(&padded, &bounds, res, &pool, |_| true)?;
-            let material_base = u32::try_from(world_materials + materials.len())
-                .ok()
-                .filter(|&b| b as usize + mdb.scene().materials.len() <= u32::MAX as usize)
-                .ok_or_else(|| bad("too many materials".into()))?;
-            materials.extend_from_slice(&mdb.scene().materials);
-            list.push(Model {
-                objects,
-                grid,
-                material_base,
-                pad,
-            });
-        }
-        Ok(Models { list, materials })
+        let grid = ObjectGrid::build(&padded, &bounds, res, &pool, |_| true)?;
+        Ok(Model {
+            objects,
+            grid,
+            material_base: self.bases[m],
+            pad,
+        })
     }
 
     /// The models' materials, to follow the world's in the render's
@@ -218,13 +239,21 @@ impl Models {
         all
     }
 
-    /// Bytes the models of `db` take once loaded, about (from their
-    /// headers, before reading them): their triangles and their grids.
-    pub fn estimate_bytes(db: &Database) -> u64 {
+    /// Bytes each model of `db` takes once loaded, about (from their
+    /// headers, before reading them): its triangles and its grid.
+    pub fn estimate_each(db: &Database) -> Vec<u64> {
         (0..db.models().len())
-            .filter_map(|m| db.open_model(m).ok())
-            .map(|m| ObjectStore::estimate_bytes(&m) + 24 * m.object_count())
-            .sum()
+            .map(|m| {
+                db.open_model(m).map_or(0, |m| {
+                    ObjectStore::estimate_bytes(&m) + 24 * m.object_count()
+                })
+            })
+            .collect()
+    }
+
+    /// Bytes all the models of `db` take once loaded, about.
+    pub fn estimate_bytes(db: &Database) -> u64 {
+        Self::estimate_each(db).iter().sum()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -235,27 +264,84 @@ impl Models {
         self.list.len()
     }
 
-    /// Bytes held: the models' triangles and grids.
+    /// Whether every model is in memory.
+    pub fn all_held(&self) -> bool {
+        self.list.iter().all(Option::is_some)
+    }
+
+    /// Bytes held: the models' triangles and grids, and their materials.
     pub fn bytes(&self) -> u64 {
-        self.list
-            .iter()
-            .map(|m| m.objects.bytes() + m.grid.bytes())
-            .sum::<u64>()
-            + 32 * self.materials.len() as u64
+        self.list.iter().flatten().map(Model::bytes).sum::<u64>() + 32 * self.materials.len() as u64
     }
 
-    /// The model `pl` places, if the database has it.
+    /// The model `pl` places, if it is held.
+    #[inline(always)]
     fn model(&self, pl: &Placement) -> Option<&Model> {
-        self.list.get(pl.model as usize)
+        self.list.get(pl.model as usize)?.as_ref()
     }
 
-    /// Triangles of each model.
-    pub fn triangles(&self) -> Vec<u64> {
-        self.list.iter().map(|m| m.objects.len() as u64).collect()
+    /// See [`Model::nearest`]; nothing if the model is not held.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn nearest<R: Real>(
+        &self,
+        pl: &Placement,
+        q: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> Option<(R, u32)> {
+        self.model(pl)?.nearest(pl, q, o, d, t_min, t_max, tests)
+    }
+
+    /// See [`Model::blocks`]; `false` if the model is not held.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    pub fn blocks<R: Real>(
+        &self,
+        pl: &Placement,
+        q: &RayQ<R>,
+        o: Vec3,
+        d: Vec3,
+        t_min: R,
+        t_max: R,
+        tests: &mut KindCounts,
+    ) -> bool {
+        self.model(pl)
+            .is_some_and(|m| m.blocks(pl, q, o, d, t_min, t_max, tests))
+    }
+
+    /// See [`Model::surface`]; nothing if the model is not held.
+    pub fn surface(
+        &self,
+        pl: &Placement,
+        prim: u32,
+        ray: &RayQ<f64>,
+        t: f64,
+    ) -> Option<(Surface, u32)> {
+        self.model(pl)?.surface(pl, prim, ray, t)
+    }
+}
+
+/// An error in model `m` of `db`.
+fn bad_model(db: &Database, m: usize, message: String) -> Error {
+    Error::Database {
+        file: db.path().to_path_buf(),
+        location: format!("model {m}"),
+        message,
+    }
+}
+
+impl Model {
+    /// Bytes held: triangles and grid.
+    pub fn bytes(&self) -> u64 {
+        self.objects.bytes() + self.grid.bytes()
     }
 
     /// The nearest hit in `(t_min, t_max)` of the ray (`q`, and its origin
-    /// `o` and direction `d` in `f64`) on the model placed by `pl`: its
+    /// `o` and direction `d` in `f64`) on this model placed by `pl`: its
     /// distance and the primitive, ties to the smaller primitive. Each
     /// triangle tested counts in `tests` by its kind.
     #[allow(clippy::too_many_arguments)]
@@ -270,11 +356,10 @@ impl Models {
         t_max: R,
         tests: &mut KindCounts,
     ) -> Option<(R, u32)> {
-        let model = self.model(pl)?;
         let mut best: Option<(R, u32)> = None;
         let mut upper = t_max;
-        model.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
-            if let Some(t) = model.test(pl, id, q, t_min, upper, tests) {
+        self.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
+            if let Some(t) = self.test(pl, id, q, t_min, upper, tests) {
                 let wins = match best {
                     None => true,
                     Some((bt, bid)) => t < bt || (t == bt && id < bid),
@@ -290,7 +375,7 @@ impl Models {
         best
     }
 
-    /// Whether the model placed by `pl` blocks the ray anywhere in
+    /// Whether this model placed by `pl` blocks the ray anywhere in
     /// `(t_min, t_max)`.
     #[allow(clippy::too_many_arguments)]
     #[inline]
@@ -304,12 +389,9 @@ impl Models {
         t_max: R,
         tests: &mut KindCounts,
     ) -> bool {
-        let Some(model) = self.model(pl) else {
-            return false;
-        };
         let mut hit = false;
-        model.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
-            if model.test(pl, id, q, t_min, t_max, tests).is_some() {
+        self.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
+            if self.test(pl, id, q, t_min, t_max, tests).is_some() {
                 hit = true;
                 Walk::Stop
             } else {
@@ -319,7 +401,7 @@ impl Models {
         hit
     }
 
-    /// The surface of primitive `prim` of the model placed by `pl` where
+    /// The surface of primitive `prim` of this model placed by `pl` where
     /// `ray` meets it at `t`, and its material's index in the render's
     /// table (see [`Models::materials`]): the surface of the copy of that
     /// triangle the placement stands for.
@@ -330,11 +412,10 @@ impl Models {
         ray: &RayQ<f64>,
         t: f64,
     ) -> Option<(Surface, u32)> {
-        let model = self.model(pl)?;
-        if prim as usize >= model.objects.len() {
+        if prim as usize >= self.objects.len() {
             return None;
         }
-        let (v, n, material) = corners_of(&model.objects, prim)?;
+        let (v, n, material) = corners_of(&self.objects, prim)?;
         let v = v.map(|p| pl.point(p));
         let surface = match n {
             Some(n) => {
@@ -347,7 +428,7 @@ impl Models {
             }
             None => Shape::Polygon(Polygon { vertices: &v }).surface(ray, t),
         };
-        Some((surface, model.material_base + material))
+        Some((surface, self.material_base + material))
     }
 }
 

@@ -137,6 +137,7 @@ mod tests {
             memory: None,
             store: crate::bf::StoreNumber::Adaptive,
             shading: Default::default(),
+            models: Default::default(),
             full_scans: false,
             tmp_dir: None,
             setup: Default::default(),

@@ -4,7 +4,7 @@ use super::bar::Bar;
 use super::outputs::Outputs;
 use super::summary;
 use clap::Args;
-use sray_engine::bf::{Shading, StoreNumber};
+use sray_engine::bf::{ModelHolding, Shading, StoreNumber};
 use sray_engine::job::{PrepareOptions, RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
 use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
@@ -104,6 +104,12 @@ pub struct RenderArgs {
     /// (the paper's sort-and-scan of the objects)
     #[arg(long, default_value = "carry")]
     pub shading: Shading,
+    /// Breadth-first: hold the models a scene's instances place for the
+    /// whole render (held), or read each in the passes that need it, one
+    /// at a time (per-pass: the memory of the largest model, not of all);
+    /// auto holds them when they take at most a quarter of --memory
+    #[arg(long, default_value = "auto", value_name = "auto|held|per-pass")]
+    pub models: ModelHolding,
     /// Breadth-first: read every block of the database in every pass, as
     /// the paper does, instead of passing over the blocks no ray is near
     /// (slower; the same image; for reproducing the paper's figures; a
@@ -209,6 +215,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         memory: a.memory,
         store: a.store_number,
         shading: a.shading,
+        models: a.models,
         full_scans: a.full_scans,
         tmp_dir: a.tmp_dir.clone(),
         setup: a.setup.setup([a.width, a.height])?,

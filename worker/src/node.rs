@@ -269,6 +269,7 @@ impl Node {
                         // Results that come from elsewhere (bare, as they
                         // travel) are joined with the objects.
                         shading: sray_engine::bf::Shading::Carry,
+                        models: Default::default(),
                         memory: self.cfg.memory - self.kept_memory.cap(),
                         store,
                         spill_dir: self.cfg.tmp_dir.clone(),

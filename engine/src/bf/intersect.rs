@@ -298,6 +298,19 @@ struct Shard<R> {
     /// Store numbers of the walks registered this pass, and their number.
     store_sum: u64,
     store_walks: u64,
+    /// When models are read per pass: the instances met this pass, and
+    /// the rays (slots) registered near each, tested once the model is
+    /// read after the world's objects.
+    placed: Vec<(u32, Placement)>,
+    pairs: Vec<Pair>,
+}
+
+/// A ray and an instance to test it against (an index into
+/// `Shard::placed`).
+#[derive(Clone, Copy, Debug)]
+struct Pair {
+    slot: u32,
+    placed: u32,
 }
 
 /// Statistics of one round's intersection.
@@ -318,6 +331,8 @@ pub struct IntersectStats {
     pub db_bytes_read: u64,
     /// Blocks the passes left unread (no registered ray near them).
     pub db_blocks_skipped: u64,
+    /// Models read by the passes (when they are not held).
+    pub model_reads: u64,
 }
 
 /// What the intersection stage is given.
@@ -325,6 +340,9 @@ pub struct IntersectSetup<'a> {
     pub db: &'a Database,
     /// The models the database's instances place.
     pub models: &'a Models,
+    /// Models are not held: each pass reads those its instances' rays
+    /// need, after the world's objects (see [`crate::models`]).
+    pub models_per_pass: bool,
     pub grids: &'a mut VoxelGrids,
     pub store: StorePlan,
     /// Ray slots in memory.
@@ -368,6 +386,8 @@ impl<R: Real> Slots<R> {
                     live: 0,
                     store_sum: 0,
                     store_walks: 0,
+                    placed: Vec::new(),
+                    pairs: Vec::new(),
                 })
                 .collect(),
             touched: Touched::default(),
@@ -387,6 +407,8 @@ impl<R: Real> Slots<R> {
                     + sh.done.capacity() * size_of::<Outcome>()
                     + sh.order.capacity() * size_of::<u32>()
                     + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
+                    + sh.placed.capacity() * size_of::<(u32, Placement)>()
+                    + sh.pairs.capacity() * size_of::<Pair>()
             })
             .sum::<usize>()
     }
@@ -402,6 +424,8 @@ impl<R: Real> Slots<R> {
             sh.order = Vec::new();
             sh.pending = Vec::new();
             sh.regs = Default::default();
+            sh.placed = Vec::new();
+            sh.pairs = Vec::new();
         }
     }
 
@@ -905,6 +929,7 @@ pub fn intersect_rays<R: Real>(
         if regs > 0 {
             let grids = &*setup.grids;
             let models = setup.models;
+            let per_pass = setup.models_per_pass;
             let carry = setup.carry;
             let touched = &*touched;
             let region = &region;
@@ -918,9 +943,9 @@ pub fn intersect_rays<R: Real>(
                 &mut |block, found| {
                     if !found.is_empty() {
                         pool.install(|| {
-                            shards
-                                .par_iter_mut()
-                                .for_each(|sh| scan_block(sh, block, found, grids, models, carry));
+                            shards.par_iter_mut().for_each(|sh| {
+                                scan_block(sh, block, found, grids, models, per_pass, carry)
+                            });
                         });
                     }
                     Ok(())
@@ -929,6 +954,9 @@ pub fn intersect_rays<R: Real>(
             st.db_scans += 1;
             st.db_bytes_read += stats.bytes_read;
             st.db_blocks_skipped += stats.blocks_skipped;
+            if per_pass {
+                test_pairs(shards, setup.db, models, pool, carry, &mut st)?;
+            }
         }
         for sh in shards.iter() {
             for g in 0..ngrids {
@@ -1113,6 +1141,7 @@ fn scan_block<R: Real>(
     candidates: &[Candidate],
     grids: &VoxelGrids,
     models: &Models,
+    per_pass: bool,
     carry: bool,
 ) {
     for c in candidates {
@@ -1128,6 +1157,9 @@ fn scan_block<R: Real>(
         let dense = sh.regs[g].is_dense();
         // Decoded on the first ray to test, and then kept.
         let mut object: Option<(ObjectRef<'_>, Option<Prepared>, Option<Placement>)> = None;
+        // Where this instance went in `sh.placed`, when models are read
+        // per pass.
+        let mut placed_at = u32::MAX;
         let index = c.index;
         let prim = PrimId::object(index);
         for z in lo[2]..=hi[2] {
@@ -1169,12 +1201,25 @@ fn scan_block<R: Real>(
                                 Shape::Instance(i) => Some(Placement::of(i)),
                                 _ => None,
                             };
+                            if let (true, Some(pl)) = (per_pass, placement) {
+                                placed_at = sh.placed.len() as u32;
+                                sh.placed.push((index, pl));
+                            }
                             object = Some((o, o.shape.prepare(), placement));
                         }
                         let Some((o, pr, placement)) = &object else {
                             continue;
                         };
                         sh.counts.tests.add(o.shape.kind());
+                        if placed_at != u32::MAX {
+                            // Tested once the model is read, after the
+                            // world's objects.
+                            sh.pairs.push(Pair {
+                                slot,
+                                placed: placed_at,
+                            });
+                            continue;
+                        }
                         let q = &sh.q[slot as usize];
                         let found = match placement {
                             None => o
@@ -1244,6 +1289,94 @@ fn scan_block<R: Real>(
             }
         }
     }
+}
+
+/// Reads, one at a time and in file order, the models this pass's
+/// instances place, and tests each instance's rays against its model:
+/// the same tests, hits and surfaces as a model held in memory gives
+/// (see [`crate::models`]), and which hit is nearest does not depend on
+/// the order of the tests.
+fn test_pairs<R: Real>(
+    shards: &mut [Shard<R>],
+    db: &Database,
+    models: &Models,
+    pool: &rayon::ThreadPool,
+    carry: bool,
+    st: &mut IntersectStats,
+) -> Result<(), Error> {
+    let mut wanted: Vec<u32> = Vec::new();
+    for sh in shards.iter_mut() {
+        let placed = &sh.placed;
+        sh.pairs
+            .sort_unstable_by_key(|p| (placed[p.placed as usize].1.model, p.slot));
+        wanted.extend(sh.placed.iter().map(|(_, pl)| pl.model));
+    }
+    wanted.sort_unstable();
+    wanted.dedup();
+    for m in wanted {
+        let model = models.read_model(db, m as usize, &crate::progress::NoProgress)?;
+        st.model_reads += 1;
+        pool.install(|| {
+            shards.par_iter_mut().for_each(|sh| {
+                let Shard {
+                    hot,
+                    q,
+                    cold,
+                    placed,
+                    pairs,
+                    counts,
+                    ..
+                } = sh;
+                let from = pairs.partition_point(|p| placed[p.placed as usize].1.model < m);
+                for p in &pairs[from..] {
+                    let (index, pl) = &placed[p.placed as usize];
+                    if pl.model != m {
+                        break;
+                    }
+                    let slot = p.slot as usize;
+                    let (s, c) = (&mut hot[slot], &mut cold[slot]);
+                    if s.blocked {
+                        continue;
+                    }
+                    let q = &q[slot];
+                    if s.shadow {
+                        if model.blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests) {
+                            s.blocked = true;
+                            s.best = Hit {
+                                t: s.upper.to_f64(),
+                                prim: PrimId::object(*index),
+                            };
+                        }
+                        continue;
+                    }
+                    let Some((t, k)) =
+                        model.nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                    else {
+                        continue;
+                    };
+                    let prim = PrimId::instance(*index, k);
+                    let t = t.to_f64();
+                    if s.best.loses_to(t, prim) {
+                        s.best = Hit { t, prim };
+                        s.upper = R::from_f64(t).next_up();
+                        if carry {
+                            let ray = RayQ::from_vec3(c.o, c.d);
+                            if let Some((surf, material)) = model.surface(pl, k, &ray, t) {
+                                c.ng = surf.ng;
+                                c.ns = surf.ns;
+                                c.material = material;
+                            }
+                        }
+                    }
+                }
+            })
+        });
+    }
+    for sh in shards.iter_mut() {
+        sh.pairs.clear();
+        sh.placed.clear();
+    }
+    Ok(())
 }
 
 /// Finishes the rays whose result is complete, freeing their slots.

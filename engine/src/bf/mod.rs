@@ -55,6 +55,25 @@ pub struct BfOptions {
     /// Where rays and results spill (default: the system's temp dir).
     pub spill_dir: Option<PathBuf>,
     pub shading: Shading,
+    /// Whether the models instances place are held for the render or
+    /// read by each pass that needs them.
+    pub models: ModelHolding,
+}
+
+/// Where the breadth-first tracer keeps the models instances place.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ModelHolding {
+    /// Held when they take at most a quarter of the budget, else read
+    /// per pass.
+    #[default]
+    Auto,
+    /// Read once and held for the render.
+    Held,
+    /// Read by each pass whose rays meet their instances, one model at a
+    /// time, after the world's objects: the memory of the largest model,
+    /// not of all of them.
+    PerPass,
 }
 
 /// Where shading gets a hit's normals and material.
@@ -72,6 +91,20 @@ pub enum Shading {
     /// cluster does, where results travel without surfaces, and what `sray
     /// bench table1` measures).
     Join,
+}
+
+impl std::str::FromStr for ModelHolding {
+    type Err = String;
+    fn from_str(s: &str) -> Result<ModelHolding, String> {
+        match s {
+            "auto" => Ok(ModelHolding::Auto),
+            "held" => Ok(ModelHolding::Held),
+            "per-pass" => Ok(ModelHolding::PerPass),
+            _ => Err(format!(
+                "unknown model holding '{s}' (expected auto, held or per-pass)"
+            )),
+        }
+    }
 }
 
 impl std::str::FromStr for Shading {
@@ -272,6 +305,11 @@ pub struct BfStats {
     pub db_bytes_read: u64,
     /// Blocks the intersection passes left unread (see `skip`).
     pub db_blocks_skipped: u64,
+    /// How the models were kept ("held" or "per-pass"; none without
+    /// models), and how many times the passes read one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub models: Option<ModelHolding>,
+    pub model_reads: u64,
     pub spill_bytes_written: u64,
     pub ray_voxel_registrations: u64,
     pub tests_skipped_last_voxel: u64,

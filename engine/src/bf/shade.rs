@@ -26,6 +26,8 @@ pub struct ShadeStats {
     pub db_bytes_read: u64,
     /// Blocks the joins passed over (none of their objects was hit).
     pub db_blocks_skipped: u64,
+    /// Models read by the joins (when they are not held).
+    pub model_reads: u64,
 }
 
 pub struct ShadeSetup<'a> {
@@ -376,6 +378,9 @@ fn shade_set(
     st.sets += 1;
     let mut scan = setup.db.scan()?;
     let mut at = 0;
+    // Hits on instances of models not held: shaded once the world's
+    // objects are done, each model read once for the set.
+    let mut deferred: Vec<(u32, Placement)> = Vec::new();
     while at < set.len() {
         // A block holding none of the hit objects is passed over unread.
         if let Some(end) = scan.next_block_end()
@@ -395,6 +400,16 @@ fn shade_set(
         }
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
+        if !setup.models.all_held() {
+            for (k, h) in set[at..stop].iter().enumerate() {
+                if let (Shape::Instance(i), Some(_)) = (
+                    &objs[(key(h) - first) as usize].shape,
+                    h.prim.instance_parts(),
+                ) {
+                    deferred.push(((at + k) as u32, Placement::of(i)));
+                }
+            }
+        }
         let (materials, shade_scene, models) = (setup.materials, setup.shade, setup.models);
         let chunks = pool.current_num_threads().max(1) * 4;
         let chunk = (stop - at).div_ceil(chunks).max(64);
@@ -435,7 +450,48 @@ fn shade_set(
     st.db_scans += 1;
     st.db_bytes_read += scan.stats().bytes_read;
     st.db_blocks_skipped += scan.stats().blocks_skipped;
+    if !deferred.is_empty() {
+        shade_deferred(setup, set, &mut deferred, next, counts, st)?;
+    }
     set.clear();
+    Ok(())
+}
+
+/// Shades the hits on instances whose models are not held, reading each
+/// model once, in file order.
+fn shade_deferred(
+    setup: &mut ShadeSetup<'_>,
+    set: &[HitRec],
+    deferred: &mut [(u32, Placement)],
+    next: &mut NextRays,
+    counts: &mut RayCounts,
+    st: &mut ShadeStats,
+) -> Result<(), Error> {
+    deferred.sort_by_key(|(k, pl)| (pl.model, *k));
+    let mut rays = Vec::new();
+    let mut from = 0;
+    while from < deferred.len() {
+        let m = deferred[from].1.model;
+        let to = from + deferred[from..].partition_point(|(_, pl)| pl.model == m);
+        let model = setup
+            .models
+            .read_model(setup.db, m as usize, &crate::progress::NoProgress)?;
+        st.model_reads += 1;
+        for (k, pl) in &deferred[from..to] {
+            let h = &set[*k as usize];
+            let Some((_, p)) = h.prim.instance_parts() else {
+                continue;
+            };
+            let r = &h.ray;
+            let ray = RayQ::from_vec3(Vec3::from_array(r.o), Vec3::from_array(r.d));
+            if let Some((surf, material)) = model.surface(pl, p, &ray, h.t) {
+                let mat = &setup.materials[material as usize];
+                shade_surface(setup.shade, r, h.id, &surf, mat, &mut rays, counts);
+            }
+        }
+        from = to;
+    }
+    next.extend_from_slices(&[&rays])?;
     Ok(())
 }
 
@@ -458,8 +514,9 @@ fn shade_hit(
         (Shape::Instance(i), Some((_, p))) => {
             match models.surface(&Placement::of(i), p, &ray, h.t) {
                 Some(found) => found,
-                // Results are checked against the database before they
-                // are shaded; a primitive past its model cannot come here.
+                // A model not held (shaded later, see `shade_deferred`),
+                // or a primitive past its model, which results checked
+                // against the database do not name.
                 None => return,
             }
         }

@@ -17,7 +17,7 @@ use super::shade::{
     ChunkOut, NextRays, ShadeSetup, ShadeStats, ray_key, shade_indexed, shade_round,
 };
 use super::voxels::VoxelGrids;
-use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS};
+use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, ModelHolding};
 use crate::error::Error;
 use crate::hit::PrimId;
 use crate::math::Real;
@@ -191,22 +191,53 @@ impl<'db, R: Real> Tracer<'db, R> {
         progress: &dyn Progress,
     ) -> Result<Self, Error> {
         opts.validate()?;
-        // Models are held whole (their triangles and grids), out of the
-        // budget like the voxel flags.
+        // Models are held whole (their triangles and grids) when they
+        // take a small part of the budget; else each pass reads those it
+        // needs, one at a time, and the budget keeps room for the
+        // largest. Either way they are out of what the phases share.
         let t_models = Instant::now();
+        let each = Models::estimate_each(db);
+        let all: u64 = each.iter().sum();
+        let largest = each.iter().copied().max().unwrap_or(0);
+        let holding = match bf.models {
+            _ if each.is_empty() => ModelHolding::Held,
+            ModelHolding::Auto if all <= bf.memory / 4 => ModelHolding::Held,
+            ModelHolding::Auto => ModelHolding::PerPass,
+            h => h,
+        };
         // Refused before reading when they clearly cannot fit (the
         // estimate errs high, up to 1.6 times on the dragon); else the
-        // budget's plan says, with the bytes they took.
-        let need = Models::estimate_bytes(db);
+        // budget's plan says, with the bytes they take.
+        let need = if holding == ModelHolding::Held {
+            all
+        } else {
+            largest
+        };
         if need > 2 * bf.memory {
             return Err(Error::Invalid(format!(
-                "the scene's models need about {} in memory, more than the budget of {}; \
-                 both tracers hold a model whole (raise --memory)",
+                "the scene's {} about {} in memory, more than the budget of {}; \
+                 a model is held whole while it is tested (raise --memory)",
+                if holding == ModelHolding::Held {
+                    "models need"
+                } else {
+                    "largest model needs"
+                },
                 crate::units::fmt_bytes(need),
                 crate::units::fmt_bytes(bf.memory)
             )));
         }
-        let models = Models::load(db, progress)?;
+        let (models, models_bytes) = match holding {
+            ModelHolding::PerPass => {
+                let m = Models::open(db)?;
+                let b = m.bytes() + largest;
+                (m, b)
+            }
+            _ => {
+                let m = Models::load(db, progress)?;
+                let b = m.bytes();
+                (m, b)
+            }
+        };
         let models_seconds = t_models.elapsed().as_secs_f64();
         let (specs, partition) = super::plan_grids(db, opts, bf.memory);
         if specs.len() > MAX_GRIDS {
@@ -238,7 +269,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             bf.memory,
             super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
-            models.bytes(),
+            models_bytes,
             db.scan_buffer_bytes() as u64
                 + if read_ahead {
                     crate::sdb::read_ahead_bytes(db)
@@ -269,6 +300,7 @@ impl<'db, R: Real> Tracer<'db, R> {
                 super::StoreNumber::Adaptive => "adaptive".into(),
             },
             budget: Some(budget.clone()),
+            models: (!models.is_empty()).then_some(holding),
             ..Default::default()
         };
         Ok(Tracer {
@@ -352,6 +384,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         let mut setup = IntersectSetup {
             db: self.db,
             models: &self.models,
+            models_per_pass: !self.models.all_held(),
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
@@ -397,6 +430,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.db_scans += ist.db_scans;
         st.db_bytes_read += ist.db_bytes_read;
         st.db_blocks_skipped += ist.db_blocks_skipped;
+        st.model_reads += ist.model_reads;
         st.ray_voxel_registrations += ist.registrations;
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
@@ -539,6 +573,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
         self.stats.db_blocks_skipped += sst.db_blocks_skipped;
+        self.stats.model_reads += sst.model_reads;
         // The hit set and its outputs are the shading phase's; the next
         // intersection gets their share back (unless they are small).
         let held = self.set_buf.capacity() * std::mem::size_of::<super::records::HitRec>()

@@ -231,6 +231,7 @@ fn too_small_a_budget_says_the_minimum() {
         store: StoreNumber::Adaptive,
         spill_dir: None,
         shading: Default::default(),
+        models: Default::default(),
     };
     let e = bf::render(&db, &opts(1, true), &b, &NoProgress)
         .err()

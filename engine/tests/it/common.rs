@@ -79,6 +79,7 @@ pub fn bf_render_with(
         store,
         spill_dir: None,
         shading,
+        models: Default::default(),
     };
     let out = bf::render(db, o, &b, &NoProgress).unwrap();
     (out.frame.to_rgb8(), out.stats)

@@ -280,6 +280,7 @@ fn a_density_summary_that_lies_is_an_error() {
         store: StoreNumber::Adaptive,
         spill_dir: None,
         shading: sray_engine::bf::Shading::Carry,
+        models: Default::default(),
     };
     let e = sray_engine::bf::render(&db, &o, &b, &NoProgress)
         .err()

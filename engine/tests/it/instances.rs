@@ -7,8 +7,9 @@
 
 use crate::common::{bf_render, bf_render_with, df_render};
 use glam::{DAffine3, DMat3, DQuat, DVec3};
-use sray_engine::bf::{Shading, StoreNumber};
+use sray_engine::bf::{BfOptions, ModelHolding, Shading, StoreNumber};
 use sray_engine::models::{place_normal, place_point};
+use sray_engine::progress::NoProgress;
 use sray_engine::render::{Precision, RenderOptions};
 use sray_engine::scene::{Light, Material, SceneSink, View};
 use sray_engine::sdb::{Compression, Database, DbWriter};
@@ -227,6 +228,51 @@ fn instances_render_as_the_copies_they_stand_for() {
         }
         let (d, _) = bf_render(&copies, &o, StoreNumber::Fixed(2), 6 << 20);
         assert!(d == a, "{precision:?}: breadth-first copies differ");
+    }
+}
+
+/// Breadth-first with the models read by each pass that needs them (not
+/// held): the same image and counts as held, in both shading modes.
+#[test]
+fn models_read_per_pass_give_the_same_image_as_models_held() {
+    let dir = tempfile::tempdir().unwrap();
+    let inst = write(&dir.path().join("inst.sdb"), true);
+    let o = RenderOptions {
+        width: 48,
+        height: 48,
+        max_depth: 3,
+        ..Default::default()
+    };
+    let (want, sw) = df_render(&inst, &o);
+    for shading in [Shading::Carry, Shading::Join] {
+        for models in [ModelHolding::PerPass, ModelHolding::Held] {
+            let b = BfOptions {
+                memory: 6 << 20,
+                store: StoreNumber::Adaptive,
+                spill_dir: None,
+                shading,
+                models,
+            };
+            let out = sray_engine::bf::render(&inst, &o, &b, &NoProgress).unwrap();
+            assert!(
+                out.frame.to_rgb8() == want,
+                "{shading:?} {models:?}: the image differs from depth-first"
+            );
+            assert_eq!(out.stats.rays, sw.rays, "{shading:?} {models:?}");
+            let d = out.stats.details.unwrap();
+            let reads = d["model_reads"].as_u64().unwrap();
+            match models {
+                ModelHolding::PerPass => {
+                    assert_eq!(d["models"], "per-pass", "{d}");
+                    // A read per pass (and per shading set with Join).
+                    assert!(reads >= d["db_scans"].as_u64().unwrap() - 1, "{d}");
+                }
+                _ => {
+                    assert_eq!(d["models"], "held", "{d}");
+                    assert_eq!(reads, 0, "{d}");
+                }
+            }
+        }
     }
 }
 
