@@ -64,14 +64,7 @@ pub fn read_gltf(
         .reader
         .read_to_end(&mut bytes)
         .map_err(|e| Error::Scene(format!("{}: {e}", path.display())))?;
-    read_gltf_bytes(
-        &bytes,
-        path,
-        path.parent(),
-        opts.camera_index,
-        sink,
-        progress,
-    )
+    read_gltf_bytes(&bytes, path, path.parent(), opts, sink, progress)
 }
 
 /// Reads a glTF scene from `bytes` (`.gltf` JSON or `.glb`); external
@@ -81,10 +74,11 @@ pub fn read_gltf_bytes(
     bytes: &[u8],
     name: &Path,
     base: Option<&Path>,
-    camera_index: Option<usize>,
+    opts: &MeshOptions,
     sink: &mut dyn SceneSink,
     progress: &dyn Progress,
 ) -> Result<MeshSummary, Error> {
+    let camera_index = opts.camera_index;
     let bad = |what: String| Error::Scene(format!("{}: {what}", name.display()));
     let invalid = |e: gltf::Error| bad(format!("not a valid glTF file: {e}"));
     let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
@@ -119,6 +113,19 @@ pub fn read_gltf_bytes(
                 b.index()
             )));
         }
+    }
+    // A glTF file is read whole, with its buffers: refused, before the
+    // buffers are read, if they would take more than the budget. (Meshes
+    // in other formats are read within it, spilling to disk.)
+    let buffer_bytes: u64 = doc.buffers().map(|b| b.length() as u64).sum();
+    let need = bytes.len() as u64 + buffer_bytes;
+    if need > opts.memory {
+        return Err(bad(format!(
+            "its document and buffers take {}, more than the memory budget of {}; \
+             a glTF file is read whole (raise --memory)",
+            crate::units::fmt_bytes(need),
+            crate::units::fmt_bytes(opts.memory)
+        )));
     }
     let buffers = gltf::import_buffers(&doc, base, blob)
         .map_err(|e| bad(format!("cannot load its buffers: {e}")))?;

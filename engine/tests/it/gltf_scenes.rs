@@ -286,4 +286,53 @@ fn gpu_instancing_draws_each_listed_copy() {
         plain[per..],
         "the other nodes are as they were"
     );
+    // Written to a database, the mesh is one model placed five times.
+    let db = dir.path().join("instanced.sdb");
+    crate::common::write_converted(
+        &SceneSource::parse(path.to_str().unwrap()).unwrap(),
+        &db,
+        sray_engine::sdb::Compression::None,
+        true,
+    );
+    let db = sray_engine::sdb::Database::open(&db).unwrap();
+    assert_eq!(db.models().len(), 1);
+    assert_eq!(db.counts().get(sray_engine::shapes::ShapeKind::Instance), 5);
+    assert_eq!(db.object_count(), 5);
+}
+
+/// A glTF file is read whole: one whose document and buffers exceed the
+/// memory budget is refused before its buffers are read.
+#[test]
+fn a_gltf_file_larger_than_the_budget_is_refused() {
+    let path = fixtures().join("spot4.glb");
+    let bytes = std::fs::read(&path).unwrap();
+    let opts = sray_engine::mesh::MeshOptions {
+        memory: bytes.len() as u64,
+        spill_dir: None,
+        camera_index: None,
+    };
+    let e = sray_engine::mesh::gltf_scene::read_gltf_bytes(
+        &bytes,
+        &path,
+        None,
+        &opts,
+        &mut Recorder::default(),
+        &NoProgress,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("spot4.glb") && e.contains("read whole"), "{e}");
+    let opts = sray_engine::mesh::MeshOptions {
+        memory: 3 * bytes.len() as u64,
+        ..opts
+    };
+    sray_engine::mesh::gltf_scene::read_gltf_bytes(
+        &bytes,
+        &path,
+        None,
+        &opts,
+        &mut Recorder::default(),
+        &NoProgress,
+    )
+    .unwrap();
 }
