@@ -642,15 +642,64 @@ impl Bounds {
 /// Checks that an accessor lies within its buffer view and the view within
 /// its buffer, so that reading it cannot go past the data.
 fn check_accessor(a: &gltf::Accessor<'_>, buffers: &[gltf::buffer::Data]) -> Result<(), String> {
-    if a.sparse().is_some() {
-        return Err(format!(
-            "accessor {}: sparse accessors are not supported",
-            a.index()
-        ));
+    let sparse = a.sparse();
+    if let Some(sp) = &sparse {
+        // A sparse accessor: a base (its buffer view, or zeros without
+        // one) with `count` elements replaced at the listed indices.
+        let n = sp.count();
+        if n == 0 || n > a.count() {
+            return Err(format!(
+                "accessor {}: {n} sparse elements for {} elements",
+                a.index(),
+                a.count()
+            ));
+        }
+        let idx = sp.indices();
+        check_range(
+            &idx.view(),
+            buffers,
+            idx.offset(),
+            n,
+            idx.index_type().size(),
+            &format!("accessor {} sparse indices", a.index()),
+        )?;
+        let vals = sp.values();
+        check_range(
+            &vals.view(),
+            buffers,
+            vals.offset(),
+            n,
+            a.size(),
+            &format!("accessor {} sparse values", a.index()),
+        )?;
     }
     let Some(view) = a.view() else {
+        if sparse.is_some() && a.count() > 0 {
+            return Ok(());
+        }
         return Err(format!("accessor {} has no buffer view", a.index()));
     };
+    check_range(
+        &view,
+        buffers,
+        a.offset(),
+        a.count(),
+        a.size(),
+        &format!("accessor {} ({} elements)", a.index(), a.count()),
+    )
+}
+
+/// Checks that `count` elements of `size` bytes from byte `offset` of
+/// buffer view `view` (at its stride) lie within the view, and the view
+/// within its buffer.
+fn check_range(
+    view: &gltf::buffer::View<'_>,
+    buffers: &[gltf::buffer::Data],
+    offset: usize,
+    count: usize,
+    size: usize,
+    what: &str,
+) -> Result<(), String> {
     let data = buffers.get(view.buffer().index()).map_or(0, |d| d.0.len());
     let view_end = view.offset().checked_add(view.length());
     if view_end.is_none_or(|e| e > data) {
@@ -659,20 +708,17 @@ fn check_accessor(a: &gltf::Accessor<'_>, buffers: &[gltf::buffer::Data]) -> Res
             view.index()
         ));
     }
-    let size = a.size();
     let stride = view.stride().unwrap_or(size).max(size);
-    let end = match a.count() {
+    let end = match count {
         0 => Some(0),
         n => (n - 1)
             .checked_mul(stride)
-            .and_then(|x| x.checked_add(a.offset()))
+            .and_then(|x| x.checked_add(offset))
             .and_then(|x| x.checked_add(size)),
     };
     if end.is_none_or(|e| e > view.length()) {
         return Err(format!(
-            "accessor {} ({} elements) ends past its buffer view's {} bytes",
-            a.index(),
-            a.count(),
+            "{what} ends past its buffer view's {} bytes",
             view.length()
         ));
     }

@@ -336,3 +336,52 @@ fn a_gltf_file_larger_than_the_budget_is_refused() {
     )
     .unwrap();
 }
+
+/// A sparse positions accessor: vertex 0 moved to (10, 10, 10) by a
+/// sparse substitution is where every triangle using it finds it; a
+/// sparse block past its buffer is an error.
+#[test]
+fn sparse_accessors_replace_the_listed_elements() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = Vec::new();
+    bytes.extend(0u16.to_le_bytes());
+    bytes.extend([0u8; 2]);
+    for v in [10f32, 10.0, 10.0] {
+        bytes.extend(v.to_le_bytes());
+    }
+    std::fs::write(dir.path().join("sparse.bin"), &bytes).unwrap();
+    let sparse = |value_len: usize| {
+        move |doc: &mut serde_json::Value| {
+            let buffers = doc["buffers"].as_array_mut().unwrap();
+            buffers.push(serde_json::json!({"byteLength": 16, "uri": "sparse.bin"}));
+            let b = buffers.len() - 1;
+            let views = doc["bufferViews"].as_array_mut().unwrap();
+            views.push(serde_json::json!({"buffer": b, "byteOffset": 0, "byteLength": 2}));
+            views.push(serde_json::json!({"buffer": b, "byteOffset": 4, "byteLength": value_len}));
+            let v = views.len() - 2;
+            doc["accessors"][1]["sparse"] = serde_json::json!({
+                "count": 1,
+                "indices": {"bufferView": v, "componentType": 5123},
+                "values": {"bufferView": v + 1}
+            });
+        }
+    };
+    let plain = corners(&record(&fixtures().join("spot4_light.gltf")).unwrap());
+    let got = corners(&record(&edited(dir.path(), "sparse.gltf", sparse(12))).unwrap());
+    assert_eq!(got.len(), plain.len());
+    let moved = got
+        .iter()
+        .flatten()
+        .filter(|c| **c == [10.0, 10.0, 10.0])
+        .count();
+    assert!(moved > 0, "no corner was moved");
+    let differ = got.iter().zip(&plain).filter(|(a, b)| a != b).count();
+    // Every node places the mesh, so each triangle using vertex 0 moves
+    // in the first placement (the identity) to the point itself.
+    assert!(
+        differ >= moved,
+        "{differ} triangles differ, {moved} corners moved"
+    );
+    let e = error_of(&edited(dir.path(), "short.gltf", sparse(8)));
+    assert!(e.contains("sparse values"), "{e}");
+}
