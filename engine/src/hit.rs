@@ -3,11 +3,12 @@
 use bytemuck::{Pod, Zeroable};
 use serde::Serialize;
 
-/// Identifies a primitive for ties, mailboxes and shading. An object of
-/// the database is its index there (its position in the scene as read);
-/// the high bits are reserved for instances, so that a primitive of a
-/// placed model is (instance, primitive) and ties between instances are
-/// decided the same way everywhere. The order of ids is the tie order.
+/// Identifies a primitive for ties, mailboxes and shading: the database
+/// object it belongs to (its index there, its position in the scene as
+/// read) in the high half, and in the low half 0 for the object itself or
+/// `1 + k` for triangle `k` of the model an instance record places. The
+/// order of ids is the tie order: by object, then by the model's
+/// triangle, which is the order of the copies an instance stands for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Pod, Zeroable, Serialize)]
 #[repr(transparent)]
 pub struct PrimId(pub u64);
@@ -19,31 +20,14 @@ impl PrimId {
     /// Object `index` of the database.
     #[inline(always)]
     pub const fn object(index: u32) -> PrimId {
-        PrimId(index as u64)
+        PrimId((index as u64) << 32)
     }
 
-    /// Primitive `prim` of the model placed by instance `index` (the
-    /// database's object `index`, an instance record). Every such id is
-    /// above every plain object's; among them the order is by primitive,
-    /// then by instance, so that within one instance the smaller primitive
-    /// wins a tie, as it does within the model itself.
+    /// Triangle `prim` of the model placed by instance `index` (the
+    /// database's object `index`, an instance record).
     #[inline(always)]
     pub const fn instance(index: u32, prim: u32) -> PrimId {
-        PrimId(((prim as u64 + 1) << 32) | index as u64)
-    }
-
-    /// The database object the primitive belongs to: the object itself,
-    /// or the instance record that places it.
-    #[inline(always)]
-    pub fn world_index(self) -> u32 {
-        self.0 as u32
-    }
-
-    /// `(instance, primitive)` if this is a primitive of a placed model.
-    #[inline(always)]
-    pub fn instance_parts(self) -> Option<(u32, u32)> {
-        let hi = (self.0 >> 32) as u32;
-        (hi != 0 && !self.is_none()).then(|| (self.0 as u32, hi - 1))
+        PrimId(((index as u64) << 32) | (prim as u64 + 1))
     }
 
     #[inline(always)]
@@ -51,10 +35,24 @@ impl PrimId {
         self == PrimId::NONE
     }
 
+    /// The database object the primitive belongs to: the object itself,
+    /// or the instance record that places it.
+    #[inline(always)]
+    pub fn world_index(self) -> u32 {
+        (self.0 >> 32) as u32
+    }
+
     /// The database object this primitive is, if it is one.
     #[inline(always)]
     pub fn object_index(self) -> Option<u32> {
-        u32::try_from(self.0).ok()
+        (self.0 as u32 == 0).then_some(self.world_index())
+    }
+
+    /// `(instance, primitive)` if this is a triangle of a placed model.
+    #[inline(always)]
+    pub fn instance_parts(self) -> Option<(u32, u32)> {
+        let lo = self.0 as u32;
+        (lo != 0 && !self.is_none()).then(|| (self.world_index(), lo - 1))
     }
 }
 
@@ -101,16 +99,19 @@ mod tests {
         assert!(!h.loses_to(2.0, PrimId::object(6)));
         assert!(!h.loses_to(3.0, PrimId::object(0)));
         assert!(Hit::NONE.loses_to(1e300, PrimId::object(u32::MAX)));
-        assert!(PrimId::object(u32::MAX) < PrimId(1 << 32));
-        assert_eq!(PrimId(1 << 32).object_index(), None);
         let p = PrimId::instance(7, 3);
         assert_eq!(p.instance_parts(), Some((7, 3)));
         assert_eq!(p.world_index(), 7);
         assert_eq!(p.object_index(), None);
         assert_eq!(PrimId::object(7).instance_parts(), None);
+        assert_eq!(PrimId::object(7).object_index(), Some(7));
         assert_eq!(PrimId::NONE.instance_parts(), None);
-        assert!(PrimId::instance(9, 2) < PrimId::instance(1, 3));
-        assert!(PrimId::instance(1, 2) < PrimId::instance(9, 2));
-        assert!(PrimId::object(u32::MAX - 1) < PrimId::instance(0, 0));
+        assert_eq!(PrimId::NONE.object_index(), None);
+        // By object, then by the model's triangle: the copies' order.
+        assert!(PrimId::instance(1, 3) < PrimId::instance(9, 2));
+        assert!(PrimId::instance(1, 2) < PrimId::instance(1, 3));
+        assert!(PrimId::instance(1, u32::MAX - 1) < PrimId::object(2));
+        assert!(PrimId::object(0) < PrimId::instance(1, 0));
+        assert!(PrimId::instance(u32::MAX - 1, u32::MAX - 1) < PrimId::NONE);
     }
 }

@@ -117,7 +117,7 @@ fn model_infos(db: &Database) -> Result<Option<(Vec<ModelInfo>, u64)>, Error> {
             (Some(t), Some(v)) => (t, v),
             _ => scan_counts(&mdb)?,
         };
-        placed += triangles * n;
+        placed = placed.saturating_add(triangles.saturating_mul(n));
         out.push(ModelInfo {
             triangles,
             vertices,
@@ -238,7 +238,7 @@ pub fn scene_info_with(
             dense_regions: dense_regions(&db),
             placed_triangles: models
                 .as_ref()
-                .map(|(_, p)| triangles - models_stored(&models) + p),
+                .map(|(_, p)| (triangles - models_stored(&models)).saturating_add(*p)),
             models: models.map(|(m, _)| m),
         });
     }

@@ -14,8 +14,9 @@
 //! other.
 //!
 //! The model's grid lists each triangle by its box grown by a margin
-//! (`pad`, written with the model) that covers how far the rounding of a
-//! placed corner and of a hit may move a point, in the model's units: a
+//! (`pad`, written with the model: four times the rounding of a placed
+//! corner, in the model's units, plus a millionth of the model's size)
+//! that covers how far placing the corners in `f32` moves them: a
 //! triangle the world ray hits is listed in every voxel of the model's
 //! grid that the walk of the mapped ray crosses near the hit, and the
 //! walk's early exit (the nearest hit lies before the voxel's far side)
@@ -212,7 +213,16 @@ impl Models {
         };
         let mut bounds = Aabb::EMPTY;
         padded.each(&mut |_, b| bounds.union(&b));
-        let res = choose_resolution(&bounds, objects.len() as u64, DEFAULT_DENSITY, MAX_CELLS);
+        // No voxel narrower than four margins: a margin is the rounding
+        // of a placed corner, which for a model placed far from the
+        // origin (or scaled down) may be a sizeable part of it, and
+        // boxes grown by several voxels each would multiply the entries.
+        let mut res = choose_resolution(&bounds, objects.len() as u64, DEFAULT_DENSITY, MAX_CELLS);
+        for (i, r) in res.iter_mut().enumerate() {
+            let side = (bounds.max[i] - bounds.min[i]) as f64;
+            let most = (side / (4.0 * pad)).floor().clamp(1.0, u32::MAX as f64) as u32;
+            *r = (*r).min(most).max(1);
+        }
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(crate::sys::cpus())
             .build()

@@ -155,7 +155,7 @@ async fn lie(c: &mut Client, session: &str, t: &v1::Task, seed: &mut u64) -> boo
                 .wrapping_add(1442695040888963407);
             let r = sray_engine::bf::ResultRec {
                 ray: t.first_ray + i,
-                prim: sray_engine::hit::PrimId((*seed >> 33) % 4),
+                prim: sray_engine::hit::PrimId::object(((*seed >> 33) % 4) as u32),
                 t: 1.0 + (*seed >> 40) as f64 / 1e6,
             };
             recs.push(r);

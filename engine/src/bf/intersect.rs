@@ -1307,8 +1307,13 @@ fn test_pairs<R: Real>(
     let mut wanted: Vec<u32> = Vec::new();
     for sh in shards.iter_mut() {
         let placed = &sh.placed;
-        sh.pairs
-            .sort_unstable_by_key(|p| (placed[p.placed as usize].1.model, p.slot));
+        // By model, then ray, then instance: each ray meets its
+        // instances in the database's order whatever shard it is in, so
+        // that counts do not depend on the number of threads.
+        sh.pairs.sort_unstable_by_key(|p| {
+            let (index, pl) = &placed[p.placed as usize];
+            (pl.model, p.slot, *index)
+        });
         wanted.extend(sh.placed.iter().map(|(_, pl)| pl.model));
     }
     wanted.sort_unstable();

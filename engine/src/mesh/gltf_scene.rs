@@ -270,8 +270,19 @@ pub fn read_gltf_bytes(
         };
         let placement = DAffine3::from_mat4(p.world);
         match model_of[mesh.index()] {
+            // A placement that flattens the mesh (a zero scale, often how
+            // a node is hidden) places nothing: its copy would be all
+            // degenerate triangles.
+            Some(_) if !invertible(&placement) => {
+                out.warnings.add(
+                    "a placement of a shared mesh with a zero (or non-invertible) scale is skipped",
+                    || format!("node {}", p.node.index()),
+                );
+            }
             Some(model) => {
-                out.sink.instance(model, &placement)?;
+                out.sink
+                    .instance(model, &placement)
+                    .map_err(|e| bad(format!("node {}: {e}", p.node.index())))?;
                 out.summary.instances += 1;
             }
             None => out.mesh(&mesh, Some(&placement), p.node.index())?,
@@ -368,10 +379,13 @@ impl Emit<'_, '_> {
                 .iter()
                 .position(|v| !v.iter().all(|c| c.is_finite()))
             {
-                return Err(bad(format!(
-                    "{}: vertex {k} is not a finite point once placed by node {node}",
-                    what(),
-                )));
+                return Err(bad(match placement {
+                    Some(_) => format!(
+                        "{}: vertex {k} is not a finite point once placed by node {node}",
+                        what()
+                    ),
+                    None => format!("{}: vertex {k} is not a finite point", what()),
+                }));
             }
             let normals: Option<Vec<[f32; 3]>> = match prim.get(&gltf::Semantic::Normals) {
                 Some(n) => {
@@ -455,6 +469,12 @@ impl Emit<'_, '_> {
         }
         Ok(())
     }
+}
+
+/// Whether `m` maps no direction to zero (it can be inverted, finitely).
+fn invertible(m: &DAffine3) -> bool {
+    let det = m.matrix3.determinant();
+    det.is_finite() && det != 0.0 && m.inverse().to_cols_array().iter().all(|c| c.is_finite())
 }
 
 /// A node of the scene with its world transform.

@@ -267,7 +267,9 @@ impl Database {
             {
                 return Err(err("tables", format!("model {i} is out of place")));
             }
-            at += m.bytes;
+            at = at
+                .checked_add(m.bytes)
+                .ok_or_else(|| err("tables", format!("model {i} is out of place")))?;
         }
         if at != file_bytes || (h.version >= VERSION_MODELS && models.is_empty()) {
             return Err(err("tables", "the models do not fill the file".into()));
@@ -944,8 +946,13 @@ impl Scan<'_> {
             self.words.truncate(raw_len / 4);
         }
         if self.verify {
-            validate_records(&self.words, h.object_count, self.db.scene.materials.len())
-                .map_err(|m| self.err(m))?;
+            validate_records(
+                &self.words,
+                h.object_count,
+                self.db.scene.materials.len(),
+                self.db.models.len(),
+            )
+            .map_err(|m| self.err(m))?;
         }
         self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
         self.decoded += self.words.len() as u64 * 4;
@@ -974,8 +981,14 @@ impl Scan<'_> {
 }
 
 /// Checks every record of a decoded block so that iteration cannot fail.
-fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), String> {
+fn validate_records(
+    words: &[u32],
+    count: u32,
+    materials: usize,
+    models: usize,
+) -> Result<(), String> {
     let mut pos = 0usize;
+    let mut instances = false;
     for i in 0..count {
         let head = words
             .get(pos..pos + RECORD_HEADER_WORDS)
@@ -995,6 +1008,7 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
                 head[1]
             ));
         }
+        instances |= kind == ShapeKind::Instance;
         pos += RECORD_HEADER_WORDS + payload;
         if pos > words.len() {
             return Err(format!("record {i} is cut off"));
@@ -1002,6 +1016,11 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
     }
     if pos != words.len() {
         return Err("block has bytes after its last record".into());
+    }
+    if instances {
+        // An instance's transform is stored as `f64` words, whose low
+        // halves are any bit pattern: its record is checked as a shape.
+        return validate_with_instances(words, count, models);
     }
     // No number may be NaN or infinite. The integer words (kind and vertex
     // count, material index) are far below the pattern once checked above,
@@ -1013,6 +1032,36 @@ fn validate_records(words: &[u32], count: u32, materials: usize) -> Result<(), S
     });
     if bad != 0 {
         return Err("a record has a non-finite number".into());
+    }
+    Ok(())
+}
+
+/// The finiteness check of [`validate_records`], record by record, for a
+/// block holding instances (checked whole, and their model's index).
+fn validate_with_instances(words: &[u32], count: u32, models: usize) -> Result<(), String> {
+    let finite = |w: &[u32]| w.iter().all(|w| (w & 0x7f80_0000) != 0x7f80_0000);
+    let mut pos = 0usize;
+    for i in 0..count {
+        let (o, len) =
+            decode_record(&words[pos..], i).ok_or_else(|| format!("record {i} is cut off"))?;
+        let rec = &words[pos..pos + len];
+        match o.shape {
+            Shape::Instance(inst) => {
+                if !finite(&rec[..RECORD_HEADER_WORDS]) {
+                    return Err(format!("record {i} has a non-finite number"));
+                }
+                o.shape.validate().map_err(|e| format!("record {i}: {e}"))?;
+                if inst.model() as usize >= models {
+                    return Err(format!(
+                        "record {i} places model {} of {models}",
+                        inst.model()
+                    ));
+                }
+            }
+            _ if !finite(rec) => return Err(format!("record {i} has a non-finite number")),
+            _ => {}
+        }
+        pos += len;
     }
     Ok(())
 }

@@ -327,11 +327,15 @@ impl DbWriter {
                 e.u64(at);
                 e.u64(m.bytes);
                 // The margin a model's grid keeps around each triangle,
-                // in its units (see `crate::models`).
+                // in its units (see `crate::models`): four times the
+                // rounding of a placed corner (half an ulp of the
+                // largest placed coordinate, 2^-24 of it, taken back
+                // into the model by the inverse), and a millionth of the
+                // model's size, as a grid keeps around every box.
                 let extent = (0..3)
                     .map(|i| (m.bbox.max[i] - m.bbox.min[i]) as f64)
                     .fold(0.0, f64::max);
-                e.f64(1e-5 * extent + 1e-5 * m.spread);
+                e.f64(1e-6 * extent + 4.0 * m.spread * f64::powi(2.0, -24));
                 e.u64(0);
                 at += m.bytes;
             }

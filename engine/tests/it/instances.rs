@@ -313,3 +313,150 @@ fn models_are_refused_where_they_cannot_be() {
     assert!(e.contains("not ended"), "{e}");
     assert!(!path.exists(), "an unfinished database was left behind");
 }
+
+/// Coincident triangles of different instances, and of an instance and
+/// a plain object: every tie goes as it goes between the copies (by
+/// object, then by the model's triangle), which the materials show.
+#[test]
+fn ties_between_instances_go_as_between_copies() {
+    // A model of two unit squares side by side, of two materials; A
+    // places it as it is, B one unit along x, so that B's first square
+    // lies exactly on A's second; a plain square after them lies on A's
+    // first.
+    let square = |x: f32, material: usize| -> Vec<Tri> {
+        let v = |a: f32, b: f32| [x + a, 0.0, b];
+        vec![
+            Tri {
+                v: [v(0.0, 0.0), v(1.0, 0.0), v(1.0, 1.0)],
+                n: None,
+                material,
+            },
+            Tri {
+                v: [v(0.0, 0.0), v(1.0, 1.0), v(0.0, 1.0)],
+                n: None,
+                material,
+            },
+        ]
+    };
+    let tris: Vec<Tri> = square(0.0, 0).into_iter().chain(square(1.0, 1)).collect();
+    let at = [DAffine3::IDENTITY, DAffine3::from_translation(DVec3::X)];
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, instances: bool| {
+        let path = dir.path().join(name);
+        let mut w = DbWriter::create(&path, Compression::None).unwrap();
+        w.view(&View {
+            from: [1.5, 4.0, 0.5],
+            at: [1.5, 0.0, 0.5],
+            up: [0.0, 0.0, 1.0],
+            angle: 60.0,
+            hither: 0.01,
+            resolution: [32, 32],
+        })
+        .unwrap();
+        w.light(&Light {
+            position: [1.5, 5.0, 0.5],
+            color: None,
+        })
+        .unwrap();
+        let model = instances.then(|| {
+            w.begin_model().unwrap();
+            emit(&mut w, &tris, None);
+            w.end_model().unwrap()
+        });
+        for p in &at {
+            match &model {
+                Some(m) => w.instance(m.index, p).unwrap(),
+                None => emit(&mut w, &tris, Some(p)),
+            }
+        }
+        w.material(&Material {
+            color: [0.1, 0.9, 0.1],
+            ..MATERIALS[0]
+        })
+        .unwrap();
+        for t in square(0.0, 0) {
+            w.object(&Shape::Polygon(Polygon { vertices: &t.v }))
+                .unwrap();
+        }
+        w.finish().unwrap();
+        Database::open(&path).unwrap()
+    };
+    let inst = write("inst.sdb", true);
+    let copies = write("copies.sdb", false);
+    let o = RenderOptions {
+        width: 32,
+        height: 32,
+        max_depth: 1,
+        ..Default::default()
+    };
+    let (a, _) = df_render(&inst, &o);
+    let (b, _) = df_render(&copies, &o);
+    assert!(
+        a == b,
+        "ties between instances go otherwise than between copies"
+    );
+    let (c, _) = bf_render(&inst, &o, StoreNumber::Fixed(1), 6 << 20);
+    assert!(c == a, "breadth-first decides the ties otherwise");
+    // Both materials of the model show, and the plain square's green
+    // does not (it lies under A's first square, which wins the tie).
+    let colors: std::collections::HashSet<[u8; 3]> =
+        a.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
+    assert!(
+        colors.iter().all(|c| !(c[1] > 2 * c[0] && c[1] > 2 * c[2])),
+        "{colors:?}"
+    );
+    assert!(colors.iter().any(|c| c[2] > c[0]), "{colors:?}");
+    assert!(colors.iter().any(|c| c[0] > c[2]), "{colors:?}");
+}
+
+/// An instance record naming a model the file does not have is an error
+/// of the file (reading it, verifying it, or rendering it either way),
+/// not an instance never hit.
+#[test]
+fn an_instance_of_a_missing_model_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.sdb");
+    let mut w = DbWriter::create(&path, Compression::None).unwrap();
+    header(&mut w);
+    w.begin_model().unwrap();
+    emit(&mut w, &model()[..4], None);
+    let m = w.end_model().unwrap();
+    w.instance(
+        m.index,
+        &DAffine3::from_translation(DVec3::new(FAR, 0.0, 0.0)),
+    )
+    .unwrap();
+    // Written as a plain object, past the writer's checks.
+    let words = sray_engine::shapes::instance_words(3, &m.bbox, &DAffine3::IDENTITY);
+    w.object(&Shape::Instance(sray_engine::shapes::Instance {
+        words: &words,
+    }))
+    .unwrap();
+    w.finish().unwrap();
+    let db = Database::open(&path).unwrap();
+    let o = RenderOptions {
+        width: 8,
+        height: 8,
+        ..Default::default()
+    };
+    let e = sray_engine::df::render(&db, &o, &NoProgress)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("model 3 of 1"), "{e}");
+    for models in [ModelHolding::Held, ModelHolding::PerPass] {
+        let b = BfOptions {
+            memory: 6 << 20,
+            store: StoreNumber::Adaptive,
+            spill_dir: None,
+            shading: Shading::Carry,
+            models,
+        };
+        let db = Database::open(&path).unwrap();
+        let e = sray_engine::bf::render(&db, &o, &b, &NoProgress)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("model 3 of 1"), "{models:?}: {e}");
+    }
+}
