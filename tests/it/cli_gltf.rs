@@ -9,7 +9,7 @@ use crate::common;
 use common::{fails, json, ok};
 use std::path::{Path, PathBuf};
 
-fn fixture(name: &str) -> String {
+pub(crate) fn fixture(name: &str) -> String {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/fixtures/gltf")
         .join(name)
@@ -19,7 +19,7 @@ fn fixture(name: &str) -> String {
 }
 
 /// The PNG and the statistics of `sray render ARGS` at 64 x 64.
-fn render(d: &Path, args: &[&str]) -> (Vec<u8>, serde_json::Value) {
+pub(crate) fn render(d: &Path, args: &[&str]) -> (Vec<u8>, serde_json::Value) {
     let mut a = args.to_vec();
     a.extend([
         "--width", "64", "--height", "64", "-o", "r.png", "--stats", "r.json", "--quiet",

@@ -8,30 +8,9 @@
 
 use crate::common;
 
+use crate::cli_gltf::{fixture, render};
 use common::{fails, json, ok};
-use std::path::{Path, PathBuf};
-
-fn fixture(name: &str) -> String {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/fixtures/gltf")
-        .join(name)
-        .to_str()
-        .unwrap()
-        .to_string()
-}
-
-/// The PNG and the statistics of `sray render ARGS` at 64 x 64.
-fn render(d: &Path, args: &[&str]) -> (Vec<u8>, serde_json::Value) {
-    let mut a = args.to_vec();
-    a.extend([
-        "--width", "64", "--height", "64", "-o", "r.png", "--stats", "r.json", "--quiet",
-    ]);
-    ok(d, &a);
-    (
-        std::fs::read(d.join("r.png")).unwrap(),
-        json(&std::fs::read_to_string(d.join("r.json")).unwrap()),
-    )
-}
+use std::path::Path;
 
 fn info(d: &Path, db: &str) -> serde_json::Value {
     json(&ok(d, &["info", db, "--json"]))
