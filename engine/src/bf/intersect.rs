@@ -1257,36 +1257,48 @@ fn scan_block<R: Real>(
                         };
                         if let Some((t, prim)) = found {
                             let t = t.to_f64();
-                            if s.shadow {
-                                s.blocked = true;
-                                s.best = Hit { t, prim };
-                            } else if s.best.loses_to(t, prim) {
-                                s.best = Hit { t, prim };
-                                s.upper = R::from_f64(t).next_up();
-                                if carry {
-                                    // Exactly what the shading join would
-                                    // compute from the ray and this hit.
-                                    let c = &mut sh.cold[slot as usize];
-                                    let ray = RayQ::from_vec3(c.o, c.d);
-                                    let (surf, material) = match (placement, prim.instance_parts())
-                                    {
-                                        (Some(pl), Some((_, p))) => {
-                                            match models.surface(pl, p, &ray, t) {
-                                                Some(found) => found,
-                                                None => continue,
-                                            }
-                                        }
-                                        _ => (o.shape.surface(&ray, t), o.material),
-                                    };
-                                    c.ng = surf.ng;
-                                    c.ns = surf.ns;
-                                    c.material = material;
-                                }
-                            }
+                            offer(
+                                s,
+                                &mut sh.cold[slot as usize],
+                                t,
+                                prim,
+                                carry,
+                                |ray| match (placement, prim.instance_parts()) {
+                                    (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
+                                    _ => Some((o.shape.surface(ray, t), o.material)),
+                                },
+                            );
                         }
                     }
                 }
             }
+        }
+    }
+}
+
+/// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`: a shadow ray
+/// is blocked; another keeps the hit if it wins, and with `carry` the
+/// surface there (exactly what the shading join would compute from the
+/// ray and this hit), which `surface` gives from the ray.
+#[inline(always)]
+fn offer<R: Real>(
+    s: &mut Hot<R>,
+    c: &mut Cold,
+    t: f64,
+    prim: PrimId,
+    carry: bool,
+    surface: impl FnOnce(&RayQ<f64>) -> Option<(crate::intersect::Surface, u32)>,
+) {
+    if s.shadow {
+        s.blocked = true;
+        s.best = Hit { t, prim };
+    } else if s.best.loses_to(t, prim) {
+        s.best = Hit { t, prim };
+        s.upper = R::from_f64(t).next_up();
+        if carry && let Some((surf, material)) = surface(&RayQ::from_vec3(c.o, c.d)) {
+            c.ng = surf.ng;
+            c.ns = surf.ns;
+            c.material = material;
         }
     }
 }
@@ -1344,34 +1356,19 @@ fn test_pairs<R: Real>(
                         continue;
                     }
                     let q = &q[slot];
-                    if s.shadow {
-                        if model.blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests) {
-                            s.blocked = true;
-                            s.best = Hit {
-                                t: s.upper.to_f64(),
-                                prim: PrimId::object(*index),
-                            };
-                        }
-                        continue;
-                    }
-                    let Some((t, k)) =
-                        model.nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
-                    else {
-                        continue;
+                    let found = if s.shadow {
+                        model
+                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .then(|| (s.upper.to_f64(), PrimId::object(*index)))
+                    } else {
+                        model
+                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .map(|(t, k)| (t.to_f64(), PrimId::instance(*index, k)))
                     };
-                    let prim = PrimId::instance(*index, k);
-                    let t = t.to_f64();
-                    if s.best.loses_to(t, prim) {
-                        s.best = Hit { t, prim };
-                        s.upper = R::from_f64(t).next_up();
-                        if carry {
-                            let ray = RayQ::from_vec3(c.o, c.d);
-                            if let Some((surf, material)) = model.surface(pl, k, &ray, t) {
-                                c.ng = surf.ng;
-                                c.ns = surf.ns;
-                                c.material = material;
-                            }
-                        }
+                    if let Some((t, prim)) = found {
+                        offer(s, c, t, prim, carry, |ray| {
+                            model.surface(pl, prim.instance_parts()?.1, ray, t)
+                        });
                     }
                 }
             })
