@@ -60,6 +60,8 @@ pub struct Job {
     /// The format of the image sent back.
     pub format: ImageFormat,
     pub objects: u64,
+    /// The most triangles of any model the scene's instances place.
+    pub model_triangles: u64,
     pub eps: f64,
     pub grids: Vec<sray_engine::grid::GridStat>,
 }
@@ -224,29 +226,42 @@ impl Job {
         };
         let path = scene.path.clone();
         let o = opts.clone();
-        let (objects, eps, grids) = tokio::task::spawn_blocking(move || -> anyhow::Result<_> {
-            let db = Database::open(&path)?;
-            Camera::new(&db.scene().view, o.width, o.height)?;
-            let (specs, _) = sray_engine::bf::plan_grids(&db, &o, NOMINAL_MEMORY);
-            let groups = sray_engine::grid::plan_groups(db.sizes(), db.density(), o.multiple_grids);
-            let grids: Vec<_> = specs
-                .iter()
-                .zip(&groups.counts)
-                .map(|(s, &n)| sray_engine::grid::GridStat {
-                    objects: n,
-                    resolution: s.res,
-                    lo: s.lo,
-                    hi: s.hi,
-                    nested_voxels: 0,
-                    nested_objects: 0,
-                })
-                .collect();
-            Ok((db.object_count(), epsilon(&db.bbox(), o.precision), grids))
-        })
-        .await??;
+        let ((objects, model_triangles), eps, grids) =
+            tokio::task::spawn_blocking(move || -> anyhow::Result<_> {
+                let db = Database::open(&path)?;
+                Camera::new(&db.scene().view, o.width, o.height)?;
+                let (specs, _) = sray_engine::bf::plan_grids(&db, &o, NOMINAL_MEMORY);
+                let groups =
+                    sray_engine::grid::plan_groups(db.sizes(), db.density(), o.multiple_grids);
+                let grids: Vec<_> = specs
+                    .iter()
+                    .zip(&groups.counts)
+                    .map(|(s, &n)| sray_engine::grid::GridStat {
+                        objects: n,
+                        resolution: s.res,
+                        lo: s.lo,
+                        hi: s.hi,
+                        nested_voxels: 0,
+                        nested_objects: 0,
+                    })
+                    .collect();
+                // The most triangles any model has: no instance hit can name
+                // a triangle past it.
+                let mut model_triangles = 0;
+                for m in 0..db.models().len() {
+                    model_triangles = model_triangles.max(db.open_model(m)?.object_count());
+                }
+                Ok((
+                    (db.object_count(), model_triangles),
+                    epsilon(&db.bbox(), o.precision),
+                    grids,
+                ))
+            })
+            .await??;
         let _ = GridRes::Auto;
         Ok(Job {
             objects,
+            model_triangles,
             eps,
             scene,
             hash,
@@ -598,6 +613,7 @@ async fn drive(
                         results: None,
                         results_offset: 0,
                         objects: job.objects,
+                        model_triangles: job.model_triangles,
                         corners,
                         held: Held {
                             rays: segments.clone(),
@@ -653,6 +669,7 @@ async fn drive(
                         results: results[i].clone(),
                         results_offset: 0,
                         objects: job.objects,
+                        model_triangles: job.model_triangles,
                         corners,
                         held: Held {
                             rays: Arc::default(),
@@ -859,6 +876,7 @@ impl Stage<'_> {
             results: inp.results.clone(),
             results_offset: s - self.shards[i].0,
             objects: inp.objects,
+            model_triangles: inp.model_triangles,
             corners: inp.corners,
             held: inp.held.clone(),
         })

@@ -716,10 +716,17 @@ impl<'a> Receiver<'a> {
                     if r.ray != want {
                         return Err(format!("result for ray {} where ray {want} was due", r.ray));
                     }
-                    // An instance's hit names its record (and the model's
-                    // primitive, checked when it is shaded).
+                    // An instance's hit names its record and a triangle
+                    // of a model (checked against the instance's own
+                    // model when it is shaded).
+                    let past_models = r
+                        .prim
+                        .instance_parts()
+                        .is_some_and(|(_, p)| u64::from(p) >= self.input.model_triangles);
                     if !r.prim.is_none()
-                        && (r.prim.world_index() as u64 >= self.input.objects || !r.t.is_finite())
+                        && (r.prim.world_index() as u64 >= self.input.objects
+                            || past_models
+                            || !r.t.is_finite())
                     {
                         return Err(format!(
                             "ray {}: no object {} at distance {}",

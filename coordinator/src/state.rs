@@ -207,6 +207,9 @@ pub struct TaskInput {
     pub results: Option<Arc<Records<ResultRec>>>,
     pub results_offset: u64,
     pub objects: u64,
+    /// The most triangles of any model (the bound of an instance hit's
+    /// triangle; the shading checks it against the instance's own model).
+    pub model_triangles: u64,
     /// Frame slots (pixel corners, or pixels): the bound of contributions.
     pub corners: u64,
     /// Where workers may hold this input already.

@@ -150,13 +150,18 @@ pub struct Models {
     /// The models' materials, after the world's in the render's table:
     /// a model's material `k` is entry `material_base + k` there.
     materials: Vec<Material>,
+    /// Threads that build a model's grid when it is read (the render's
+    /// `--threads`).
+    threads: usize,
+    /// Each model's triangles, from its header.
+    triangles: Vec<u64>,
 }
 
 impl Models {
     /// Reads and indexes every model of `db` (none for a database
-    /// without models).
-    pub fn load(db: &Database, progress: &dyn Progress) -> Result<Models, Error> {
-        let mut models = Models::open(db)?;
+    /// without models), building each grid on `threads` threads.
+    pub fn load(db: &Database, threads: usize, progress: &dyn Progress) -> Result<Models, Error> {
+        let mut models = Models::open(db, threads)?;
         for m in 0..models.len() {
             progress.set_message(&format!("loading model {} of {}", m + 1, models.len()));
             models.list[m] = Some(models.read_model(db, m, progress)?);
@@ -164,13 +169,16 @@ impl Models {
         Ok(models)
     }
 
-    /// The models of `db` by their materials alone: none is read.
-    pub fn open(db: &Database) -> Result<Models, Error> {
+    /// The models of `db` by their materials alone: none is read. A
+    /// model read later builds its grid on `threads` threads.
+    pub fn open(db: &Database, threads: usize) -> Result<Models, Error> {
         let n = db.models().len();
         let mut models = Models {
             list: (0..n).map(|_| None).collect(),
             bases: Vec::with_capacity(n),
             materials: Vec::new(),
+            threads: threads.max(1),
+            triangles: Vec::with_capacity(n),
         };
         let world_materials = db.scene().materials.len();
         for m in 0..n {
@@ -180,6 +188,7 @@ impl Models {
                 .filter(|&b| b as usize + mdb.scene().materials.len() <= u32::MAX as usize)
                 .ok_or_else(|| bad_model(db, m, "too many materials".into()))?;
             models.bases.push(base);
+            models.triangles.push(mdb.object_count());
             models.materials.extend_from_slice(&mdb.scene().materials);
         }
         Ok(models)
@@ -224,7 +233,7 @@ impl Models {
             *r = (*r).min(most).max(1);
         }
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(crate::sys::cpus())
+            .num_threads(self.threads)
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
         let grid = ObjectGrid::build(&padded, &bounds, res, &pool, |_| true)?;
@@ -272,6 +281,11 @@ impl Models {
 
     pub fn len(&self) -> usize {
         self.list.len()
+    }
+
+    /// The triangles of model `m` (0 for a model the file lacks).
+    pub fn triangles(&self, m: u32) -> u64 {
+        self.triangles.get(m as usize).copied().unwrap_or(0)
     }
 
     /// Whether every model is in memory.

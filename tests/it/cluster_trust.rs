@@ -324,6 +324,75 @@ fn contributions_cover_no_more_slots_than_their_rays() {
     );
 }
 
+/// An intersection result naming an instance's triangle past every
+/// model of the scene (here a scene without models) is refused when it
+/// arrives; one within the models is checked against the instance's own
+/// model when it is shaded (`bf::shade`).
+#[test]
+fn an_instance_hit_past_every_model_is_refused() {
+    use v1::task_output::Part;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--verify-fraction", "0"]);
+    let _render = client(d, &render_args("spd:balls:1", &url, "token", "c.png", "32"));
+    let rt = rt();
+    let answer = rt.block_on(async {
+        let mut c = connect(&url, &d.join("token")).await;
+        let session = register(&mut c, "forger").await;
+        keep_beating(&c, &session);
+        let t0 = Instant::now();
+        while t0.elapsed() < Duration::from_secs(60) {
+            let Some(t) = next(&mut c, &session).await else {
+                continue;
+            };
+            if t.stage != v1::Stage::Intersect as i32 {
+                continue;
+            }
+            let recs: Vec<_> = (0..t.ray_count)
+                .map(|i| sray_engine::bf::ResultRec {
+                    ray: t.first_ray + i,
+                    prim: match i {
+                        0 => sray_engine::hit::PrimId::instance(0, 5),
+                        _ => sray_engine::hit::PrimId::NONE,
+                    },
+                    t: if i == 0 { 1.0 } else { f64::INFINITY },
+                })
+                .collect();
+            let msgs = vec![
+                v1::TaskOutput {
+                    part: Some(Part::Header(tref(&session, &t))),
+                },
+                v1::TaskOutput {
+                    part: Some(Part::Records(v1::RecordChunk {
+                        kind: v1::RecordKind::Results as i32,
+                        data: sray_proto::wire::encode(&recs),
+                        held: None,
+                        raw: false,
+                    })),
+                },
+                v1::TaskOutput {
+                    part: Some(Part::Summary(v1::TaskSummary::default())),
+                },
+            ];
+            return Some(
+                c.complete_task(tokio_stream::iter(msgs))
+                    .await
+                    .map(|r| r.into_inner().accepted)
+                    .map_err(|s| s.message().to_string()),
+            );
+        }
+        None
+    });
+    drop(rt);
+    drop(coord);
+    let answer = answer.expect("no intersection task came");
+    assert!(
+        answer.as_ref().is_err_and(|m| m.contains("no object")),
+        "{answer:?}"
+    );
+}
+
 /// Item 1: job ids are random and workers key their caches by content:
 /// after a coordinator restart with the same worker up, a render of
 /// another scene gives that scene's image, not the cached one's.

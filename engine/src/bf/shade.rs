@@ -400,6 +400,29 @@ fn shade_set(
         }
         let objects: Vec<ObjectRef<'_>> = block.objects().collect();
         let objs = &objects;
+        // A hit names an instance's triangle exactly when its object is an
+        // instance, and a triangle its model has: a hit from elsewhere (a
+        // worker's results) that does not is an error, not a pixel left
+        // unshaded.
+        for h in &set[at..stop] {
+            let k = key(h);
+            let bad = match (&objs[(k - first) as usize].shape, h.prim.instance_parts()) {
+                (Shape::Instance(i), Some((_, p))) => {
+                    let n = setup.models.triangles(i.model());
+                    (u64::from(p) >= n).then(|| {
+                        format!("names triangle {p} of model {}, which has {n}", i.model())
+                    })
+                }
+                (Shape::Instance(_), None) => Some("names no triangle of the instance".into()),
+                (_, Some((_, p))) => Some(format!(
+                    "names triangle {p} of an object that is not an instance"
+                )),
+                (_, None) => None,
+            };
+            if let Some(why) = bad {
+                return Err(Error::Invalid(format!("a hit on object {k} {why}")));
+            }
+        }
         if !setup.models.all_held() {
             for (k, h) in set[at..stop].iter().enumerate() {
                 if let (Shape::Instance(i), Some(_)) = (

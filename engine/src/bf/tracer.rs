@@ -226,14 +226,19 @@ impl<'db, R: Real> Tracer<'db, R> {
                 crate::units::fmt_bytes(bf.memory)
             )));
         }
+        let threads = if opts.threads == 0 {
+            crate::sys::cpus()
+        } else {
+            opts.threads
+        };
         let (models, models_bytes) = match holding {
             ModelHolding::PerPass => {
-                let m = Models::open(db)?;
+                let m = Models::open(db, threads)?;
                 let b = m.bytes() + largest;
                 (m, b)
             }
             _ => {
-                let m = Models::load(db, progress)?;
+                let m = Models::load(db, threads, progress)?;
                 let b = m.bytes();
                 (m, b)
             }
@@ -255,11 +260,6 @@ impl<'db, R: Real> Tracer<'db, R> {
             + specs.len() as u64 * 4096
             + db.block_count()
                 * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64);
-        let threads = if opts.threads == 0 {
-            crate::sys::cpus()
-        } else {
-            opts.threads
-        };
         let store = StorePlan::new(bf.store, &specs);
         // A reader thread needs a core beside the shards' and a few block
         // buffers: worth it when they are a small part of the budget.

@@ -32,11 +32,15 @@
 //!   refraction (1.5 by default). Textures are ignored, with one warning.
 //!   A primitive without a material is the meshes' neutral grey.
 //!
+//! The file is read within the memory budget ([`super::gltf_data`]): the
+//! document is held, the buffers are read by offset.
+//!
 //! Bad input is an error that names the file and what is wrong: a missing
 //! or short buffer, an accessor outside its buffer, an index past the
 //! vertices, a cycle in the node graph, a primitive of points or lines.
 
 use super::builder::NEUTRAL;
+use super::gltf_data::{self, Buffers, Elements, Main, vec3_of};
 use super::{MeshOptions, MeshSummary, Warnings};
 use crate::error::Error;
 use crate::models::{place_normal, place_point};
@@ -45,26 +49,38 @@ use crate::scene::setup::{DEFAULT_BACKGROUND, default_lights};
 use crate::scene::{Light, Material, MeshFacts, SceneSink, View};
 use crate::shapes::{Patch, Polygon, Shape};
 use glam::{DAffine3, DMat4, DVec3};
+use gltf::accessor::Dimensions;
 use gltf::mesh::Mode;
-use std::io::Read;
 use std::path::Path;
 
-/// Reads the glTF scene at `path` into `sink`.
+/// Reads the glTF scene at `path` into `sink`, within `opts.memory`: the
+/// document is held, the buffers are read by offset
+/// ([`gltf_data`]). A gzip or zstd file is first decompressed to a
+/// temporary file (in `opts.spill_dir`), since its buffers are read out
+/// of order.
 pub fn read_gltf(
     path: &Path,
     sink: &mut dyn SceneSink,
     progress: &dyn Progress,
     opts: &MeshOptions,
 ) -> Result<MeshSummary, Error> {
-    // Progress is the file's bytes: the document and a GLB's buffer are
-    // read whole before anything is emitted (external buffers are read by
-    // the gltf crate, unreported).
-    let mut bytes = Vec::new();
-    crate::input::open(path, progress)?
-        .reader
-        .read_to_end(&mut bytes)
-        .map_err(|e| Error::Scene(format!("{}: {e}", path.display())))?;
-    read_gltf_bytes(&bytes, path, path.parent(), opts, sink, progress)
+    use crate::error::IoContext;
+    use crate::input::Wrapping;
+    let wrapping = Wrapping::of_head(&crate::input::raw_head(path, 4)?);
+    let (file, _temp) = if wrapping == Wrapping::Plain {
+        (std::fs::File::open(path).at(path)?, None)
+    } else {
+        let mut temp = match &opts.spill_dir {
+            Some(d) => tempfile::NamedTempFile::new_in(d).at(d)?,
+            None => tempfile::NamedTempFile::new().at(std::env::temp_dir())?,
+        };
+        let mut input = crate::input::open(path, progress)?;
+        std::io::copy(&mut input.reader, temp.as_file_mut())
+            .map_err(|e| crate::input::read_error(path, input.wrapping, e))?;
+        let file = temp.reopen().at(temp.path())?;
+        (file, Some(temp))
+    };
+    read_main(Main::File(file), path, path.parent(), opts, sink, progress)
 }
 
 /// Reads a glTF scene from `bytes` (`.gltf` JSON or `.glb`); external
@@ -78,77 +94,66 @@ pub fn read_gltf_bytes(
     sink: &mut dyn SceneSink,
     progress: &dyn Progress,
 ) -> Result<MeshSummary, Error> {
+    read_main(Main::Slice(bytes), name, base, opts, sink, progress)
+}
+
+/// How the memory budget is shared while a glTF file is read.
+struct Shares {
+    /// The document and buffers embedded in it (data URIs).
+    document: u64,
+    /// Pages of buffer files kept for vertices looked up by index.
+    cache: u64,
+    /// A sparse accessor's replaced elements; the placements of GPU
+    /// instancing.
+    lists: u64,
+    /// One primitive's vertices (and normals) held, placed, while its
+    /// faces are written; beyond that they are looked up by index.
+    primitive: u64,
+}
+
+impl Shares {
+    fn of(memory: u64) -> Shares {
+        Shares {
+            document: memory / 4,
+            cache: memory / 8,
+            lists: memory / 8,
+            primitive: memory / 2,
+        }
+    }
+}
+
+fn read_main(
+    main: Main<'_>,
+    name: &Path,
+    base: Option<&Path>,
+    opts: &MeshOptions,
+    sink: &mut dyn SceneSink,
+    progress: &dyn Progress,
+) -> Result<MeshSummary, Error> {
     let camera_index = opts.camera_index;
     let bad = |what: String| Error::Scene(format!("{}: {what}", name.display()));
-    let invalid = |e: gltf::Error| bad(format!("not a valid glTF file: {e}"));
-    let gltf = gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
-    let blob = gltf.blob;
-    // gltf-json 1.4.1's validation indexes a primitive's POSITION accessor
-    // before checking that it exists (a panic on a bad file): check that
-    // first, then validate.
-    let json = gltf.document.into_json();
-    for (m, mesh) in json.meshes.iter().enumerate() {
-        for (k, prim) in mesh.primitives.iter().enumerate() {
-            for a in prim.attributes.values() {
-                if a.value() >= json.accessors.len() {
-                    return Err(bad(format!(
-                        "mesh {m} primitive {k}: an attribute names accessor {}, of {}",
-                        a.value(),
-                        json.accessors.len()
-                    )));
-                }
-            }
-        }
-    }
-    let doc = gltf::Document::from_json(json).map_err(invalid)?;
-    // The gltf crate unwraps the percent-decoding of a relative buffer URI
-    // (a panic on an escape that is not UTF-8): check it first.
-    for b in doc.buffers() {
-        if let gltf::buffer::Source::Uri(u) = b.source()
-            && !u.contains(':')
-            && !percent_decodes_to_utf8(u)
-        {
-            return Err(bad(format!(
-                "buffer {}: its URI is not UTF-8 once decoded",
-                b.index()
-            )));
-        }
-    }
-    // A glTF file is read whole, with its buffers: refused, before the
-    // buffers are read, if they would take more than the budget. (Meshes
-    // in other formats are read within it, spilling to disk.)
-    let buffer_bytes: u64 = doc.buffers().map(|b| b.length() as u64).sum();
-    let need = bytes.len() as u64 + buffer_bytes;
-    if need > opts.memory {
-        return Err(bad(format!(
-            "its document and buffers take {}, more than the memory budget of {}; \
-             a glTF file is read whole (raise --memory)",
-            crate::units::fmt_bytes(need),
-            crate::units::fmt_bytes(opts.memory)
-        )));
-    }
-    let buffers = gltf::import_buffers(&doc, base, blob)
-        .map_err(|e| bad(format!("cannot load its buffers: {e}")))?;
+    let shares = Shares::of(opts.memory);
+    let (doc, mut bufs) =
+        gltf_data::open(main, base, shares.document, shares.cache).map_err(&bad)?;
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| bad("it has no scene".into()))?;
     let mut placed = place_nodes(&scene, doc.nodes().count()).map_err(bad)?;
     let mut warnings = Warnings::default();
-    let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(|d| &d.0[..]);
-    gpu_instances(&doc, &mut placed, &buffers, get).map_err(&bad)?;
+    gpu_instances(&doc, &mut placed, &mut bufs, shares.lists).map_err(&bad)?;
 
     // A mesh drawn by more than one placement is a model, stored once and
     // placed by instances, when the output keeps models; else (and for
     // a mesh drawn once) each placement writes its own copy.
-    let mut uses = vec![0usize; doc.meshes().count()];
-    for p in placed.iter().filter(|p| p.draws) {
+    let mut drawn_by = vec![Vec::new(); doc.meshes().count()];
+    for (i, p) in placed.iter().enumerate().filter(|(_, p)| p.draws) {
         if let Some(m) = p.node.mesh() {
-            uses[m.index()] += 1;
+            drawn_by[m.index()].push(i);
         }
     }
     let takes_models = sink.takes_models();
-    let is_model = |m: &gltf::Mesh<'_>| takes_models && uses[m.index()] > 1;
+    let is_model = |m: &gltf::Mesh<'_>| takes_models && drawn_by[m.index()].len() > 1;
     let mesh_vertices = |m: &gltf::Mesh<'_>| -> u64 {
         m.primitives()
             .filter_map(|p| p.get(&gltf::Semantic::Positions))
@@ -156,8 +161,33 @@ pub fn read_gltf_bytes(
             .sum()
     };
 
-    // Bounds of every placed primitive, from its positions.
+    // Bounds of every placed primitive, from its positions, read once
+    // (in chunks) and placed by each of its mesh's placements.
     let mut bounds = Bounds::default();
+    for mesh in doc.meshes() {
+        let by = &drawn_by[mesh.index()];
+        if by.is_empty() {
+            continue;
+        }
+        for prim in mesh.primitives() {
+            let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
+                continue;
+            };
+            let e = Elements::new(&pos, &mut bufs, shares.lists).map_err(&bad)?;
+            e.expect_floats(Dimensions::Vec3, "positions")
+                .map_err(&bad)?;
+            e.chunks(&mut bufs, |_, raw| {
+                for v in raw.chunks_exact(12) {
+                    let v = DVec3::from(vec3_of(v).map(f64::from));
+                    for &i in by {
+                        bounds.add(placed[i].world.transform_point3(v));
+                    }
+                }
+                Ok(())
+            })
+            .map_err(&bad)?;
+        }
+    }
     // The vertices the world stores (a copy's each time); a model's are
     // its own facts.
     let model_vertices: u64 = doc
@@ -165,25 +195,11 @@ pub fn read_gltf_bytes(
         .filter(is_model)
         .map(|m| mesh_vertices(&m))
         .sum();
-    let mut vertices = 0u64;
-    for p in &placed {
-        if let Some(mesh) = p.node.mesh().filter(|_| p.draws) {
-            if !is_model(&mesh) {
-                vertices += mesh_vertices(&mesh);
-            }
-            for prim in mesh.primitives() {
-                let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
-                    continue;
-                };
-                check_accessor(&pos, &buffers).map_err(&bad)?;
-                check_vec3(&pos).map_err(&bad)?;
-                let reader = prim.reader(get);
-                for v in reader.read_positions().into_iter().flatten() {
-                    bounds.add(p.world.transform_point3(DVec3::from(v.map(f64::from))));
-                }
-            }
-        }
-    }
+    let vertices: u64 = doc
+        .meshes()
+        .filter(|m| !is_model(m))
+        .map(|m| drawn_by[m.index()].len() as u64 * mesh_vertices(&m))
+        .sum();
 
     // Camera, lights, then the mesh facts (the setup's defaults fill in
     // what the file lacks).
@@ -234,35 +250,48 @@ pub fn read_gltf_bytes(
         up: Some([0.0, 1.0, 0.0]),
     })?;
 
+    // Progress counts the triangles written: a model's once, a copied
+    // mesh's once per placement.
+    let triangles_of =
+        |m: &gltf::Mesh<'_>| -> u64 { m.primitives().map(|p| triangle_count(&p)).sum() };
+    progress.set_unit("triangles");
+    progress.set_total(
+        doc.meshes()
+            .map(|m| match is_model(&m) {
+                true => triangles_of(&m),
+                false => drawn_by[m.index()].len() as u64 * triangles_of(&m),
+            })
+            .sum(),
+    );
     let mut summary = MeshSummary {
         vertices: vertices + model_vertices,
         ..Default::default()
     };
     let models: Vec<gltf::Mesh<'_>> = doc.meshes().filter(is_model).collect();
-    let mut model_of: Vec<Option<u32>> = vec![None; uses.len()];
+    let mut model_of: Vec<Option<u32>> = vec![None; drawn_by.len()];
     let mut out = Emit {
-        buffers: &buffers,
+        bufs: &mut bufs,
+        shares: &shares,
         sink,
         current: None,
         summary: &mut summary,
         warnings: &mut warnings,
         bad: &bad,
+        progress,
     };
-    {
-        for mesh in models {
-            out.sink.begin_model()?;
-            out.sink.mesh(&MeshFacts {
-                vertices: mesh_vertices(&mesh),
-                bounds: None,
-                up: None,
-            })?;
-            out.current = None;
-            out.mesh(&mesh, None, mesh.index())?;
-            let model = out.sink.end_model()?;
-            out.current = None;
-            model_of[mesh.index()] = Some(model.index);
-            out.summary.models += 1;
-        }
+    for mesh in models {
+        out.sink.begin_model()?;
+        out.sink.mesh(&MeshFacts {
+            vertices: mesh_vertices(&mesh),
+            bounds: None,
+            up: None,
+        })?;
+        out.current = None;
+        out.mesh(&mesh, None, mesh.index())?;
+        let model = out.sink.end_model()?;
+        out.current = None;
+        model_of[mesh.index()] = Some(model.index);
+        out.summary.models += 1;
     }
     for p in &placed {
         let Some(mesh) = p.node.mesh().filter(|_| p.draws) else {
@@ -293,40 +322,38 @@ pub fn read_gltf_bytes(
     Ok(summary)
 }
 
-/// Whether `%XX` escapes in `uri` decode to UTF-8.
-fn percent_decodes_to_utf8(uri: &str) -> bool {
-    let b = uri.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        match (
-            b[i],
-            b.get(i + 1).copied().and_then(hex),
-            b.get(i + 2).copied().and_then(hex),
-        ) {
-            (b'%', Some(h), Some(l)) => {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-            }
-            (c, ..) => {
-                out.push(c);
-                i += 1;
-            }
-        }
+/// The triangles a primitive's indices (or vertices) make, by its mode.
+fn triangle_count(p: &gltf::Primitive<'_>) -> u64 {
+    let n = match (p.indices(), p.get(&gltf::Semantic::Positions)) {
+        (Some(i), _) => i.count() as u64,
+        (None, Some(v)) => v.count() as u64,
+        (None, None) => 0,
+    };
+    match p.mode() {
+        Mode::Triangles => n / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => n.saturating_sub(2),
+        _ => 0,
     }
-    std::str::from_utf8(&out).is_ok()
 }
 
 /// Writes meshes' triangles into a sink.
 struct Emit<'e, 'b> {
-    buffers: &'b [gltf::buffer::Data],
+    bufs: &'e mut Buffers<'b>,
+    shares: &'e Shares,
     sink: &'e mut dyn SceneSink,
     /// The material the sink has now.
     current: Option<Material>,
     summary: &'e mut MeshSummary,
     warnings: &'e mut Warnings,
     bad: &'e dyn Fn(String) -> Error,
+    progress: &'e dyn Progress,
+}
+
+/// A primitive's vertices (and normals), placed: held, or read by index
+/// when they do not fit in their share of memory.
+enum Vertices {
+    Held(Vec<[f32; 3]>, Option<Vec<[f32; 3]>>),
+    ByIndex,
 }
 
 impl Emit<'_, '_> {
@@ -337,6 +364,11 @@ impl Emit<'_, '_> {
     /// instance of the model computes, so that a copy and an instance are
     /// the same triangles. A model keeps the file's normals (a normal that
     /// is not finite as zero), to be placed by each instance.
+    ///
+    /// Indices are read in order, in chunks; vertices are held for the
+    /// primitive if they fit in their share of the budget, else each
+    /// corner's is read by index through the page cache. Both ways give
+    /// the same triangles and the same errors.
     fn mesh(
         &mut self,
         mesh: &gltf::Mesh<'_>,
@@ -344,9 +376,18 @@ impl Emit<'_, '_> {
         node: usize,
     ) -> Result<(), Error> {
         let bad = self.bad;
-        let buffers = self.buffers;
-        let get = |b: gltf::Buffer<'_>| buffers.get(b.index()).map(|d| &d.0[..]);
         let normal_map = placement.map(|m| m.matrix3.inverse().transpose());
+        let place_p = |v: [f32; 3]| match placement {
+            Some(m) => place_point(m, v),
+            None => v,
+        };
+        let place_n = |v: [f32; 3]| match &normal_map {
+            // A normal that cannot be normalised (zero, or not finite) is
+            // taken as none (zero).
+            Some(nm) => place_normal(nm, v),
+            None if v.iter().all(|c| c.is_finite()) => v,
+            None => [0.0; 3],
+        };
         for prim in mesh.primitives() {
             let what = || format!("mesh {} primitive {}", mesh.index(), prim.index());
             let mode = prim.mode();
@@ -364,110 +405,211 @@ impl Emit<'_, '_> {
                     .add("a primitive without positions is skipped", what);
                 continue;
             };
-            let reader = prim.reader(get);
-            let positions: Vec<[f32; 3]> = reader
-                .read_positions()
-                .ok_or_else(|| bad(format!("{}: positions cannot be read", what())))?
-                .map(|v| match placement {
-                    Some(m) => place_point(m, v),
-                    None => v,
-                })
-                .collect();
-            // A number that is not finite, in the file or once placed (a
-            // transform too large for single precision).
-            if let Some(k) = positions
-                .iter()
-                .position(|v| !v.iter().all(|c| c.is_finite()))
-            {
-                return Err(bad(match placement {
-                    Some(_) => format!(
-                        "{}: vertex {k} is not a finite point once placed by node {node}",
-                        what()
-                    ),
-                    None => format!("{}: vertex {k} is not a finite point", what()),
-                }));
-            }
-            let normals: Option<Vec<[f32; 3]>> = match prim.get(&gltf::Semantic::Normals) {
+            let lists = self.shares.lists;
+            let pos = Elements::new(&pos, self.bufs, lists).map_err(bad)?;
+            pos.expect_floats(Dimensions::Vec3, "positions")
+                .map_err(bad)?;
+            let count = pos.count;
+            let normals = match prim.get(&gltf::Semantic::Normals) {
                 Some(n) => {
-                    check_accessor(&n, buffers).map_err(bad)?;
-                    check_vec3(&n).map_err(bad)?;
-                    if n.count() != pos.count() {
+                    let n = Elements::new(&n, self.bufs, lists).map_err(bad)?;
+                    n.expect_floats(Dimensions::Vec3, "normals").map_err(bad)?;
+                    if n.count != count {
                         return Err(bad(format!(
-                            "{}: {} normals for {} positions",
+                            "{}: {} normals for {count} positions",
                             what(),
-                            n.count(),
-                            pos.count()
+                            n.count
                         )));
                     }
-                    reader.read_normals().map(|it| {
-                        it.map(|v| match &normal_map {
-                            // A normal that cannot be normalised (zero, or
-                            // not finite) is taken as none (zero).
-                            Some(nm) => place_normal(nm, v),
-                            None if v.iter().all(|c| c.is_finite()) => v,
-                            None => [0.0; 3],
-                        })
-                        .collect()
-                    })
+                    Some(n)
                 }
                 None => None,
             };
-            let indices: Vec<u32> = match prim.indices() {
+            let indices = match prim.indices() {
                 Some(a) => {
-                    check_accessor(&a, buffers).map_err(bad)?;
-                    use gltf::accessor::DataType::{U8, U16, U32};
-                    if a.dimensions() != gltf::accessor::Dimensions::Scalar
-                        || !matches!(a.data_type(), U8 | U16 | U32)
-                    {
-                        return Err(bad(format!(
-                            "{}: indices (accessor {}) must be unsigned integers",
-                            what(),
-                            a.index()
-                        )));
-                    }
-                    let read = reader
-                        .read_indices()
-                        .ok_or_else(|| bad(format!("{}: indices cannot be read", what())))?;
-                    let v: Vec<u32> = read.into_u32().collect();
-                    if let Some(&i) = v.iter().find(|&&i| i as usize >= positions.len()) {
-                        return Err(bad(format!(
-                            "{}: index {i} is past its {} vertices",
-                            what(),
-                            positions.len()
-                        )));
-                    }
-                    v
+                    let e = Elements::new(&a, self.bufs, lists).map_err(bad)?;
+                    e.expect_indices(&what()).map_err(bad)?;
+                    Some(e)
                 }
-                None => (0..positions.len() as u32).collect(),
+                None => None,
+            };
+            // A number that is not finite, in the file or once placed (a
+            // transform too large for single precision), is an error
+            // whether or not a face uses it.
+            let not_finite = |k: usize| match placement {
+                Some(_) => format!(
+                    "{}: vertex {k} is not a finite point once placed by node {node}",
+                    what()
+                ),
+                None => format!("{}: vertex {k} is not a finite point", what()),
+            };
+            let per_vertex = if normals.is_some() { 24 } else { 12 };
+            let held = count as u64 * per_vertex <= self.shares.primitive;
+            let mut points = Vec::with_capacity(if held { count } else { 0 });
+            pos.chunks(self.bufs, |first, raw| {
+                for (j, e) in raw.chunks_exact(12).enumerate() {
+                    let p = place_p(vec3_of(e));
+                    if !p.iter().all(|c| c.is_finite()) {
+                        return Err(not_finite(first + j));
+                    }
+                    if held {
+                        points.push(p);
+                    }
+                }
+                Ok(())
+            })
+            .map_err(bad)?;
+            let vertices = match (held, &normals) {
+                (false, _) => Vertices::ByIndex,
+                (true, None) => Vertices::Held(points, None),
+                (true, Some(n)) => {
+                    let mut ns = Vec::with_capacity(count);
+                    n.chunks(self.bufs, |_, raw| {
+                        ns.extend(raw.chunks_exact(12).map(|e| place_n(vec3_of(e))));
+                        Ok(())
+                    })
+                    .map_err(bad)?;
+                    Vertices::Held(points, Some(ns))
+                }
             };
             let m = material(&prim.material(), self.warnings);
             if self.current != Some(m) {
                 self.sink.material(&m)?;
                 self.current = Some(m);
             }
-            for t in triangles(mode, &indices) {
-                self.summary.faces += 1;
-                let v = t.map(|i| positions[i as usize]);
-                if !super::geometry::has_area(v[0], v[1], v[2]) {
-                    self.summary.degenerate += 1;
-                    continue;
-                }
-                match &normals {
-                    Some(n) => {
-                        let n = t.map(|i| n[i as usize]);
-                        self.sink.object(&Shape::Patch(Patch {
-                            vertices: &v,
-                            normals: &n,
-                        }))?
+            // The faces, their indices read in order.
+            let total = indices.as_ref().map_or(count, |e| e.count);
+            let mut faces = Assembler::new(mode);
+            let mut chunk = Vec::new();
+            let mut first = 0;
+            while first < total {
+                let n = (1 << 18).min(total - first);
+                match &indices {
+                    Some(e) => e.indices(self.bufs, first, n, &mut chunk).map_err(bad)?,
+                    None => {
+                        chunk.clear();
+                        chunk.extend(first as u32..(first + n) as u32);
                     }
-                    None => self
-                        .sink
-                        .object(&Shape::Polygon(Polygon { vertices: &v }))?,
                 }
-                self.summary.objects += 1;
+                for &i in &chunk {
+                    if i as usize >= count {
+                        return Err(bad(format!(
+                            "{}: index {i} is past its {count} vertices",
+                            what()
+                        )));
+                    }
+                    let Some(t) = faces.push(i) else {
+                        continue;
+                    };
+                    let (v, n) = match &vertices {
+                        Vertices::Held(p, n) => (
+                            t.map(|i| p[i as usize]),
+                            n.as_ref().map(|n| t.map(|i| n[i as usize])),
+                        ),
+                        Vertices::ByIndex => {
+                            let mut v = [[0f32; 3]; 3];
+                            for (c, &i) in v.iter_mut().zip(&t) {
+                                *c = place_p(pos.vec3(self.bufs, i as usize).map_err(bad)?);
+                            }
+                            let n = match &normals {
+                                Some(ne) => {
+                                    let mut n = [[0f32; 3]; 3];
+                                    for (c, &i) in n.iter_mut().zip(&t) {
+                                        *c = place_n(ne.vec3(self.bufs, i as usize).map_err(bad)?);
+                                    }
+                                    Some(n)
+                                }
+                                None => None,
+                            };
+                            (v, n)
+                        }
+                    };
+                    self.summary.faces += 1;
+                    if !super::geometry::has_area(v[0], v[1], v[2]) {
+                        self.summary.degenerate += 1;
+                        continue;
+                    }
+                    match &n {
+                        Some(n) => self.sink.object(&Shape::Patch(Patch {
+                            vertices: &v,
+                            normals: n,
+                        }))?,
+                        None => self
+                            .sink
+                            .object(&Shape::Polygon(Polygon { vertices: &v }))?,
+                    }
+                    self.summary.objects += 1;
+                }
+                first += n;
             }
+            self.progress.inc(triangle_count(&prim));
         }
         Ok(())
+    }
+}
+
+/// Triangles from a primitive's indices, one index at a time: a list's
+/// threes, a strip's (every other one reversed to keep its winding) or
+/// a fan's.
+struct Assembler {
+    mode: Mode,
+    seen: usize,
+    a: u32,
+    b: u32,
+}
+
+impl Assembler {
+    fn new(mode: Mode) -> Assembler {
+        Assembler {
+            mode,
+            seen: 0,
+            a: 0,
+            b: 0,
+        }
+    }
+
+    /// The triangle index `i` completes, if any.
+    fn push(&mut self, i: u32) -> Option<[u32; 3]> {
+        let k = self.seen;
+        self.seen += 1;
+        match self.mode {
+            Mode::Triangles => match k % 3 {
+                0 => {
+                    self.a = i;
+                    None
+                }
+                1 => {
+                    self.b = i;
+                    None
+                }
+                _ => Some([self.a, self.b, i]),
+            },
+            Mode::TriangleStrip => {
+                let t = match k {
+                    0 | 1 => None,
+                    _ if k % 2 == 1 => Some([self.b, self.a, i]),
+                    _ => Some([self.a, self.b, i]),
+                };
+                self.a = self.b;
+                self.b = i;
+                t
+            }
+            _ => match k {
+                0 => {
+                    self.a = i;
+                    None
+                }
+                1 => {
+                    self.b = i;
+                    None
+                }
+                _ => {
+                    let t = [self.a, self.b, i];
+                    self.b = i;
+                    Some(t)
+                }
+            },
+        }
     }
 }
 
@@ -536,16 +678,16 @@ fn place_nodes<'a>(scene: &gltf::Scene<'a>, nodes: usize) -> Result<Vec<Placed<'
 
 /// Replaces each placed node that has `EXT_mesh_gpu_instancing` by the
 /// copies of its mesh the extension lists: the node's transform times each
-/// copy's translation, rotation and scale (each attribute optional; floats
-/// only). The node itself stays, for its camera and light, without its
-/// mesh being drawn.
-fn gpu_instances<'a, 's>(
+/// copy's translation, rotation and scale (each attribute optional;
+/// floats, or a rotation of normalized signed bytes or shorts). The node
+/// itself stays, for its camera and light, without its mesh being drawn.
+/// The placements are held: refused beyond `budget` bytes.
+fn gpu_instances<'a>(
     doc: &'a gltf::Document,
     placed: &mut Vec<Placed<'a>>,
-    buffers: &[gltf::buffer::Data],
-    get: impl Clone + Fn(gltf::Buffer<'a>) -> Option<&'s [u8]>,
+    bufs: &mut Buffers<'_>,
+    budget: u64,
 ) -> Result<(), String> {
-    use gltf::accessor::{DataType, Dimensions, Iter};
     let mut out = Vec::with_capacity(placed.len());
     for p in placed.drain(..) {
         let ext = p.node.extension_value("EXT_mesh_gpu_instancing");
@@ -557,31 +699,36 @@ fn gpu_instances<'a, 's>(
             continue;
         };
         let node = p.node.index();
-        let accessor =
-            |name: &str, dims: Dimensions| -> Result<Option<gltf::Accessor<'a>>, String> {
-                let Some(v) = attrs.get(name) else {
-                    return Ok(None);
-                };
-                let a = v
-                    .as_u64()
-                    .and_then(|i| doc.accessors().nth(i as usize))
-                    .ok_or_else(|| {
-                        format!("node {node}: EXT_mesh_gpu_instancing {name} names no accessor")
-                    })?;
-                if a.data_type() != DataType::F32 || a.dimensions() != dims || a.normalized() {
-                    return Err(format!(
-                        "node {node}: EXT_mesh_gpu_instancing {name} must be {dims:?} of floats"
-                    ));
-                }
-                check_accessor(&a, buffers)?;
-                Ok(Some(a))
+        let mut accessor = |name: &str, dims: Dimensions| -> Result<Option<Elements>, String> {
+            let Some(v) = attrs.get(name) else {
+                return Ok(None);
             };
+            let a = v
+                .as_u64()
+                .and_then(|i| doc.accessors().nth(i as usize))
+                .ok_or_else(|| {
+                    format!("node {node}: EXT_mesh_gpu_instancing {name} names no accessor")
+                })?;
+            let e = Elements::new(&a, bufs, budget)?;
+            let rotation = name == "ROTATION";
+            if !(e.is_float_like(dims) && (rotation || e.expect_floats(dims, name).is_ok())) {
+                return Err(format!(
+                    "node {node}: EXT_mesh_gpu_instancing {name} must be {dims:?} of floats{}",
+                    if rotation {
+                        " (or of normalized signed bytes or shorts)"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+            Ok(Some(e))
+        };
         let t = accessor("TRANSLATION", Dimensions::Vec3)?;
         let r = accessor("ROTATION", Dimensions::Vec4)?;
         let sc = accessor("SCALE", Dimensions::Vec3)?;
         let counts: Vec<usize> = [&t, &r, &sc]
             .iter()
-            .filter_map(|a| a.as_ref().map(|a| a.count()))
+            .filter_map(|a| a.as_ref().map(|a| a.count))
             .collect();
         let n = counts.first().copied().unwrap_or(0);
         if counts.iter().any(|&c| c != n) {
@@ -589,26 +736,18 @@ fn gpu_instances<'a, 's>(
                 "node {node}: EXT_mesh_gpu_instancing attributes of different counts {counts:?}"
             ));
         }
-        let read3 = |a: &Option<gltf::Accessor<'a>>| -> Result<Option<Vec<[f32; 3]>>, String> {
-            a.clone()
-                .map(|a| {
-                    Iter::<[f32; 3]>::new(a, get.clone())
-                        .map(|it| it.collect())
-                        .ok_or_else(|| {
-                            format!("node {node}: an instancing attribute cannot be read")
-                        })
-                })
-                .transpose()
-        };
-        let ts = read3(&t)?;
-        let ss = read3(&sc)?;
-        let rs: Option<Vec<[f32; 4]>> = r
-            .map(|a| {
-                Iter::<[f32; 4]>::new(a, get.clone())
-                    .map(|it| it.collect())
-                    .ok_or_else(|| format!("node {node}: ROTATION cannot be read"))
-            })
-            .transpose()?;
+        let held = (out.len() + n) as u64 * std::mem::size_of::<Placed<'_>>() as u64;
+        if held > budget {
+            return Err(format!(
+                "node {node}: EXT_mesh_gpu_instancing places {n} copies, {} with the other \
+                 placements, more than the {} of the memory budget they may take (raise --memory)",
+                crate::units::fmt_bytes(held),
+                crate::units::fmt_bytes(budget)
+            ));
+        }
+        let ts = t.map(|e| e.floats::<3>(bufs)).transpose()?;
+        let ss = sc.map(|e| e.floats::<3>(bufs)).transpose()?;
+        let rs = r.map(|e| e.floats::<4>(bufs)).transpose()?;
         for k in 0..n {
             let tr = ts
                 .as_ref()
@@ -657,122 +796,6 @@ impl Bounds {
             None => (DVec3::ZERO, 1.0),
         }
     }
-}
-
-/// Checks that an accessor lies within its buffer view and the view within
-/// its buffer, so that reading it cannot go past the data.
-fn check_accessor(a: &gltf::Accessor<'_>, buffers: &[gltf::buffer::Data]) -> Result<(), String> {
-    let sparse = a.sparse();
-    if let Some(sp) = &sparse {
-        // A sparse accessor: a base (its buffer view, or zeros without
-        // one) with `count` elements replaced at the listed indices.
-        let n = sp.count();
-        if n == 0 || n > a.count() {
-            return Err(format!(
-                "accessor {}: {n} sparse elements for {} elements",
-                a.index(),
-                a.count()
-            ));
-        }
-        let idx = sp.indices();
-        check_range(
-            &idx.view(),
-            buffers,
-            idx.offset(),
-            n,
-            idx.index_type().size(),
-            &format!("accessor {} sparse indices", a.index()),
-        )?;
-        let vals = sp.values();
-        check_range(
-            &vals.view(),
-            buffers,
-            vals.offset(),
-            n,
-            a.size(),
-            &format!("accessor {} sparse values", a.index()),
-        )?;
-    }
-    let Some(view) = a.view() else {
-        if sparse.is_some() && a.count() > 0 {
-            return Ok(());
-        }
-        return Err(format!("accessor {} has no buffer view", a.index()));
-    };
-    check_range(
-        &view,
-        buffers,
-        a.offset(),
-        a.count(),
-        a.size(),
-        &format!("accessor {} ({} elements)", a.index(), a.count()),
-    )
-}
-
-/// Checks that `count` elements of `size` bytes from byte `offset` of
-/// buffer view `view` (at its stride) lie within the view, and the view
-/// within its buffer.
-fn check_range(
-    view: &gltf::buffer::View<'_>,
-    buffers: &[gltf::buffer::Data],
-    offset: usize,
-    count: usize,
-    size: usize,
-    what: &str,
-) -> Result<(), String> {
-    let data = buffers.get(view.buffer().index()).map_or(0, |d| d.0.len());
-    let view_end = view.offset().checked_add(view.length());
-    if view_end.is_none_or(|e| e > data) {
-        return Err(format!(
-            "buffer view {} ends past its buffer's {data} bytes",
-            view.index()
-        ));
-    }
-    let stride = view.stride().unwrap_or(size).max(size);
-    let end = match count {
-        0 => Some(0),
-        n => (n - 1)
-            .checked_mul(stride)
-            .and_then(|x| x.checked_add(offset))
-            .and_then(|x| x.checked_add(size)),
-    };
-    if end.is_none_or(|e| e > view.length()) {
-        return Err(format!(
-            "{what} ends past its buffer view's {} bytes",
-            view.length()
-        ));
-    }
-    Ok(())
-}
-
-/// Checks that an accessor holds three floats per element, as positions
-/// and normals must.
-fn check_vec3(a: &gltf::Accessor<'_>) -> Result<(), String> {
-    if a.dimensions() != gltf::accessor::Dimensions::Vec3
-        || a.data_type() != gltf::accessor::DataType::F32
-    {
-        return Err(format!(
-            "accessor {}: positions and normals must be three floats each",
-            a.index()
-        ));
-    }
-    Ok(())
-}
-
-/// The triangles of a primitive's indices.
-fn triangles(mode: Mode, idx: &[u32]) -> impl Iterator<Item = [u32; 3]> + '_ {
-    let n = idx.len();
-    let count = match mode {
-        Mode::Triangles => n / 3,
-        _ => n.saturating_sub(2),
-    };
-    (0..count).map(move |k| match mode {
-        Mode::Triangles => [idx[3 * k], idx[3 * k + 1], idx[3 * k + 2]],
-        // Every other triangle of a strip is reversed to keep its winding.
-        Mode::TriangleStrip if k % 2 == 1 => [idx[k + 1], idx[k], idx[k + 2]],
-        Mode::TriangleStrip => [idx[k], idx[k + 1], idx[k + 2]],
-        _ => [idx[0], idx[k + 1], idx[k + 2]],
-    })
 }
 
 /// The NFF material of a glTF one (see the module documentation).
@@ -886,4 +909,38 @@ fn punctual_lights(placed: &[Placed<'_>], bounds: &Bounds, warnings: &mut Warnin
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The triangles of whole index lists, as glTF defines them.
+    fn reference(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+        let n = idx.len();
+        match mode {
+            Mode::Triangles => idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+            Mode::TriangleStrip => (0..n.saturating_sub(2))
+                .map(|k| match k % 2 {
+                    1 => [idx[k + 1], idx[k], idx[k + 2]],
+                    _ => [idx[k], idx[k + 1], idx[k + 2]],
+                })
+                .collect(),
+            _ => (0..n.saturating_sub(2))
+                .map(|k| [idx[0], idx[k + 1], idx[k + 2]])
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn assembled_triangles_are_the_lists_strips_and_fans_of_the_spec() {
+        for mode in [Mode::Triangles, Mode::TriangleStrip, Mode::TriangleFan] {
+            for n in 0..12u32 {
+                let idx: Vec<u32> = (0..n).map(|i| 100 + i * 7 % 11).collect();
+                let mut a = Assembler::new(mode);
+                let got: Vec<[u32; 3]> = idx.iter().filter_map(|&i| a.push(i)).collect();
+                assert_eq!(got, reference(mode, &idx), "{mode:?}, {n} indices");
+            }
+        }
+    }
 }

@@ -16,6 +16,7 @@
 
 pub mod builder;
 pub mod geometry;
+mod gltf_data;
 pub mod gltf_scene;
 mod mtl;
 pub mod obj;

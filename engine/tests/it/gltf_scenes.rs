@@ -286,6 +286,25 @@ fn gpu_instancing_draws_each_listed_copy() {
         plain[per..],
         "the other nodes are as they were"
     );
+    // The rotations as normalized shorts (32767 is 1) give the same.
+    let mut shorts = bytes[..24].to_vec();
+    for q in [0i16, 0, 0, 32767, 0, 32767, 0, 0] {
+        shorts.extend(q.to_le_bytes());
+    }
+    std::fs::write(dir.path().join("shorts.bin"), &shorts).unwrap();
+    let short_path = edited(dir.path(), "shorts.gltf", |doc| {
+        let text = std::fs::read_to_string(&path).unwrap();
+        *doc = serde_json::from_str(&text).unwrap();
+        let b = doc["buffers"].as_array().unwrap().len() - 1;
+        doc["buffers"][b] = serde_json::json!({"byteLength": shorts.len(), "uri": "shorts.bin"});
+        let v = doc["bufferViews"].as_array().unwrap().len() - 1;
+        doc["bufferViews"][v]["byteLength"] = serde_json::json!(16);
+        let a = doc["accessors"].as_array().unwrap().len() - 1;
+        doc["accessors"][a]["componentType"] = serde_json::json!(5122);
+        doc["accessors"][a]["normalized"] = serde_json::json!(true);
+    });
+    assert_eq!(corners(&record(&short_path).unwrap()), got);
+
     // Written to a database, the mesh is one model placed five times.
     let db = dir.path().join("instanced.sdb");
     crate::common::write_converted(
@@ -300,41 +319,95 @@ fn gpu_instancing_draws_each_listed_copy() {
     assert_eq!(db.object_count(), 5);
 }
 
-/// A glTF file is read whole: one whose document and buffers exceed the
-/// memory budget is refused before its buffers are read.
-#[test]
-fn a_gltf_file_larger_than_the_budget_is_refused() {
+/// Reads `spot4.glb` from memory or from a file at `memory` bytes of
+/// budget.
+fn spot4_within(memory: u64, from_file: Option<&Path>) -> Result<Recorder, Error> {
     let path = fixtures().join("spot4.glb");
-    let bytes = std::fs::read(&path).unwrap();
     let opts = sray_engine::mesh::MeshOptions {
-        memory: bytes.len() as u64,
+        memory,
         spill_dir: None,
         camera_index: None,
     };
-    let e = sray_engine::mesh::gltf_scene::read_gltf_bytes(
-        &bytes,
-        &path,
-        None,
-        &opts,
-        &mut Recorder::default(),
-        &NoProgress,
-    )
-    .unwrap_err()
-    .to_string();
-    assert!(e.contains("spot4.glb") && e.contains("read whole"), "{e}");
-    let opts = sray_engine::mesh::MeshOptions {
-        memory: 3 * bytes.len() as u64,
-        ..opts
+    let mut r = Recorder::default();
+    match from_file {
+        Some(p) => sray_engine::mesh::gltf_scene::read_gltf(p, &mut r, &NoProgress, &opts)?,
+        None => sray_engine::mesh::gltf_scene::read_gltf_bytes(
+            &std::fs::read(&path).unwrap(),
+            &path,
+            None,
+            &opts,
+            &mut r,
+            &NoProgress,
+        )?,
     };
-    sray_engine::mesh::gltf_scene::read_gltf_bytes(
-        &bytes,
-        &path,
-        None,
-        &opts,
-        &mut Recorder::default(),
-        &NoProgress,
-    )
-    .unwrap();
+    Ok(r)
+}
+
+/// A glTF file's buffers are read by offset, not whole: a budget of a
+/// fifth of the file (too small to hold one primitive's vertices, which
+/// are then read by index) gives the same scene, from memory, from the
+/// file and from a gzip-compressed file.
+#[test]
+fn a_gltf_file_larger_than_the_budget_converts_within_it() {
+    let path = fixtures().join("spot4.glb");
+    let len = std::fs::metadata(&path).unwrap().len();
+    let whole = spot4_within(1 << 30, None).unwrap();
+    assert!(whole.objects().count() > 20_000);
+    let dir = tempfile::tempdir().unwrap();
+    let gz = dir.path().join("spot4.glb.gz");
+    let mut enc = flate2::write::GzEncoder::new(
+        std::fs::File::create(&gz).unwrap(),
+        flate2::Compression::fast(),
+    );
+    std::io::Write::write_all(&mut enc, &std::fs::read(&path).unwrap()).unwrap();
+    enc.finish().unwrap();
+    let small = len / 5;
+    for from in [None, Some(path.as_path()), Some(gz.as_path())] {
+        let r = spot4_within(small, from).unwrap();
+        assert!(
+            whole.objects().eq(r.objects()),
+            "{from:?}: the scenes differ"
+        );
+    }
+    // The document itself must fit in a quarter of the budget.
+    let e = spot4_within(64, None).unwrap_err().to_string();
+    assert!(
+        e.contains("spot4.glb") && e.contains("JSON document"),
+        "{e}"
+    );
+}
+
+/// Buffers embedded as data URIs are held with the document: read like
+/// external ones, refused when they pass the document's share.
+#[test]
+fn data_uri_buffers_read_as_files_do_within_the_budget() {
+    use base64::Engine as _;
+    let dir = tempfile::tempdir().unwrap();
+    let p = edited(dir.path(), "embedded.gltf", |doc| {
+        for b in doc["buffers"].as_array_mut().unwrap() {
+            let bytes = std::fs::read(fixtures().join(b["uri"].as_str().unwrap())).unwrap();
+            b["uri"] = serde_json::json!(format!(
+                "data:application/octet-stream;base64,{}",
+                base64::engine::general_purpose::STANDARD.encode(bytes)
+            ));
+        }
+    });
+    let plain = record(&fixtures().join("spot4_light.gltf")).unwrap();
+    assert!(record(&p).unwrap().objects().eq(plain.objects()));
+    let len = std::fs::metadata(&p).unwrap().len();
+    let opts = sray_engine::mesh::MeshOptions {
+        memory: 4 * len + len / 2,
+        spill_dir: None,
+        camera_index: None,
+    };
+    let e =
+        sray_engine::mesh::gltf_scene::read_gltf(&p, &mut Recorder::default(), &NoProgress, &opts)
+            .unwrap_err()
+            .to_string();
+    assert!(
+        e.contains("embedded.gltf") && e.contains("data URIs"),
+        "{e}"
+    );
 }
 
 /// A sparse positions accessor: vertex 0 moved to (10, 10, 10) by a
