@@ -81,3 +81,59 @@ fn a_bad_gltf_file_is_an_error() {
     let e = fails(d, &["render", "lonely.gltf", "-o", "x.png"]);
     assert!(e.contains("lonely.gltf") && e.contains("buffer"), "{e}");
 }
+
+/// The largest and the mean difference of two PNGs' channels.
+fn difference(a: &[u8], b: &[u8]) -> (u8, f64) {
+    let a = image::load_from_memory(a).unwrap().to_rgb8();
+    let b = image::load_from_memory(b).unwrap().to_rgb8();
+    assert_eq!(a.dimensions(), b.dimensions());
+    let d: Vec<u8> = a
+        .iter()
+        .zip(b.iter())
+        .map(|(x, y)| x.abs_diff(*y))
+        .collect();
+    let mean = d.iter().map(|&x| f64::from(x)).sum::<f64>() / d.len() as f64;
+    (d.iter().copied().max().unwrap_or(0), mean)
+}
+
+/// Files written by gltfpack (quantized positions and normals, strided
+/// views, GPU instancing required by the file) render as the float
+/// original does, to the quantization's rounding; the instanced one is
+/// a model placed four times, and breadth-first equals depth-first.
+#[test]
+fn gltfpack_files_render_as_their_original() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (want, _) = render(d, &["render", &fixture("spot4_smooth.glb"), "--mode", "df"]);
+    for f in ["spot4_gltfpack.glb", "spot4_gltfpack_mi.glb"] {
+        let (got, stats) = render(d, &["render", &fixture(f), "--mode", "df"]);
+        let (most, mean) = difference(&want, &got);
+        assert!(
+            most <= 2 && mean < 0.05,
+            "{f}: channels differ by up to {most}, {mean} on average"
+        );
+        assert!(stats["eye_hit_rays"].as_u64().unwrap() > 200, "{stats}");
+        let (bf, sb) = render(
+            d,
+            &["render", &fixture(f), "--mode", "bf", "--memory", "16MiB"],
+        );
+        assert!(
+            bf == got,
+            "{f}: breadth-first and depth-first images differ"
+        );
+        assert_eq!(stats["shadow_rays"], sb["shadow_rays"]);
+    }
+    ok(
+        d,
+        &[
+            "convert",
+            &fixture("spot4_gltfpack_mi.glb"),
+            "-o",
+            "mi.sdb",
+            "--quiet",
+        ],
+    );
+    let info = json(&ok(d, &["info", "mi.sdb", "--json"]));
+    assert_eq!(info["models"].as_array().map(Vec::len), Some(1), "{info}");
+    assert_eq!(info["models"][0]["instances"], 4, "{info}");
+}

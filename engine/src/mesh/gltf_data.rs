@@ -92,13 +92,14 @@ const GLB_BIN: u32 = 0x004E_4942;
 /// The document of the glTF file in `main` (`.glb` or `.gltf`), held
 /// within `doc_budget` bytes with its data-URI buffers, and where its
 /// other buffers are (external ones under `base`). `cache` bytes of pages
-/// are kept for reads by index.
+/// are kept for reads by index. Also the extensions the file requires
+/// that are ignored (see [`parse_document`]).
 pub(super) fn open<'a>(
     mut main: Main<'a>,
     base: Option<&Path>,
     doc_budget: u64,
     cache: u64,
-) -> Result<(gltf::Document, Buffers<'a>), String> {
+) -> Result<(gltf::Document, Buffers<'a>, Vec<String>), String> {
     let io = |e: std::io::Error| format!("cannot read it: {e}");
     let file_len = main.len().map_err(io)?;
     let mut head = [0u8; 12];
@@ -116,7 +117,7 @@ pub(super) fn open<'a>(
         main.read_at(0, &mut json).map_err(io)?;
         (json, None)
     };
-    let doc = parse_document(&json)?;
+    let (doc, ignored) = parse_document(&json)?;
     // The document, parsed, keeps its data URIs' text: it counts with
     // their bytes.
     let mut held = json.len() as u64;
@@ -198,6 +199,7 @@ pub(super) fn open<'a>(
             scratch: Vec::new(),
             read: 0,
         },
+        ignored,
     ))
 }
 
@@ -258,15 +260,50 @@ fn glb_chunks(
     Ok((json, bin))
 }
 
-/// The glTF document of `json`, validated. gltf-json 1.4.1's validation
-/// indexes a primitive's POSITION accessor before checking that it exists
-/// (a panic on a bad file): that is checked first.
-fn parse_document(json: &[u8]) -> Result<gltf::Document, String> {
+/// Extensions read here (the gltf crate's validation knows only some).
+const READ: [&str; 5] = [
+    "EXT_mesh_gpu_instancing",
+    "KHR_mesh_quantization",
+    "KHR_lights_punctual",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+];
+
+/// Extensions without which a file's geometry cannot be read.
+const GEOMETRY: [&str; 3] = [
+    "KHR_draco_mesh_compression",
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
+];
+
+/// The glTF document of `json`, validated, and the extensions it requires
+/// that are ignored.
+///
+/// - `extensionsRequired` is judged here: an extension this reader reads
+///   is fine; one that compresses the geometry is an error; any other
+///   (textures, material extensions) is ignored, returned for a warning:
+///   the shapes are right, the shading may differ.
+/// - gltf-json 1.4.1's validation indexes a primitive's POSITION accessor
+///   before checking that it exists (a panic on a bad file): that is
+///   checked first.
+fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> {
     let invalid = |e: gltf::Error| format!("not a valid glTF file: {e}");
-    let root = gltf::Gltf::from_slice_without_validation(json)
+    let mut root = gltf::Gltf::from_slice_without_validation(json)
         .map_err(invalid)?
         .document
         .into_json();
+    let mut ignored = Vec::new();
+    for ext in std::mem::take(&mut root.extensions_required) {
+        if GEOMETRY.contains(&ext.as_str()) {
+            return Err(format!(
+                "its geometry is compressed with {ext}, which sray does not decode \
+                 (write the file without it, e.g. with gltf-transform or gltfpack)"
+            ));
+        }
+        if !READ.contains(&ext.as_str()) {
+            ignored.push(ext);
+        }
+    }
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (k, prim) in mesh.primitives.iter().enumerate() {
             for a in prim.attributes.values() {
@@ -280,7 +317,7 @@ fn parse_document(json: &[u8]) -> Result<gltf::Document, String> {
             }
         }
     }
-    gltf::Document::from_json(root).map_err(invalid)
+    Ok((gltf::Document::from_json(root).map_err(invalid)?, ignored))
 }
 
 /// The bytes of a base64 data URI (what follows `data:`).
@@ -564,15 +601,9 @@ impl Elements {
         })
     }
 
-    /// Checks that the elements are `dims` of `f32`.
-    pub fn expect_floats(&self, dims: Dimensions, what: &str) -> Result<(), String> {
-        if self.dims != dims || self.data_type != DataType::F32 || self.normalized {
-            return Err(format!(
-                "accessor {}: {what} must be {dims:?} of floats",
-                self.index
-            ));
-        }
-        Ok(())
+    /// Bytes per element.
+    pub fn size(&self) -> usize {
+        self.size
     }
 
     /// Checks that the elements are unsigned integer scalars (indices).
@@ -666,64 +697,105 @@ impl Elements {
         Ok(())
     }
 
-    /// Element `k` as three floats (checked by [`Self::expect_floats`]):
-    /// one read, through the page cache, allocating nothing.
+    /// Element `k` as three floats (see [`Self::expect_vectors`]): one
+    /// read, through the page cache, allocating nothing.
     pub fn vec3(&self, bufs: &mut Buffers<'_>, k: usize) -> Result<[f32; 3], String> {
-        let mut e = [0u8; 12];
+        let mut e = [0u8; 16];
+        let e = &mut e[..self.size.min(16)];
         if let Some((b, at, stride)) = self.view {
-            bufs.read(b, at + k as u64 * stride, &mut e)?;
+            bufs.read(b, at + k as u64 * stride, e)?;
         }
         if let Some((idx, vals)) = &self.sparse
             && let Ok(j) = idx.binary_search(&(k as u32))
         {
-            e.copy_from_slice(&vals[j * 12..][..12]);
+            e.copy_from_slice(&vals[j * self.size..][..e.len()]);
         }
-        Ok(vec3_of(&e))
+        Ok(self.decode::<3>(e))
     }
 
-    /// Every element as a float vector of `D` components; normalized
-    /// signed bytes and shorts are taken to floats as glTF says.
+    /// One element's components as floats, as glTF 2.0 (with
+    /// `KHR_mesh_quantization`) says: floats as they are; normalized
+    /// integers to [0, 1] or [-1, 1]; other integers by value. The
+    /// component types were checked by [`Self::expect_vectors`].
+    #[inline]
+    pub fn decode<const D: usize>(&self, e: &[u8]) -> [f32; D] {
+        let (t, norm) = (self.data_type, self.normalized);
+        std::array::from_fn(|j| {
+            let b = |w: usize| &e[w * j..w * j + w];
+            match (t, norm) {
+                (DataType::F32, _) => f32::from_le_bytes(b(4).try_into().unwrap()),
+                (DataType::I8, true) => (f32::from(e[j] as i8) / 127.0).max(-1.0),
+                (DataType::U8, true) => f32::from(e[j]) / 255.0,
+                (DataType::I16, true) => {
+                    (f32::from(i16::from_le_bytes([e[2 * j], e[2 * j + 1]])) / 32767.0).max(-1.0)
+                }
+                (DataType::U16, true) => {
+                    f32::from(u16::from_le_bytes([e[2 * j], e[2 * j + 1]])) / 65535.0
+                }
+                (DataType::I8, false) => f32::from(e[j] as i8),
+                (DataType::U8, false) => f32::from(e[j]),
+                (DataType::I16, false) => f32::from(i16::from_le_bytes([e[2 * j], e[2 * j + 1]])),
+                (DataType::U16, false) => f32::from(u16::from_le_bytes([e[2 * j], e[2 * j + 1]])),
+                // Not allowed for a vector (refused by `expect_vectors`).
+                (DataType::U32, _) => 0.0,
+            }
+        })
+    }
+
+    /// Every element as a vector of `D` floats (see [`Self::decode`]).
     pub fn floats<const D: usize>(&self, bufs: &mut Buffers<'_>) -> Result<Vec<[f32; D]>, String> {
         let mut out = Vec::with_capacity(self.count);
-        let (c, norm) = (self.data_type, self.normalized);
         self.chunks(bufs, |_, raw| {
-            for e in raw.chunks_exact(self.size) {
-                let mut v = [0f32; D];
-                for (j, x) in v.iter_mut().enumerate() {
-                    *x = match (c, norm) {
-                        (DataType::F32, false) => {
-                            f32::from_le_bytes(e[4 * j..4 * j + 4].try_into().unwrap())
-                        }
-                        (DataType::I8, true) => (f32::from(e[j] as i8) / 127.0).max(-1.0),
-                        (DataType::I16, true) => {
-                            (f32::from(i16::from_le_bytes([e[2 * j], e[2 * j + 1]])) / 32767.0)
-                                .max(-1.0)
-                        }
-                        _ => return Err(format!("accessor {}: not floats", self.index)),
-                    };
-                }
-                out.push(v);
-            }
+            out.extend(raw.chunks_exact(self.size).map(|e| self.decode::<D>(e)));
             Ok(())
         })?;
         Ok(out)
     }
 
-    /// Whether the elements are `dims` of floats or normalized signed
-    /// bytes or shorts.
-    pub fn is_float_like(&self, dims: Dimensions) -> bool {
-        self.dims == dims
-            && matches!(
-                (self.data_type, self.normalized),
-                (DataType::F32, false) | (DataType::I8, true) | (DataType::I16, true)
-            )
+    /// Checks that the elements are `dims` of a component type `of`
+    /// allows (`true`: normalized).
+    pub fn expect_vectors(
+        &self,
+        dims: Dimensions,
+        what: &str,
+        of: Components,
+    ) -> Result<(), String> {
+        let ok = self.dims == dims
+            && match (self.data_type, self.normalized) {
+                (DataType::F32, false) => true,
+                (DataType::I8 | DataType::I16, true) => of != Components::Floats,
+                (DataType::U8 | DataType::U16, _) | (DataType::I8 | DataType::I16, false) => {
+                    of == Components::Quantized
+                }
+                _ => false,
+            };
+        if !ok {
+            return Err(format!(
+                "accessor {}: {what} must be {dims:?} of {} ({:?}{} found)",
+                self.index,
+                match of {
+                    Components::Floats => "floats",
+                    Components::Signed => "floats or normalized signed bytes or shorts",
+                    Components::Quantized => "floats, bytes or shorts",
+                },
+                self.data_type,
+                if self.normalized { ", normalized" } else { "" }
+            ));
+        }
+        Ok(())
     }
 }
 
-/// Three little-endian floats.
-pub(super) fn vec3_of(e: &[u8]) -> [f32; 3] {
-    let f = |j: usize| f32::from_le_bytes(e[4 * j..4 * j + 4].try_into().unwrap());
-    [f(0), f(1), f(2)]
+/// The component types a vector may have.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(super) enum Components {
+    /// Floats only.
+    Floats,
+    /// Floats, or normalized signed bytes or shorts (normals, rotations).
+    Signed,
+    /// Floats, or bytes or shorts of either sign, normalized or not
+    /// (positions under `KHR_mesh_quantization`).
+    Quantized,
 }
 
 /// An index of `size` bytes, little-endian.
@@ -849,7 +921,7 @@ mod tests {
         let mut got = Vec::new();
         e.chunks(&mut bufs, |first, raw| {
             assert_eq!(first, got.len());
-            got.extend(raw.chunks_exact(12).map(vec3_of));
+            got.extend(raw.chunks_exact(12).map(|x| e.decode::<3>(x)));
             Ok(())
         })
         .unwrap();
@@ -859,7 +931,7 @@ mod tests {
         }
         let mut raw = Vec::new();
         e.raw(&mut bufs, 3, 5, &mut raw).unwrap();
-        let part: Vec<[f32; 3]> = raw.chunks_exact(12).map(vec3_of).collect();
+        let part: Vec<[f32; 3]> = raw.chunks_exact(12).map(|x| e.decode::<3>(x)).collect();
         assert_eq!(part, (3..8).map(want).collect::<Vec<_>>());
     }
 }

@@ -40,7 +40,7 @@
 //! vertices, a cycle in the node graph, a primitive of points or lines.
 
 use super::builder::NEUTRAL;
-use super::gltf_data::{self, Buffers, Elements, Main, vec3_of};
+use super::gltf_data::{self, Buffers, Components, Elements, Main};
 use super::{MeshOptions, MeshSummary, Warnings};
 use crate::error::Error;
 use crate::models::{place_normal, place_point};
@@ -133,14 +133,20 @@ fn read_main(
     let camera_index = opts.camera_index;
     let bad = |what: String| Error::Scene(format!("{}: {what}", name.display()));
     let shares = Shares::of(opts.memory);
-    let (doc, mut bufs) =
+    let (doc, mut bufs, ignored) =
         gltf_data::open(main, base, shares.document, shares.cache).map_err(&bad)?;
+    let mut warnings = Warnings::default();
+    for ext in ignored {
+        warnings.add(
+            "an extension the file requires is ignored (the shapes are read; shading may differ)",
+            || ext,
+        );
+    }
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| bad("it has no scene".into()))?;
     let mut placed = place_nodes(&scene, doc.nodes().count()).map_err(bad)?;
-    let mut warnings = Warnings::default();
     gpu_instances(&doc, &mut placed, &mut bufs, shares.lists).map_err(&bad)?;
 
     // A mesh drawn by more than one placement is a model, stored once and
@@ -174,11 +180,11 @@ fn read_main(
                 continue;
             };
             let e = Elements::new(&pos, &mut bufs, shares.lists).map_err(&bad)?;
-            e.expect_floats(Dimensions::Vec3, "positions")
+            e.expect_vectors(Dimensions::Vec3, "positions", Components::Quantized)
                 .map_err(&bad)?;
             e.chunks(&mut bufs, |_, raw| {
-                for v in raw.chunks_exact(12) {
-                    let v = DVec3::from(vec3_of(v).map(f64::from));
+                for v in raw.chunks_exact(e.size()) {
+                    let v = DVec3::from(e.decode::<3>(v).map(f64::from));
                     for &i in by {
                         bounds.add(placed[i].world.transform_point3(v));
                     }
@@ -407,13 +413,14 @@ impl Emit<'_, '_> {
             };
             let lists = self.shares.lists;
             let pos = Elements::new(&pos, self.bufs, lists).map_err(bad)?;
-            pos.expect_floats(Dimensions::Vec3, "positions")
+            pos.expect_vectors(Dimensions::Vec3, "positions", Components::Quantized)
                 .map_err(bad)?;
             let count = pos.count;
             let normals = match prim.get(&gltf::Semantic::Normals) {
                 Some(n) => {
                     let n = Elements::new(&n, self.bufs, lists).map_err(bad)?;
-                    n.expect_floats(Dimensions::Vec3, "normals").map_err(bad)?;
+                    n.expect_vectors(Dimensions::Vec3, "normals", Components::Signed)
+                        .map_err(bad)?;
                     if n.count != count {
                         return Err(bad(format!(
                             "{}: {} normals for {count} positions",
@@ -447,8 +454,8 @@ impl Emit<'_, '_> {
             let held = count as u64 * per_vertex <= self.shares.primitive;
             let mut points = Vec::with_capacity(if held { count } else { 0 });
             pos.chunks(self.bufs, |first, raw| {
-                for (j, e) in raw.chunks_exact(12).enumerate() {
-                    let p = place_p(vec3_of(e));
+                for (j, e) in raw.chunks_exact(pos.size()).enumerate() {
+                    let p = place_p(pos.decode::<3>(e));
                     if !p.iter().all(|c| c.is_finite()) {
                         return Err(not_finite(first + j));
                     }
@@ -465,7 +472,10 @@ impl Emit<'_, '_> {
                 (true, Some(n)) => {
                     let mut ns = Vec::with_capacity(count);
                     n.chunks(self.bufs, |_, raw| {
-                        ns.extend(raw.chunks_exact(12).map(|e| place_n(vec3_of(e))));
+                        ns.extend(
+                            raw.chunks_exact(n.size())
+                                .map(|e| place_n(n.decode::<3>(e))),
+                        );
                         Ok(())
                     })
                     .map_err(bad)?;
@@ -710,17 +720,12 @@ fn gpu_instances<'a>(
                     format!("node {node}: EXT_mesh_gpu_instancing {name} names no accessor")
                 })?;
             let e = Elements::new(&a, bufs, budget)?;
-            let rotation = name == "ROTATION";
-            if !(e.is_float_like(dims) && (rotation || e.expect_floats(dims, name).is_ok())) {
-                return Err(format!(
-                    "node {node}: EXT_mesh_gpu_instancing {name} must be {dims:?} of floats{}",
-                    if rotation {
-                        " (or of normalized signed bytes or shorts)"
-                    } else {
-                        ""
-                    }
-                ));
-            }
+            let of = match name {
+                "ROTATION" => Components::Signed,
+                _ => Components::Floats,
+            };
+            e.expect_vectors(dims, &format!("EXT_mesh_gpu_instancing {name}"), of)
+                .map_err(|m| format!("node {node}: {m}"))?;
             Ok(Some(e))
         };
         let t = accessor("TRANSLATION", Dimensions::Vec3)?;

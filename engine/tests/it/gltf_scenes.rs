@@ -185,7 +185,20 @@ fn bad_files_are_clear_errors() {
             }),
             "past its",
         ),
+        (
+            edited(d, "draco.gltf", |doc| {
+                doc["extensionsRequired"] = serde_json::json!(["KHR_draco_mesh_compression"])
+            }),
+            "compressed with KHR_draco_mesh_compression",
+        ),
     ];
+    // An extension required for appearance only is ignored (a warning):
+    // the shapes are read.
+    let p = edited(d, "transform.gltf", |doc| {
+        doc["extensionsRequired"] = serde_json::json!(["KHR_texture_transform"])
+    });
+    let plain = record(&fixtures().join("spot4_light.gltf")).unwrap();
+    assert!(record(&p).unwrap().objects().eq(plain.objects()));
     for (path, says) in &cases {
         let e = error_of(path);
         assert!(
