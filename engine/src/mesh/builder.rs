@@ -226,6 +226,8 @@ pub struct MeshSummary {
     /// instances placing them.
     pub models: u64,
     pub instances: u64,
+    /// glTF primitives of points or lines, skipped.
+    pub skipped_primitives: u64,
 }
 
 /// Collects a mesh as a reader parses it (phase 1); [`MeshBuilder::finish`]

@@ -37,7 +37,8 @@
 //!
 //! Bad input is an error that names the file and what is wrong: a missing
 //! or short buffer, an accessor outside its buffer, an index past the
-//! vertices, a cycle in the node graph, a primitive of points or lines.
+//! vertices, a cycle in the node graph, a file of nothing but points or
+//! lines (beside triangles they are skipped with a warning).
 
 use super::builder::NEUTRAL;
 use super::gltf_data::{self, Buffers, Components, Elements, Main};
@@ -176,7 +177,10 @@ fn read_main(
             continue;
         }
         for prim in mesh.primitives() {
-            let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
+            let Some(pos) = prim
+                .get(&gltf::Semantic::Positions)
+                .filter(|_| is_surface(prim.mode()))
+            else {
                 continue;
             };
             let e = Elements::new(&pos, &mut bufs, shares.lists).map_err(&bad)?;
@@ -324,8 +328,22 @@ fn read_main(
         }
     }
     warnings.report(name, progress);
+    if summary.faces == 0 && summary.skipped_primitives > 0 {
+        return Err(bad(format!(
+            "it has no triangles, only {} primitive(s) of points or lines, which are not supported",
+            summary.skipped_primitives
+        )));
+    }
     super::report_summary(name, &summary, progress);
     Ok(summary)
+}
+
+/// Whether primitives of `mode` are surfaces (triangles, strips, fans).
+fn is_surface(mode: Mode) -> bool {
+    matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    )
 }
 
 /// The triangles a primitive's indices (or vertices) make, by its mode.
@@ -397,14 +415,16 @@ impl Emit<'_, '_> {
         for prim in mesh.primitives() {
             let what = || format!("mesh {} primitive {}", mesh.index(), prim.index());
             let mode = prim.mode();
-            if !matches!(
-                mode,
-                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-            ) {
-                return Err(bad(format!(
-                    "{}: {mode:?} primitives are not supported (only triangles, strips and fans)",
-                    what()
-                )));
+            if !is_surface(mode) {
+                // Points and lines (a CAD file's edges, say) have no
+                // surface to hit: skipped, said once. A file of nothing
+                // else is an error (see `read_main`).
+                self.warnings.add(
+                    "points and lines primitives are not supported and are skipped (only triangles, strips and fans)",
+                    || format!("{}, {mode:?}", what()),
+                );
+                self.summary.skipped_primitives += 1;
+                continue;
             }
             let Some(pos) = prim.get(&gltf::Semantic::Positions) else {
                 self.warnings

@@ -199,6 +199,21 @@ fn bad_files_are_clear_errors() {
     });
     let plain = record(&fixtures().join("spot4_light.gltf")).unwrap();
     assert!(record(&p).unwrap().objects().eq(plain.objects()));
+    // Lines beside the triangles (a CAD file's edges) are skipped with a
+    // warning; a file of nothing but points or lines is an error.
+    let p = edited(d, "edges.gltf", |doc| {
+        let mut lines = doc["meshes"][0]["primitives"][0].clone();
+        lines["mode"] = serde_json::json!(1);
+        doc["meshes"][0]["primitives"]
+            .as_array_mut()
+            .unwrap()
+            .push(lines);
+    });
+    assert!(record(&p).unwrap().objects().eq(plain.objects()));
+    let e = error_of(&edited(d, "points_only.gltf", |doc| {
+        doc["meshes"][0]["primitives"][0]["mode"] = serde_json::json!(0)
+    }));
+    assert!(e.contains("no triangles"), "{e}");
     for (path, says) in &cases {
         let e = error_of(path);
         assert!(
