@@ -343,6 +343,10 @@ pub struct IntersectSetup<'a> {
     /// Models are not held: each pass reads those its instances' rays
     /// need, after the world's objects (see [`crate::models`]).
     pub models_per_pass: bool,
+    /// Bytes of (ray, instance) pairs and placements the shards may
+    /// gather in a pass before the models they need are read and tested:
+    /// past it a pass reads those models again (same hits, more tests).
+    pub pairs_cap: usize,
     pub grids: &'a mut VoxelGrids,
     pub store: StorePlan,
     /// Ray slots in memory.
@@ -930,6 +934,7 @@ pub fn intersect_rays<R: Real>(
             let grids = &*setup.grids;
             let models = setup.models;
             let per_pass = setup.models_per_pass;
+            let (db, pairs_cap) = (setup.db, setup.pairs_cap);
             let carry = setup.carry;
             let touched = &*touched;
             let region = &region;
@@ -947,6 +952,9 @@ pub fn intersect_rays<R: Real>(
                                 scan_block(sh, block, found, grids, models, per_pass, carry)
                             });
                         });
+                        if per_pass && pair_bytes(shards) > pairs_cap {
+                            test_pairs(shards, db, models, pool, carry, &mut st)?;
+                        }
                     }
                     Ok(())
                 },
@@ -1301,6 +1309,17 @@ fn offer<R: Real>(
             c.material = material;
         }
     }
+}
+
+/// Bytes the shards' pending (ray, instance) pairs and placements take.
+fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
+    use std::mem::size_of;
+    shards
+        .iter()
+        .map(|sh| {
+            sh.pairs.len() * size_of::<Pair>() + sh.placed.len() * size_of::<(u32, Placement)>()
+        })
+        .sum()
 }
 
 /// Reads, one at a time and in file order, the models this pass's

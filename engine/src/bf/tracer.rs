@@ -385,6 +385,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             db: self.db,
             models: &self.models,
             models_per_pass: !self.models.all_held(),
+            pairs_cap: (budget.total / 64).max(16 << 10) as usize,
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,

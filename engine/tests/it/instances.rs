@@ -164,6 +164,14 @@ fn emit(w: &mut dyn SceneSink, tris: &[Tri], m: Option<&DAffine3>) {
 /// The scene as instances (a ground sphere, then the model's placements)
 /// or as copies.
 fn write(path: &Path, instances: bool) -> Database {
+    write_padded(path, instances, 0)
+}
+
+/// [`write`], with `pad` small spheres deep inside the floor's sphere (out
+/// of every ray's reach) after each placement, so that the placements lie
+/// in different blocks; with padding, each placement is made four times
+/// (coincident instances: many per ray).
+fn write_padded(path: &Path, instances: bool, pad: usize) -> Database {
     let tris = model();
     let mut w = DbWriter::create(path, Compression::None).unwrap();
     header(&mut w);
@@ -178,10 +186,25 @@ fn write(path: &Path, instances: bool) -> Database {
         radius: 99.9,
     }))
     .unwrap();
-    for p in placements() {
+    let times = if pad > 0 { 4 } else { 1 };
+    for p in placements()
+        .into_iter()
+        .flat_map(|p| std::iter::repeat_n(p, times))
+    {
         match &model {
             Some(m) => w.instance(m.index, &p).unwrap(),
             None => emit(&mut w, &tris, Some(&p)),
+        }
+        for k in 0..pad {
+            w.object(&Shape::Sphere(Sphere {
+                center: [
+                    (FAR + 0.8) as f32 + (k % 50) as f32,
+                    -150.0,
+                    (k / 50) as f32,
+                ],
+                radius: 0.1,
+            }))
+            .unwrap();
         }
     }
     w.finish().unwrap();
@@ -273,6 +296,37 @@ fn models_read_per_pass_give_the_same_image_as_models_held() {
                 }
             }
         }
+    }
+    // Pairs past their share of a small budget are tested mid-pass, after
+    // the block that passed it: the models are read more often than once
+    // a pass; the image is the one of the models held.
+    let padded = write_padded(&dir.path().join("padded.sdb"), true, 3000);
+    assert!(padded.block_count() > placements().len() as u64);
+    let o = RenderOptions {
+        width: 96,
+        height: 96,
+        ..o
+    };
+    let (want, _) = df_render(&padded, &o);
+    for shading in [Shading::Carry, Shading::Join] {
+        let b = BfOptions {
+            memory: 6 << 20,
+            store: StoreNumber::Adaptive,
+            spill_dir: None,
+            shading,
+            models: ModelHolding::PerPass,
+        };
+        let out = sray_engine::bf::render(&padded, &o, &b, &NoProgress).unwrap();
+        assert!(
+            out.frame.to_rgb8() == want,
+            "{shading:?}: the image differs"
+        );
+        let d = out.stats.details.unwrap();
+        let (reads, scans) = (d["model_reads"].as_u64(), d["db_scans"].as_u64());
+        assert!(
+            reads > scans,
+            "{shading:?}: {reads:?} model reads, {scans:?} scans"
+        );
     }
 }
 
