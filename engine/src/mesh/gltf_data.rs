@@ -23,6 +23,10 @@ use std::path::{Path, PathBuf};
 /// Bytes of one cached page of a buffer file.
 const PAGE: usize = 64 << 10;
 
+/// Bytes a JSON object takes once parsed, about (gltf-json's node,
+/// accessor and primitive structs, with their maps and vectors).
+const PARSED_OBJECT: u64 = 512;
+
 /// Bytes an in-order read takes at a time.
 const CHUNK: usize = 1 << 20;
 
@@ -117,10 +121,22 @@ pub(super) fn open<'a>(
         main.read_at(0, &mut json).map_err(io)?;
         (json, None)
     };
+    // Parsed, each JSON object becomes a struct of a few hundred bytes:
+    // judged before parsing, so that a document of many small objects
+    // cannot take many times its size.
+    let objects = json.iter().filter(|&&c| c == b'{').count() as u64;
+    let parsed = (json.len() as u64).saturating_add(objects.saturating_mul(PARSED_OBJECT));
+    if parsed > doc_budget {
+        return Err(too_big(
+            &format!("its JSON document, parsed ({objects} objects),"),
+            parsed,
+            doc_budget,
+        ));
+    }
     let (doc, ignored) = parse_document(&json)?;
     // The document, parsed, keeps its data URIs' text: it counts with
     // their bytes.
-    let mut held = json.len() as u64;
+    let mut held = parsed;
     drop(json);
     let mut data = Vec::with_capacity(doc.buffers().len());
     for b in doc.buffers() {
@@ -393,7 +409,7 @@ impl Buffers<'_> {
         let data = self
             .data
             .get_mut(b)
-            .ok_or(format!("buffer {b} is missing"))?;
+            .ok_or_else(|| format!("buffer {b} is missing"))?;
         if end.is_none_or(|e| e > data.len()) {
             return Err(format!("a read past buffer {b}'s {} bytes", data.len()));
         }
@@ -440,6 +456,8 @@ struct Pages {
     slots: Vec<Slot>,
     map: HashMap<(usize, u64), usize>,
     hand: usize,
+    /// The page last asked for (reads by index come in runs).
+    last: Option<((usize, u64), usize)>,
 }
 
 struct Slot {
@@ -456,6 +474,7 @@ impl Pages {
             slots: Vec::new(),
             map: HashMap::new(),
             hand: 0,
+            last: None,
         }
     }
 
@@ -466,7 +485,12 @@ impl Pages {
         key: (usize, u64),
         load: impl FnOnce(&mut [u8]) -> std::io::Result<usize>,
     ) -> std::io::Result<&[u8]> {
-        if let Some(&s) = self.map.get(&key) {
+        let hit = match self.last {
+            Some((k, s)) if k == key => Some(s),
+            _ => self.map.get(&key).copied(),
+        };
+        if let Some(s) = hit {
+            self.last = Some((key, s));
             let slot = &mut self.slots[s];
             slot.referenced = true;
             return Ok(&slot.data[..slot.len]);
@@ -487,6 +511,7 @@ impl Pages {
                     continue;
                 }
                 self.map.remove(&self.slots[h].key);
+                self.last = None;
                 break h;
             }
         };
@@ -496,6 +521,7 @@ impl Pages {
         slot.key = key;
         slot.referenced = true;
         self.map.insert(key, s);
+        self.last = Some((key, s));
         Ok(&slot.data[..slot.len])
     }
 }
@@ -539,7 +565,7 @@ impl Elements {
                         "accessor {index}: {n} sparse elements for {count} elements"
                     ));
                 }
-                let hold = n as u64 * (4 + size as u64);
+                let hold = (n as u64).saturating_mul(4 + size as u64);
                 if hold > budget {
                     return Err(format!(
                         "accessor {index}: {}",
@@ -586,7 +612,20 @@ impl Elements {
                 size,
                 &format!("accessor {index} ({count} elements)"),
             )?),
-            None if sparse.is_some() || count == 0 => None,
+            // Zeros nothing in the file backs: as many as the budget
+            // could hold, no more (a tiny file must not ask for hours of
+            // work).
+            None if count == 0 => None,
+            None if sparse.is_some() => {
+                let zeros = (count as u64).saturating_mul(size as u64);
+                if zeros > budget {
+                    return Err(format!(
+                        "accessor {index}: {}",
+                        too_big("a sparse accessor without a buffer view", zeros, budget)
+                    ));
+                }
+                None
+            }
             None => return Err(format!("accessor {index} has no buffer view")),
         };
         Ok(Elements {
@@ -604,6 +643,11 @@ impl Elements {
     /// Bytes per element.
     pub fn size(&self) -> usize {
         self.size
+    }
+
+    /// Elements read at a time in order: about a megabyte of the buffer.
+    pub fn per_chunk(&self) -> usize {
+        (CHUNK / self.view.map_or(self.size, |v| v.2 as usize).max(1)).max(1)
     }
 
     /// Checks that the elements are unsigned integer scalars (indices).
@@ -667,7 +711,7 @@ impl Elements {
         bufs: &mut Buffers<'_>,
         mut each: impl FnMut(usize, &[u8]) -> Result<(), String>,
     ) -> Result<(), String> {
-        let per = (CHUNK / self.view.map_or(self.size, |v| v.2 as usize).max(1)).max(1);
+        let per = self.per_chunk();
         let mut raw = std::mem::take(&mut bufs.scratch);
         let mut first = 0;
         while first < self.count {

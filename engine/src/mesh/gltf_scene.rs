@@ -98,14 +98,16 @@ pub fn read_gltf_bytes(
     read_main(Main::Slice(bytes), name, base, opts, sink, progress)
 }
 
-/// How the memory budget is shared while a glTF file is read.
+/// How the memory budget is shared while a glTF file is read (with the
+/// sparse elements of a primitive's three accessors, 15/16 of it; the
+/// chunk buffers, a megabyte or two, and the sink's own come on top).
 struct Shares {
-    /// The document and buffers embedded in it (data URIs).
+    /// The document, parsed, and buffers embedded in it (data URIs).
     document: u64,
     /// Pages of buffer files kept for vertices looked up by index.
     cache: u64,
-    /// A sparse accessor's replaced elements; the placements of GPU
-    /// instancing.
+    /// Each accessor's sparse elements (or the zeros of one without a
+    /// view); the node placements; the copies of GPU instancing.
     lists: u64,
     /// One primitive's vertices (and normals) held, placed, while its
     /// faces are written; beyond that they are looked up by index.
@@ -117,8 +119,8 @@ impl Shares {
         Shares {
             document: memory / 4,
             cache: memory / 8,
-            lists: memory / 8,
-            primitive: memory / 2,
+            lists: memory / 16,
+            primitive: memory * 3 / 8,
         }
     }
 }
@@ -147,7 +149,7 @@ fn read_main(
         .default_scene()
         .or_else(|| doc.scenes().next())
         .ok_or_else(|| bad("it has no scene".into()))?;
-    let mut placed = place_nodes(&scene, doc.nodes().count()).map_err(bad)?;
+    let mut placed = place_nodes(&scene, doc.nodes().count(), shares.lists).map_err(bad)?;
     gpu_instances(&doc, &mut placed, &mut bufs, shares.lists).map_err(&bad)?;
 
     // A mesh drawn by more than one placement is a model, stored once and
@@ -436,6 +438,12 @@ impl Emit<'_, '_> {
             pos.expect_vectors(Dimensions::Vec3, "positions", Components::Quantized)
                 .map_err(bad)?;
             let count = pos.count;
+            if count > u32::MAX as usize {
+                return Err(bad(format!(
+                    "{}: {count} vertices, more than indices can name",
+                    what()
+                )));
+            }
             let normals = match prim.get(&gltf::Semantic::Normals) {
                 Some(n) => {
                     let n = Elements::new(&n, self.bufs, lists).map_err(bad)?;
@@ -471,7 +479,7 @@ impl Emit<'_, '_> {
                 None => format!("{}: vertex {k} is not a finite point", what()),
             };
             let per_vertex = if normals.is_some() { 24 } else { 12 };
-            let held = count as u64 * per_vertex <= self.shares.primitive;
+            let held = (count as u64).saturating_mul(per_vertex) <= self.shares.primitive;
             let mut points = Vec::with_capacity(if held { count } else { 0 });
             pos.chunks(self.bufs, |first, raw| {
                 for (j, e) in raw.chunks_exact(pos.size()).enumerate() {
@@ -513,7 +521,10 @@ impl Emit<'_, '_> {
             let mut chunk = Vec::new();
             let mut first = 0;
             while first < total {
-                let n = (1 << 18).min(total - first);
+                let n = indices
+                    .as_ref()
+                    .map_or(1 << 18, Elements::per_chunk)
+                    .min(total - first);
                 match &indices {
                     Some(e) => e.indices(self.bufs, first, n, &mut chunk).map_err(bad)?,
                     None => {
@@ -663,7 +674,14 @@ struct Placed<'a> {
 
 /// Every node under the scene's roots, in depth-first order, with its
 /// world transform; a node reached again below itself is a cycle.
-fn place_nodes<'a>(scene: &gltf::Scene<'a>, nodes: usize) -> Result<Vec<Placed<'a>>, String> {
+fn place_nodes<'a>(
+    scene: &gltf::Scene<'a>,
+    nodes: usize,
+    budget: u64,
+) -> Result<Vec<Placed<'a>>, String> {
+    // A node may be the child of several (no cycle, but a graph whose
+    // placements double at each level): the placements are counted.
+    let most = (budget / std::mem::size_of::<Placed<'_>>() as u64).max(1) as usize;
     let mut out = Vec::new();
     let mut on_path = vec![false; nodes];
     // Entries to visit: a node and its parent's transform, or the end of a
@@ -696,6 +714,12 @@ fn place_nodes<'a>(scene: &gltf::Scene<'a>, nodes: usize) -> Result<Vec<Placed<'
         let first = stack.len();
         stack.extend(node.children().map(|c| Step::Enter(c, world)));
         stack[first..].reverse();
+        if out.len() >= most {
+            return Err(format!(
+                "the node graph places more than {most} nodes (children shared by several \
+                 parents?), more than the memory budget's share for them (raise --memory)"
+            ));
+        }
         out.push(Placed {
             node,
             world,
@@ -761,7 +785,10 @@ fn gpu_instances<'a>(
                 "node {node}: EXT_mesh_gpu_instancing attributes of different counts {counts:?}"
             ));
         }
-        let held = (out.len() + n) as u64 * std::mem::size_of::<Placed<'_>>() as u64;
+        // The placements, and the attributes read for them (40 bytes a
+        // copy at most).
+        let held = ((out.len() as u64).saturating_add(n as u64))
+            .saturating_mul(std::mem::size_of::<Placed<'_>>() as u64 + 40);
         if held > budget {
             return Err(format!(
                 "node {node}: EXT_mesh_gpu_instancing places {n} copies, {} with the other \
