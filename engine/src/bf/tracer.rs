@@ -216,7 +216,8 @@ impl<'db, R: Real> Tracer<'db, R> {
         if need > 2 * bf.memory {
             return Err(Error::Invalid(format!(
                 "the scene's {} about {} in memory, more than the budget of {}; \
-                 a model is held whole while it is tested (raise --memory)",
+                 a model is held whole while it is tested (raise --memory, or convert \
+                 the scene with --flatten-instances: copies are streamed like any object)",
                 if holding == ModelHolding::Held {
                     "models need"
                 } else {
