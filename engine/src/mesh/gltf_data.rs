@@ -580,11 +580,7 @@ impl Elements {
                 let mut indices = Vec::with_capacity(n);
                 for k in 0..n {
                     bufs.read(b, at + k as u64 * stride, &mut raw)?;
-                    let i = match it {
-                        1 => u32::from(raw[0]),
-                        2 => u32::from(u16::from_le_bytes([raw[0], raw[1]])),
-                        _ => u32::from_le_bytes([raw[0], raw[1], raw[2], raw[3]]),
-                    };
+                    let i = index_of(&raw);
                     if i as usize >= count || indices.last().is_some_and(|&l| l >= i) {
                         return Err(format!(
                             "accessor {index}: sparse index {i} (number {k}) is past {count} \
