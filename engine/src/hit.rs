@@ -56,6 +56,13 @@ impl PrimId {
     }
 }
 
+/// A primitive's place in the tie order, its object having input id
+/// `rank`: by that id, then by the model's triangle.
+#[inline(always)]
+pub fn tie_key(rank: u32, prim: PrimId) -> u64 {
+    (rank as u64) << 32 | (prim.0 & 0xffff_ffff)
+}
+
 /// The nearest hit found so far along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -75,6 +82,15 @@ impl Hit {
     #[inline(always)]
     pub fn loses_to(&self, t: f64, prim: PrimId) -> bool {
         t < self.t || (t == self.t && prim < self.prim)
+    }
+
+    /// As [`Hit::loses_to`], for a database whose objects are not in
+    /// input order (version 6): ties go by the objects' input ids, `rank`
+    /// for the new hit and `own_rank` for this one, then by the model's
+    /// triangle.
+    #[inline(always)]
+    pub fn loses_to_ranked(&self, own_rank: u32, t: f64, prim: PrimId, rank: u32) -> bool {
+        t < self.t || (t == self.t && tie_key(rank, prim) < tie_key(own_rank, self.prim))
     }
 
     #[inline(always)]

@@ -55,6 +55,10 @@ pub struct SceneInfo {
     /// triangles as shared, bit-packed vertices and one-byte indices).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub layout: Option<&'static str>,
+    /// Object database only: the order of its objects: "spatial" (along a
+    /// Z-order curve, each with its input id; version 6) or "input".
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub order: Option<&'static str>,
     /// Object database only (version 4 on): triangle runs, and the
     /// triangles they hold.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -231,6 +235,7 @@ pub fn scene_info_with(
             } else {
                 "records"
             }),
+            order: Some(if db.is_spatial() { "spatial" } else { "input" }),
             runs: db.has_runs().then(|| db.run_counts().runs),
             run_triangles: db.has_runs().then(|| db.run_counts().run_triangles),
             version: Some(db.version()),
@@ -270,6 +275,7 @@ pub fn scene_info_with(
         raw_bytes: None,
         decoded_bytes: None,
         layout: None,
+        order: None,
         runs: None,
         run_triangles: None,
         blocks: None,

@@ -36,6 +36,50 @@ pub struct RenderRequest {
     /// Breadth-first passes read every block, as the paper's do
     /// ([`Database::set_full_scans`]).
     pub full_scans: bool,
+    /// The order a database made for the render stores objects in.
+    pub order: ObjectOrder,
+}
+
+/// The order a new database stores its objects in.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ObjectOrder {
+    /// Spatial for scene files (meshes, NFF, glTF), whose order is
+    /// whatever their writer chose; the input's for SPD generators, which
+    /// emit their objects by recursive subdivision, already in a spatial
+    /// order, and for databases.
+    #[default]
+    Auto,
+    /// Along a Z-order curve through the objects' centres, each keeping
+    /// its input id for ties ([`crate::sdb::SpatialSorter`]; version 6).
+    Spatial,
+    /// As the input lists them (version 4 or 5).
+    Input,
+}
+
+impl ObjectOrder {
+    pub fn parse(s: &str) -> Result<ObjectOrder, String> {
+        match s {
+            "auto" => Ok(ObjectOrder::Auto),
+            "spatial" => Ok(ObjectOrder::Spatial),
+            "input" => Ok(ObjectOrder::Input),
+            _ => Err(format!("unknown order {s:?}: auto, spatial or input")),
+        }
+    }
+
+    /// Whether a database of `scene` is written in spatial order.
+    pub fn is_spatial_for(self, scene: &SceneSource) -> bool {
+        match self {
+            ObjectOrder::Spatial => true,
+            ObjectOrder::Input => false,
+            ObjectOrder::Auto => matches!(scene, SceneSource::File { .. }),
+        }
+    }
+}
+
+/// The share of a conversion's budget the spatial sort gathers records
+/// in before it writes them, sorted, to a temporary file.
+pub fn sort_memory(budget: u64) -> usize {
+    (budget / 4).min(1 << 30) as usize
 }
 
 pub struct RenderResult {
@@ -66,6 +110,8 @@ pub struct PrepareOptions<'a> {
     /// Memory budget of the conversion (a mesh's tables and sorts).
     pub memory: u64,
     pub setup: &'a Setup,
+    /// The order the database stores objects in.
+    pub order: ObjectOrder,
 }
 
 /// Output buffer of a database written under a memory budget.
@@ -101,11 +147,22 @@ pub fn write_database(
     opts: &PrepareOptions<'_>,
     progress: &dyn crate::progress::Progress,
 ) -> Result<(), Error> {
+    let spatial = opts.order.is_spatial_for(scene);
+    // The sort's chunk comes out of the budget before the reader's share.
+    let budget = if spatial {
+        let sort = sort_memory(opts.memory);
+        w.sort_spatially(sort, opts.tmp_dir);
+        opts.memory
+            .saturating_sub(crate::sdb::SpatialSorter::held_bytes(sort) as u64)
+            .max(MIN_MESH_MEMORY)
+    } else {
+        opts.memory
+    };
     let mesh_opts = MeshOptions {
         memory: if scene.is_mesh() {
-            mesh_memory(opts.memory)?
+            mesh_memory(budget)?
         } else {
-            opts.memory
+            budget
         },
         spill_dir: opts.tmp_dir.map(Path::to_path_buf),
         camera_index: opts.setup.camera_index,
@@ -219,6 +276,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
             tmp_dir: req.tmp_dir.as_deref(),
             memory,
             setup: &setup,
+            order: req.order,
         },
         stages,
     )?;

@@ -88,6 +88,9 @@ pub struct ObjectStore {
     /// each one's word offset.
     words: Vec<u32>,
     offsets: Vec<u32>,
+    /// Each object's input id, when the database is in spatial order
+    /// (version 6); empty when ids are positions. Ties go by these.
+    ranks: Vec<u32>,
 }
 
 impl ObjectStore {
@@ -108,7 +111,14 @@ impl ObjectStore {
             .decoded_bytes()
             .saturating_sub(run_triangles * face_record);
         let corners = (runs * MAX_RUN_VERTICES as u64).min(3 * run_triangles);
-        6 * n + 12 * corners + records + 4 * (n - run_triangles)
+        let ranks = if db.is_spatial() { 4 * n } else { 0 };
+        6 * n + 12 * corners + records + 4 * (n - run_triangles) + ranks
+    }
+
+    /// Each object's input id, by position; empty when they are equal.
+    #[inline(always)]
+    pub fn ranks(&self) -> &[u32] {
+        &self.ranks
     }
 
     pub fn load(db: &Database, progress: &dyn Progress) -> Result<ObjectStore, Error> {
@@ -130,6 +140,7 @@ impl ObjectStore {
                 points: Vec::new(),
                 words: Vec::new(),
                 offsets: Vec::new(),
+                ranks: Vec::new(),
             },
             run: RunGather::default(),
             run_first: 0,
@@ -139,6 +150,7 @@ impl ObjectStore {
         let mut id = 0u32;
         while let Some(block) = scan.next_block()? {
             let w = block.words();
+            b.store.ranks.extend_from_slice(block.ids());
             let mut pos = 0;
             for _ in 0..block.object_count {
                 let (_, len) = decode_record(&w[pos..], id).expect("validated block");

@@ -139,6 +139,7 @@ mod tests {
             shading: Default::default(),
             models: Default::default(),
             full_scans: false,
+            order: crate::job::ObjectOrder::Auto,
             tmp_dir: None,
             setup: Default::default(),
         };

@@ -31,4 +31,7 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// 8: scenes travel as object database version 4 (triangle runs), which a
 /// worker of protocol 7 cannot read: it is refused when it registers, not
 /// when its first task fails.
-pub const PROTOCOL_VERSION: u32 = 8;
+/// 9: scenes from files travel as object database version 6 (objects in
+/// spatial order, with their input ids), which a worker of protocol 8
+/// cannot read.
+pub const PROTOCOL_VERSION: u32 = 9;

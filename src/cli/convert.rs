@@ -34,6 +34,13 @@ pub struct ConvertArgs {
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
+    /// The order the database stores objects in: spatial (along a
+    /// Z-order curve, each keeping its input id for ties: blocks that
+    /// passes can skip, meshes stored compactly), input (as listed), or
+    /// auto (spatial for scene files, input for SPD generators, whose
+    /// order is spatial already)
+    #[arg(long, value_parser = sray_engine::job::ObjectOrder::parse, default_value = "auto", value_name = "auto|spatial|input")]
+    pub order: sray_engine::job::ObjectOrder,
     /// No progress bar (errors are still printed)
     #[arg(short, long)]
     pub quiet: bool,
@@ -64,6 +71,7 @@ pub fn run(a: ConvertArgs) -> anyhow::Result<()> {
             tmp_dir: a.tmp_dir.as_deref(),
             memory,
             setup: &setup,
+            order: a.order,
         },
         &bar,
     )?;

@@ -22,6 +22,13 @@ pub struct GenArgs {
     /// Compress the object database: none, zstd or zstd:LEVEL (1-22)
     #[arg(long, value_parser = parse_compression, default_value = "none")]
     pub compress: Compression,
+    /// The order the database stores objects in: spatial (along a
+    /// Z-order curve, each keeping its input id for ties: blocks that
+    /// passes can skip, meshes stored compactly), input (as listed), or
+    /// auto (input: generators emit their objects
+    /// in a spatial order already)
+    #[arg(long, value_parser = sray_engine::job::ObjectOrder::parse, default_value = "auto", value_name = "auto|spatial|input")]
+    pub order: sray_engine::job::ObjectOrder,
     /// No progress bar (errors are still printed)
     #[arg(short, long)]
     pub quiet: bool,
@@ -46,6 +53,7 @@ pub fn run(a: GenArgs) -> anyhow::Result<()> {
             tmp_dir: None,
             memory: sray_engine::sys::default_memory_budget(),
             setup: &super::convert::no_setup(),
+            order: a.order,
         },
         &bar,
     )?;

@@ -92,12 +92,16 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
         }
     }
     if let Some(layout) = i.layout {
+        let order = match i.order {
+            Some("spatial") => "objects in spatial order, each with its input id",
+            _ => "objects in input order",
+        };
         match (i.runs, i.run_triangles) {
             (Some(r), Some(t)) => println!(
-                "  layout       {layout}: {t} of {} triangles in {r} runs, objects in input order",
+                "  layout       {layout}: {t} of {} triangles in {r} runs, {order}",
                 i.triangles
             ),
-            _ => println!("  layout       {layout}, objects in input order"),
+            _ => println!("  layout       {layout}, {order}"),
         }
     }
     if let Some(v) = i.version {

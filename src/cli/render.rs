@@ -116,6 +116,13 @@ pub struct RenderArgs {
     /// depth-first render reads the database once anyway)
     #[arg(long)]
     pub full_scans: bool,
+    /// The order a database made for the render stores objects in: spatial (along a
+    /// Z-order curve, each keeping its input id for ties: blocks that
+    /// passes can skip, meshes stored compactly), input (as listed), or
+    /// auto (spatial for scene files, input for SPD generators, whose
+    /// order is spatial already)
+    #[arg(long, value_parser = sray_engine::job::ObjectOrder::parse, default_value = "auto", value_name = "auto|spatial|input")]
+    pub order: sray_engine::job::ObjectOrder,
     /// Intersection arithmetic: double or single
     #[arg(long, default_value = "double")]
     pub precision: Precision,
@@ -217,6 +224,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         shading: a.shading,
         models: a.models,
         full_scans: a.full_scans,
+        order: a.order,
         tmp_dir: a.tmp_dir.clone(),
         setup: a.setup.setup([a.width, a.height])?,
     };
@@ -257,6 +265,7 @@ fn run_cluster(a: &RenderArgs, req: &RenderRequest, outputs: Outputs) -> anyhow:
                 .memory
                 .unwrap_or_else(sray_engine::sys::default_memory_budget),
             setup: &req.setup,
+            order: req.order,
         },
         &BarStages,
     )?;

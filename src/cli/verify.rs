@@ -36,7 +36,24 @@ pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
     for part in parts {
         let part = part?;
         let mut scan = part.scan_checked()?;
+        // In spatial order each input id must occur exactly once.
+        let mut seen = part
+            .is_spatial()
+            .then(|| vec![0u64; (part.object_count() as usize).div_ceil(64)]);
         while let Some(block) = scan.next_block()? {
+            if let Some(seen) = seen.as_mut() {
+                for &id in block.ids() {
+                    let (w, bit) = (id as usize / 64, 1u64 << (id % 64));
+                    if seen[w] & bit != 0 {
+                        anyhow::bail!(
+                            "{}: block {}: input id {id} occurs twice: the database is corrupt",
+                            a.file.display(),
+                            block.index
+                        );
+                    }
+                    seen[w] |= bit;
+                }
+            }
             objects += block.object_count as u64;
             raw += block.raw_bytes() as u64;
             bar.0.set_position(read + scan.stats().bytes_read);

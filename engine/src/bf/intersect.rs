@@ -175,6 +175,8 @@ struct Cold {
     inv: Vec3,
     t_min: f64,
     t_max: f64,
+    /// The input id of the best hit's object, which decides ties.
+    rank: u32,
     /// The surface at the best hit so far, when surfaces are carried.
     ng: Vec3,
     ns: Vec3,
@@ -205,6 +207,7 @@ const EMPTY_COLD: Cold = Cold {
     ng: Vec3::ZERO,
     ns: Vec3::ZERO,
     material: 0,
+    rank: 0,
 };
 
 /// Bytes one ray slot takes (with its place in the queue of rays loaded
@@ -301,7 +304,7 @@ struct Shard<R> {
     /// When models are read per pass: the instances met this pass, and
     /// the rays (slots) registered near each, tested once the model is
     /// read after the world's objects.
-    placed: Vec<(u32, Placement)>,
+    placed: Vec<(u32, u32, Placement)>,
     pairs: Vec<Pair>,
 }
 
@@ -411,7 +414,7 @@ impl<R: Real> Slots<R> {
                     + sh.done.capacity() * size_of::<Outcome>()
                     + sh.order.capacity() * size_of::<u32>()
                     + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
-                    + sh.placed.capacity() * size_of::<(u32, Placement)>()
+                    + sh.placed.capacity() * size_of::<(u32, u32, Placement)>()
                     + sh.pairs.capacity() * size_of::<Pair>()
             })
             .sum::<usize>()
@@ -1110,6 +1113,8 @@ fn register<R: Real>(
 pub(crate) struct Candidate {
     at: u32,
     index: u32,
+    /// The object's input id: its place in the tie order.
+    rank: u32,
     group: u8,
     lo: [u16; 3],
     hi: [u16; 3],
@@ -1135,6 +1140,7 @@ fn candidates(
         out.push(Candidate {
             at: b.at,
             index: b.index,
+            rank: b.rank,
             group: g as u8,
             lo: lo.map(|c| c as u16),
             hi: hi.map(|c| c as u16),
@@ -1202,7 +1208,7 @@ fn scan_block<R: Real>(
                         }
                         if object.is_none() {
                             // Records were checked when the block was read.
-                            let Some(o) = block.object_at(c.at, c.index) else {
+                            let Some(o) = block.object_at(c.at, c.index, c.rank) else {
                                 return;
                             };
                             let placement = match &o.shape {
@@ -1211,7 +1217,7 @@ fn scan_block<R: Real>(
                             };
                             if let (true, Some(pl)) = (per_pass, placement) {
                                 placed_at = sh.placed.len() as u32;
-                                sh.placed.push((index, pl));
+                                sh.placed.push((index, c.rank, pl));
                             }
                             object = Some((o, o.shape.prepare(), placement));
                         }
@@ -1270,6 +1276,7 @@ fn scan_block<R: Real>(
                                 &mut sh.cold[slot as usize],
                                 t,
                                 prim,
+                                c.rank,
                                 carry,
                                 |ray| match (placement, prim.instance_parts()) {
                                     (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
@@ -1284,24 +1291,28 @@ fn scan_block<R: Real>(
     }
 }
 
-/// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`: a shadow ray
-/// is blocked; another keeps the hit if it wins, and with `carry` the
-/// surface there (exactly what the shading join would compute from the
-/// ray and this hit), which `surface` gives from the ray.
+/// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`, whose object
+/// has input id `rank`: a shadow ray is blocked; another keeps the hit if
+/// it wins, and with `carry` the surface there (exactly what the shading
+/// join would compute from the ray and this hit), which `surface` gives
+/// from the ray.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn offer<R: Real>(
     s: &mut Hot<R>,
     c: &mut Cold,
     t: f64,
     prim: PrimId,
+    rank: u32,
     carry: bool,
     surface: impl FnOnce(&RayQ<f64>) -> Option<(crate::intersect::Surface, u32)>,
 ) {
     if s.shadow {
         s.blocked = true;
         s.best = Hit { t, prim };
-    } else if s.best.loses_to(t, prim) {
+    } else if s.best.loses_to_ranked(c.rank, t, prim, rank) {
         s.best = Hit { t, prim };
+        c.rank = rank;
         s.upper = R::from_f64(t).next_up();
         if carry && let Some((surf, material)) = surface(&RayQ::from_vec3(c.o, c.d)) {
             c.ng = surf.ng;
@@ -1317,7 +1328,7 @@ fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
     shards
         .iter()
         .map(|sh| {
-            sh.pairs.len() * size_of::<Pair>() + sh.placed.len() * size_of::<(u32, Placement)>()
+            sh.pairs.len() * size_of::<Pair>() + sh.placed.len() * size_of::<(u32, u32, Placement)>()
         })
         .sum()
 }
@@ -1342,10 +1353,10 @@ fn test_pairs<R: Real>(
         // instances in the database's order whatever shard it is in, so
         // that counts do not depend on the number of threads.
         sh.pairs.sort_unstable_by_key(|p| {
-            let (index, pl) = &placed[p.placed as usize];
+            let (index, _, pl) = &placed[p.placed as usize];
             (pl.model, p.slot, *index)
         });
-        wanted.extend(sh.placed.iter().map(|(_, pl)| pl.model));
+        wanted.extend(sh.placed.iter().map(|(_, _, pl)| pl.model));
     }
     wanted.sort_unstable();
     wanted.dedup();
@@ -1363,9 +1374,9 @@ fn test_pairs<R: Real>(
                     counts,
                     ..
                 } = sh;
-                let from = pairs.partition_point(|p| placed[p.placed as usize].1.model < m);
+                let from = pairs.partition_point(|p| placed[p.placed as usize].2.model < m);
                 for p in &pairs[from..] {
-                    let (index, pl) = &placed[p.placed as usize];
+                    let (index, rank, pl) = &placed[p.placed as usize];
                     if pl.model != m {
                         break;
                     }
@@ -1385,7 +1396,7 @@ fn test_pairs<R: Real>(
                             .map(|(t, k)| (t.to_f64(), PrimId::instance(*index, k)))
                     };
                     if let Some((t, prim)) = found {
-                        offer(s, c, t, prim, carry, |ray| {
+                        offer(s, c, t, prim, *rank, carry, |ray| {
                             model.surface(pl, prim.instance_parts()?.1, ray, t)
                         });
                     }

@@ -256,7 +256,11 @@ impl<'a, 't> LaneTests<'a, 't> {
         tests: &mut KindCounts,
     ) -> Mask {
         tests.add_n(self.c.kind(), m.count_ones() as u64);
-        let mut to = Nearest { best, won: 0 };
+        let mut to = Nearest {
+            best,
+            won: 0,
+            ranks: self.s.objects.ranks(),
+        };
         self.hits(rays, m, &mut to, tests);
         to.won
     }
@@ -288,6 +292,8 @@ trait LaneSink<R> {
 struct Nearest<'b, R> {
     best: &'b mut Hits<R>,
     won: Mask,
+    /// The objects' input ids, for ties (see [`Hits::offer`]).
+    ranks: &'b [u32],
 }
 
 impl<R: Real> LaneSink<R> for Nearest<'_, R> {
@@ -298,7 +304,7 @@ impl<R: Real> LaneSink<R> for Nearest<'_, R> {
 
     #[inline(always)]
     fn hit(&mut self, i: usize, t: R, prim: PrimId) {
-        self.won |= (self.best.offer(i, t, prim) as Mask) << i;
+        self.won |= (self.best.offer(i, t, prim, self.ranks) as Mask) << i;
     }
 
     fn nearest(&self) -> bool {

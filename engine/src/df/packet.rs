@@ -600,10 +600,21 @@ impl<R: Real> Hits<R> {
     }
 
     /// Offers lane `i` a hit at `t` on primitive `prim`; whether it won.
+    /// `ranks` gives each object's input id, by which ties go (empty: the
+    /// ids are the positions).
     #[inline(always)]
-    pub fn offer(&mut self, i: usize, t: R, prim: PrimId) -> bool {
+    pub fn offer(&mut self, i: usize, t: R, prim: PrimId, ranks: &[u32]) -> bool {
         let t = t.to_f64();
-        if self.hit(i).loses_to(t, prim) {
+        let h = self.hit(i);
+        let wins = if ranks.is_empty() || t != h.t {
+            h.loses_to(t, prim)
+        } else {
+            // An exact tie in a database in spatial order (rare: looked
+            // up only then).
+            let rank = |p: PrimId| ranks[p.world_index() as usize];
+            h.loses_to_ranked(rank(h.prim), t, prim, rank(prim))
+        };
+        if wins {
             self.t[i] = t;
             self.prim[i] = prim;
             self.upper[i] = R::from_f64(t).next_up();

@@ -102,7 +102,7 @@ fn test_nearest<R: Real>(
     }
     *m = stamp;
     if let Some((t, prim)) = s.test(id, q, o, d, rmin, best.upper[lane], &mut sc.tests) {
-        best.offer(lane, t, prim);
+        best.offer(lane, t, prim, s.objects.ranks());
     }
 }
 

@@ -27,6 +27,13 @@ pub const VERSION_PACKED: u32 = 4;
 /// header is their total size. Written only when a scene has models, so
 /// that every other scene stays readable by an sray of version 4.
 pub const VERSION_MODELS: u32 = 5;
+/// Version 6: as version 5 (models only if `models_bytes` is not zero),
+/// with objects in spatial order ([`super::spatial`]): each block's
+/// payload starts with its objects' input ids
+/// ([`super::packed::pack_ids`]), then its records and runs. Written only
+/// in the spatial order, so that a file in input order stays readable by
+/// an sray of version 4 or 5.
+pub const VERSION_IDS: u32 = 6;
 /// Limit on the models of one database.
 pub const MAX_MODELS: usize = 1 << 20;
 /// Header flag: `vertices` is the size of a mesh's vertex table.

@@ -25,6 +25,7 @@ mod format;
 mod packed;
 mod read_ahead;
 mod reader;
+mod spatial;
 mod writer;
 
 pub use format::RECORD_HEADER_WORDS;
@@ -33,4 +34,5 @@ pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub(crate) use reader::decode_record;
 pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
+pub use spatial::SpatialSorter;
 pub use writer::{DbWriter, ModelRef, WRITE_BUFFER, WriteSummary};

@@ -109,7 +109,7 @@ type Corner = [u32; 6];
 /// The order-preserving integer of a finite `f32`'s bits (negative
 /// numbers reversed below the positive ones).
 #[inline]
-fn key(bits: u32) -> u32 {
+pub(crate) fn key(bits: u32) -> u32 {
     if bits >> 31 == 0 {
         bits | 0x8000_0000
     } else {
@@ -214,6 +214,67 @@ impl BitReader<'_> {
         self.bits -= width;
         v
     }
+}
+
+/// Stores the input ids of a block's objects (version 6, objects in
+/// spatial order) at the front of its payload: the smallest id, the bit
+/// width of the offsets from it, then each object's offset in that width,
+/// packed low bit first.
+pub fn pack_ids(ids: &[u32], out: &mut Vec<u32>) {
+    let lo = ids.iter().copied().min().unwrap_or(0);
+    let hi = ids.iter().copied().max().unwrap_or(0);
+    let width = 32 - (hi - lo).leading_zeros();
+    out.push(lo);
+    out.push(width);
+    let mut w = BitWriter {
+        out,
+        acc: 0,
+        bits: 0,
+    };
+    for &id in ids {
+        w.put(id - lo, width);
+    }
+    w.finish();
+}
+
+/// Reads the ids [`pack_ids`] stored for `objects` objects into `out`;
+/// returns the words they took. Each id must be below `limit` (the
+/// database's object count). Nothing in `packed` can make it panic.
+pub fn unpack_ids(
+    packed: &[u32],
+    objects: u32,
+    limit: u64,
+    out: &mut Vec<u32>,
+) -> Result<usize, String> {
+    out.clear();
+    let (&lo, &width) = match packed {
+        [lo, width, ..] => (lo, width),
+        _ => return Err("the block's object ids are cut off".into()),
+    };
+    if width > 32 {
+        return Err(format!("the block's object ids have a width of {width} bits"));
+    }
+    let words = (objects as u64 * width as u64).div_ceil(32) as usize;
+    let body = packed
+        .get(2..2 + words)
+        .ok_or("the block's object ids are cut off")?;
+    let mut r = BitReader {
+        words: body,
+        next: 0,
+        acc: 0,
+        bits: 0,
+    };
+    out.reserve(objects as usize);
+    for _ in 0..objects {
+        let id = lo as u64 + r.get(width) as u64;
+        if id >= limit {
+            return Err(format!(
+                "an object id of {id} in a database of {limit} objects"
+            ));
+        }
+        out.push(id as u32);
+    }
+    Ok(2 + words)
 }
 
 /// What packing a block did.

@@ -27,6 +27,7 @@ struct Ahead<P> {
     first_object: u64,
     object_count: u32,
     words: Vec<u32>,
+    ids: Vec<u32>,
     prepared: P,
 }
 
@@ -75,6 +76,7 @@ pub fn scan_blocks<P: Default + Send>(
                         first_object: 0,
                         object_count: 0,
                         words: Vec::new(),
+                        ids: Vec::new(),
                         prepared: P::default(),
                     });
                     a.index = block.index;
@@ -82,6 +84,8 @@ pub fn scan_blocks<P: Default + Send>(
                     a.object_count = block.object_count;
                     a.words.clear();
                     a.words.extend_from_slice(block.words());
+                    a.ids.clear();
+                    a.ids.extend_from_slice(block.ids());
                     prepare(&block, &mut a.prepared);
                     // A closed channel: the caller stopped on an error.
                     Ok(tx.send(Ok(a)).is_ok())
@@ -108,7 +112,7 @@ pub fn scan_blocks<P: Default + Send>(
                     break;
                 }
             };
-            let block = Block::from_words(a.index, a.first_object, a.object_count, &a.words);
+            let block = Block::from_words(a.index, a.first_object, a.object_count, &a.words, &a.ids);
             if let Err(e) = consume(&block, &a.prepared) {
                 outcome = Err(e);
                 break;

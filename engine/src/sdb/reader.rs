@@ -42,6 +42,9 @@ pub struct Database {
     decoded_bytes: u64,
     /// Blocks store triangles as runs (version 4).
     runs: bool,
+    /// Blocks store their objects' input ids (version 6: objects in
+    /// spatial order).
+    ids: bool,
     run_counts: PackCounts,
     /// Scans read every block, as the paper's passes do: none is passed
     /// over ([`Database::set_full_scans`]).
@@ -184,11 +187,11 @@ impl Database {
             ));
         }
         let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-        if !(VERSION..=VERSION_MODELS).contains(&h.version) {
+        if !(VERSION..=VERSION_IDS).contains(&h.version) {
             return Err(err(
                 "header",
                 format!(
-                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_MODELS}); regenerate it with `sray convert` or `sray gen`",
+                    "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_IDS}); regenerate it with `sray convert` or `sray gen`",
                     h.version
                 ),
             ));
@@ -211,6 +214,9 @@ impl Database {
         if h.version < VERSION_MODELS && models_bytes != 0 {
             return Err(err("header", "reserved words are not zero".into()));
         }
+        // Version 5 always has models; version 6 when it says it has.
+        let has_models =
+            h.version == VERSION_MODELS || (h.version >= VERSION_IDS && models_bytes != 0);
         let tables_end = h
             .tables_offset
             .checked_add(h.tables_len)
@@ -254,7 +260,7 @@ impl Database {
         let (mut scene, sizes, density, models) = decode_tables(
             &tables,
             h.version >= VERSION_DENSITY,
-            h.version >= VERSION_MODELS,
+            has_models,
         )
         .ok_or_else(|| err("tables", "malformed tables".into()))?;
         // Each model lies after the tables, in order, and they fill the
@@ -271,7 +277,7 @@ impl Database {
                 .checked_add(m.bytes)
                 .ok_or_else(|| err("tables", format!("model {i} is out of place")))?;
         }
-        if at != file_bytes || (h.version >= VERSION_MODELS && models.is_empty()) {
+        if at != file_bytes || (has_models && models.is_empty()) {
             return Err(err("tables", "the models do not fill the file".into()));
         }
         if counts_instances(&h) > 0 && models.is_empty() {
@@ -305,7 +311,10 @@ impl Database {
         // A version 4 file without a run stores its records as version 3
         // does: they are read in place (a record with a run's code is an
         // unknown kind there, so a lying count is an error, not a misread).
-        let runs = h.version >= VERSION_PACKED && run_counts.runs > 0;
+        // Version 6 blocks always go through the packed path: their ids
+        // come first.
+        let ids = h.version >= VERSION_IDS;
+        let runs = h.version >= VERSION_PACKED && (run_counts.runs > 0 || ids);
         let decoded_bytes = if runs {
             join64(h.decoded_bytes[0], h.decoded_bytes[1])
         } else {
@@ -353,6 +362,7 @@ impl Database {
             raw_bytes: h.raw_bytes,
             decoded_bytes,
             runs,
+            ids,
             full_scans: false,
             run_counts,
             file_bytes,
@@ -468,7 +478,13 @@ impl Database {
 
     /// Whether blocks store consecutive triangles as runs (version 4).
     pub fn has_runs(&self) -> bool {
-        self.runs
+        self.runs && self.run_counts.runs > 0
+    }
+
+    /// Whether objects are stored in spatial order, each with its input id
+    /// (version 6).
+    pub fn is_spatial(&self) -> bool {
+        self.ids
     }
 
     /// Makes every scan read every block, as the paper's passes do, rather
@@ -541,6 +557,7 @@ impl Database {
             decompressor,
             words: Vec::with_capacity(self.largest_block / 4),
             packed: Vec::new(),
+            ids: Vec::new(),
             decoded: 0,
             stored: Vec::new(),
             next_index: 0,
@@ -727,6 +744,8 @@ pub struct Scan<'d> {
     words: Vec<u32>,
     /// The block as stored, before its runs are expanded (version 4).
     packed: Vec<u32>,
+    /// The block's objects' input ids (version 6), else empty.
+    ids: Vec<u32>,
     /// Bytes of records the blocks read so far hold.
     decoded: u64,
     stored: Vec<u8>,
@@ -750,16 +769,24 @@ fn payload<'a>(runs: bool, packed: &'a mut Vec<u32>, words: &'a mut Vec<u32>) ->
 /// One decoded, validated block.
 pub struct Block<'a> {
     pub index: u64,
+    /// The position in the file of its first object.
     pub first_object: u64,
     pub object_count: u32,
     words: &'a [u32],
+    /// Each object's input id (version 6), or empty: the position is the
+    /// input id.
+    ids: &'a [u32],
 }
 
 /// One object of a block, borrowing its geometry from the block buffer.
 #[derive(Clone, Copy, Debug)]
 pub struct ObjectRef<'a> {
-    /// Its index in the database.
+    /// Its position in the database: how tracers, hits and the shading
+    /// join name it.
     pub index: u32,
+    /// Its id in the input, which decides ties (the same as `index`
+    /// unless the database is in spatial order).
+    pub rank: u32,
     pub material: u32,
     pub bbox: Aabb,
     pub shape: Shape<'a>,
@@ -935,8 +962,19 @@ impl Scan<'_> {
         }
         if runs {
             self.packed.truncate(raw_len / 4);
+            let at = if self.db.ids {
+                super::packed::unpack_ids(
+                    &self.packed,
+                    h.object_count,
+                    self.db.object_count,
+                    &mut self.ids,
+                )
+                .map_err(|m| self.err(m))?
+            } else {
+                0
+            };
             super::packed::unpack(
-                &self.packed,
+                &self.packed[at..],
                 h.object_count,
                 self.db.largest_block / 4,
                 &mut self.words,
@@ -976,6 +1014,7 @@ impl Scan<'_> {
             first_object: first,
             object_count: h.object_count,
             words: &self.words,
+            ids: &self.ids,
         }))
     }
 }
@@ -1071,9 +1110,20 @@ impl<'a> Block<'a> {
     pub fn objects(&self) -> ObjectIter<'a> {
         ObjectIter {
             words: self.words,
+            ids: self.ids,
             pos: 0,
+            first: self.first_object as u32,
             id: self.first_object as u32,
             left: self.object_count,
+        }
+    }
+
+    /// The input id of the block's `i`-th object.
+    #[inline(always)]
+    pub fn rank_of(&self, i: u32) -> u32 {
+        match self.ids.get(i as usize) {
+            Some(&r) => r,
+            None => self.first_object as u32 + i,
         }
     }
 
@@ -1083,17 +1133,27 @@ impl<'a> Block<'a> {
     pub fn boxes(&self) -> BoxIter<'a> {
         BoxIter {
             words: self.words,
+            ids: self.ids,
             pos: 0,
+            first: self.first_object as u32,
             index: self.first_object as u32,
             left: self.object_count,
         }
     }
 
     /// The object whose record starts at word `at` (as [`Block::boxes`]
-    /// gives it).
+    /// gives it), at position `index`, of input id `rank`.
     #[inline(always)]
-    pub fn object_at(&self, at: u32, index: u32) -> Option<ObjectRef<'a>> {
-        decode_record(self.words.get(at as usize..)?, index).map(|(o, _)| o)
+    pub fn object_at(&self, at: u32, index: u32, rank: u32) -> Option<ObjectRef<'a>> {
+        decode_record(self.words.get(at as usize..)?, index).map(|(mut o, _)| {
+            o.rank = rank;
+            o
+        })
+    }
+
+    /// Each object's input id, or empty when it is its position.
+    pub fn ids(&self) -> &'a [u32] {
+        self.ids
     }
 
     /// The block's records, as words (see the module documentation).
@@ -1107,12 +1167,14 @@ impl<'a> Block<'a> {
         first_object: u64,
         object_count: u32,
         words: &'a [u32],
+        ids: &'a [u32],
     ) -> Block<'a> {
         Block {
             index,
             first_object,
             object_count,
             words,
+            ids,
         }
     }
 
@@ -1127,14 +1189,28 @@ impl<'a> Block<'a> {
 pub struct BoxRef {
     pub at: u32,
     pub index: u32,
+    /// The input id (see [`ObjectRef::rank`]).
+    pub rank: u32,
     pub bbox: Aabb,
 }
 
 pub struct BoxIter<'a> {
     words: &'a [u32],
+    ids: &'a [u32],
     pos: usize,
+    first: u32,
     index: u32,
     left: u32,
+}
+
+/// The input id of the object at position `index` of a block whose first
+/// is `first`: from the block's ids, or the position itself.
+#[inline(always)]
+fn rank(ids: &[u32], first: u32, index: u32) -> u32 {
+    match ids.get(index.wrapping_sub(first) as usize) {
+        Some(&r) => r,
+        None => index,
+    }
 }
 
 impl Iterator for BoxIter<'_> {
@@ -1153,6 +1229,7 @@ impl Iterator for BoxIter<'_> {
         let r = BoxRef {
             at: self.pos as u32,
             index: self.index,
+            rank: rank(self.ids, self.first, self.index),
             bbox: Aabb {
                 min: [f(2), f(3), f(4)],
                 max: [f(5), f(6), f(7)],
@@ -1167,7 +1244,9 @@ impl Iterator for BoxIter<'_> {
 
 pub struct ObjectIter<'a> {
     words: &'a [u32],
+    ids: &'a [u32],
     pos: usize,
+    first: u32,
     id: u32,
     left: u32,
 }
@@ -1181,7 +1260,8 @@ impl<'a> Iterator for ObjectIter<'a> {
             return None;
         }
         // Records were validated when the block was read.
-        let (obj, len) = decode_record(&self.words[self.pos..], self.id)?;
+        let (mut obj, len) = decode_record(&self.words[self.pos..], self.id)?;
+        obj.rank = rank(self.ids, self.first, self.id);
         self.pos += len;
         self.id = self.id.wrapping_add(1);
         self.left -= 1;
@@ -1205,6 +1285,7 @@ pub(crate) fn decode_record(w: &[u32], index: u32) -> Option<(ObjectRef<'_>, usi
     Some((
         ObjectRef {
             index,
+            rank: index,
             material: w[1],
             bbox,
             shape: kind.decode(&f[6..], count),
@@ -1218,5 +1299,11 @@ impl ObjectRef<'_> {
     #[inline(always)]
     pub fn prim(&self) -> PrimId {
         PrimId::object(self.index)
+    }
+
+    /// The object's place in the tie order (its input id).
+    #[inline(always)]
+    pub fn tie(&self) -> PrimId {
+        PrimId::object(self.rank)
     }
 }

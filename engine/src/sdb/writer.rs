@@ -3,6 +3,7 @@
 
 use super::format::*;
 use super::packed::{PackCounts, Packer};
+use super::spatial::SpatialSorter;
 use crate::error::{Error, IoContext};
 use crate::scene::{
     Aabb, DensitySummary, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View,
@@ -72,6 +73,17 @@ pub struct DbWriter {
     models: Vec<ModelPart>,
     /// The model being written: objects and materials go to it.
     open_model: Option<Box<DbWriter>>,
+    /// With the spatial order (version 6), the records waiting to be
+    /// sorted; `None` writes them in input order.
+    sorter: Option<SpatialSorter>,
+    /// Whether blocks store their objects' input ids (version 6).
+    ids: bool,
+    /// The input ids of the block being filled.
+    block_ids: Vec<u32>,
+    /// A block's ids and runs, as stored.
+    id_words: Vec<u32>,
+    /// One record, encoded before the sorter takes it.
+    scratch: Vec<u32>,
 }
 
 /// A finished model, waiting to be appended.
@@ -152,13 +164,39 @@ impl DbWriter {
             triangles: 0,
             models: Vec::new(),
             open_model: None,
+            sorter: None,
+            ids: false,
+            block_ids: Vec::new(),
+            id_words: Vec::new(),
+            scratch: Vec::new(),
         })
+    }
+
+    /// Writes the objects in spatial order (version 6; see
+    /// [`super::spatial`]), sorting within `budget` bytes and spilling
+    /// sorted chunks to `dir` (the system's temporary directory if
+    /// `None`). Models keep their input order.
+    pub fn spatial(mut self, budget: usize, dir: Option<&Path>) -> DbWriter {
+        self.sort_spatially(budget, dir);
+        self
+    }
+
+    /// As [`DbWriter::spatial`], before the first object.
+    pub fn sort_spatially(&mut self, budget: usize, dir: Option<&Path>) {
+        assert_eq!(self.objects, 0, "the order is chosen before the first object");
+        if self.packer.is_none() {
+            self.packer = Some(Packer::default());
+        }
+        self.sorter = Some(SpatialSorter::new(budget, dir, &self.path));
+        self.ids = true;
     }
 
     /// Writes version 3, triangles as records, as sray did before runs
     /// (for comparisons and for tests of reading old files).
     pub fn without_runs(mut self) -> DbWriter {
         self.packer = None;
+        self.sorter = None;
+        self.ids = false;
         self
     }
 
@@ -184,6 +222,13 @@ impl DbWriter {
             return Ok(());
         }
         let raw: &[u8] = match self.packer.as_mut() {
+            Some(p) if self.ids => {
+                p.pack(&self.block, &mut self.packed);
+                self.id_words.clear();
+                super::packed::pack_ids(&self.block_ids, &mut self.id_words);
+                self.id_words.extend_from_slice(&self.packed);
+                bytemuck::cast_slice(&self.id_words)
+            }
             Some(p) => {
                 p.pack(&self.block, &mut self.packed);
                 bytemuck::cast_slice(&self.packed)
@@ -225,8 +270,24 @@ impl DbWriter {
         self.decoded_bytes += decoded_len as u64;
         self.blocks += 1;
         self.block.clear();
-        self.block_first = self.objects;
+        self.block_ids.clear();
+        self.block_first += self.block_objects as u64;
         self.block_objects = 0;
+        Ok(())
+    }
+
+    /// Adds a record to the block being filled (closing it first if the
+    /// record would take it past its target), as object `id` of the input
+    /// when blocks store ids.
+    fn place(&mut self, id: u32, record: &[u32]) -> Result<(), Error> {
+        if self.block_objects > 0 && (self.block.len() + record.len()) * 4 > BLOCK_TARGET {
+            self.flush_block()?;
+        }
+        self.block.extend_from_slice(record);
+        if self.ids {
+            self.block_ids.push(id);
+        }
+        self.block_objects += 1;
         Ok(())
     }
 
@@ -313,6 +374,9 @@ impl DbWriter {
         if self.view.is_none() {
             return Err(Error::Scene("the scene has no view ('v')".into()));
         }
+        if let Some(sorter) = self.sorter.take() {
+            sorter.finish(|id, record| self.place(id, record))?;
+        }
         self.flush_block()?;
         let mut tables = self.tables();
         let tables_offset = self.offset;
@@ -361,7 +425,9 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: if !self.models.is_empty() {
+            version: if self.ids {
+                VERSION_IDS
+            } else if !self.models.is_empty() {
                 VERSION_MODELS
             } else if self.packer.is_some() {
                 VERSION_PACKED
@@ -641,18 +707,29 @@ impl SceneSink for DbWriter {
             + kind
                 .payload_words(count)
                 .ok_or_else(|| Error::Scene(format!("a {} with count {count}", kind.name())))?;
-        if self.block_objects > 0 && (self.block.len() + words) * 4 > BLOCK_TARGET {
-            self.flush_block()?;
-        }
         let bbox = shape.bounds();
         self.bbox.union(&bbox);
         self.sizes.add(&bbox);
         self.density.add(&bbox);
-        let b = &mut self.block;
-        b.push(kind as u32 | (count << 8));
-        b.push(material);
-        b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
-        shape.encode(b);
+        let encode = |b: &mut Vec<u32>| {
+            b.push(kind as u32 | (count << 8));
+            b.push(material);
+            b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
+            shape.encode(b);
+        };
+        let id = self.objects as u32;
+        if let Some(sorter) = self.sorter.as_mut() {
+            self.scratch.clear();
+            encode(&mut self.scratch);
+            sorter.push(id, &self.scratch)?;
+        } else {
+            // In input order the record goes straight to its block.
+            if self.block_objects > 0 && (self.block.len() + words) * 4 > BLOCK_TARGET {
+                self.flush_block()?;
+            }
+            encode(&mut self.block);
+            self.block_objects += 1;
+        }
         let triangles = shape.triangles();
         if triangles > 0 {
             self.triangles += triangles;
@@ -660,7 +737,6 @@ impl SceneSink for DbWriter {
         }
         self.counts.add(kind);
         self.objects += 1;
-        self.block_objects += 1;
         Ok(())
     }
 }
