@@ -44,9 +44,10 @@ pub struct RenderRequest {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ObjectOrder {
     /// Spatial for scene files (meshes, NFF, glTF), whose order is
-    /// whatever their writer chose; the input's for SPD generators, which
+    /// whatever their writer chose, and for databases rewritten (their
+    /// objects keep their input ids); the input's for SPD generators, which
     /// emit their objects by recursive subdivision, already in a spatial
-    /// order, and for databases.
+    /// order.
     #[default]
     Auto,
     /// Along a Z-order curve through the objects' centres, each keeping
@@ -71,7 +72,7 @@ impl ObjectOrder {
         match self {
             ObjectOrder::Spatial => true,
             ObjectOrder::Input => false,
-            ObjectOrder::Auto => matches!(scene, SceneSource::File { .. }),
+            ObjectOrder::Auto => !matches!(scene, SceneSource::Spd { .. }),
         }
     }
 }
@@ -152,9 +153,15 @@ pub fn write_database(
     let budget = if spatial {
         let sort = sort_memory(opts.memory);
         w.sort_spatially(sort, opts.tmp_dir);
-        opts.memory
-            .saturating_sub(crate::sdb::SpatialSorter::held_bytes(sort) as u64)
-            .max(MIN_MESH_MEMORY)
+        let rest = opts
+            .memory
+            .saturating_sub(crate::sdb::SpatialSorter::held_bytes(sort) as u64);
+        // Below the least a mesh needs, the reader's own error says so.
+        if opts.memory < MIN_MESH_MEMORY {
+            opts.memory
+        } else {
+            rest.max(MIN_MESH_MEMORY)
+        }
     } else {
         opts.memory
     };

@@ -444,7 +444,7 @@ pub fn stream_database(
                 sink.material(m)?;
                 current = Some(obj.material);
             }
-            sink.object(&obj.shape)?;
+            sink.ranked_object(&obj.shape, obj.rank)?;
         }
         progress.inc(block.object_count as u64);
     }

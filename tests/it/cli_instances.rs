@@ -61,7 +61,8 @@ fn instances_render_as_their_copies_in_every_tracer() {
 
     // The shared mesh is stored once: one model, four instances.
     let i = info(d, "inst.sdb");
-    assert_eq!(i["version"], 5, "{i}");
+    // A glTF is a scene file: its world's objects in spatial order.
+    assert_eq!(i["version"], 6, "{i}");
     assert_eq!(i["counts"]["instance"], 4, "{i}");
     assert_eq!(i["objects"], 4, "{i}");
     let models = i["models"].as_array().unwrap();
@@ -77,12 +78,13 @@ fn instances_render_as_their_copies_in_every_tracer() {
     let f = info(d, "flat.sdb");
     assert_eq!(f["triangles"].as_u64(), Some(4 * t), "{f}");
     assert!(f.get("models").is_none(), "{f}");
-    // Less than a third of the copies' size.
+    // Less than half the copies' size (the copies are in spatial order,
+    // which stores them more compactly than the model's input order).
     let (bi, bc) = (
         i["file_bytes"].as_u64().unwrap(),
         c["file_bytes"].as_u64().unwrap(),
     );
-    assert!(3 * bi < bc, "{bi} bytes instanced, {bc} copied");
+    assert!(2 * bi < bc, "{bi} bytes instanced, {bc} copied");
 
     let configs: [&[&str]; 6] = [
         &["--mode", "df"],

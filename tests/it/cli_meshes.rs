@@ -286,9 +286,10 @@ fn every_shared_mesh_reads_converts_and_renders_whole() {
             assert_eq!(a[key], b[key], "{name}: {key}");
         }
         assert_eq!(b["lights"], 2, "{name}: the default key and fill lights");
-        // Stored as triangle runs (database version 4), which expand to
-        // the records' size.
-        assert_eq!(b["version"], 4, "{name}");
+        // Stored as triangle runs, in spatial order (database version 6),
+        // which expand to the records' size.
+        assert_eq!(b["version"], 6, "{name}");
+        assert_eq!(b["order"], "spatial", "{name}");
         assert_eq!(b["layout"], "triangle runs", "{name}");
         let objects = b["objects"].as_u64().unwrap();
         assert!(

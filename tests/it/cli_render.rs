@@ -42,8 +42,20 @@ fn nff_and_spd_routes_render_identically() {
         a.extend(small);
         let mut b = vec!["render", spd.as_str(), "-o", "b.png", "--stats", "b.json"];
         b.extend(small);
+        // The generator's order: the same database, so the same counts.
+        a.extend(["--order", "input"]);
         ok(d, &a);
         ok(d, &b);
+        // In spatial order (the default for a file): the same image.
+        let mut c = a.clone();
+        c.truncate(c.len() - 2);
+        c[3] = "c.png";
+        c[5] = "c.json";
+        ok(d, &c);
+        assert!(
+            std::fs::read(d.join("c.png")).unwrap() == std::fs::read(d.join("b.png")).unwrap(),
+            "{name}: the spatial order changed the image"
+        );
         let (ia, ib) = (
             std::fs::read(d.join("a.png")).unwrap(),
             std::fs::read(d.join("b.png")).unwrap(),

@@ -29,6 +29,7 @@ mod cli_meshes;
 mod cli_progress;
 mod cli_render;
 mod cli_scene;
+mod cli_spatial;
 mod cluster;
 mod cluster_observe;
 mod cluster_trust;

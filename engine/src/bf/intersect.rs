@@ -1328,7 +1328,8 @@ fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
     shards
         .iter()
         .map(|sh| {
-            sh.pairs.len() * size_of::<Pair>() + sh.placed.len() * size_of::<(u32, u32, Placement)>()
+            sh.pairs.len() * size_of::<Pair>()
+                + sh.placed.len() * size_of::<(u32, u32, Placement)>()
         })
         .sum()
 }

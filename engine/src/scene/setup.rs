@@ -438,6 +438,16 @@ impl SceneSink for SetupSink<'_> {
         self.inner.object(shape)
     }
 
+    fn ranked_object(&mut self, shape: &Shape<'_>, rank: u32) -> Result<(), Error> {
+        if let Some(m) = self.setup.material
+            && !self.material_sent
+        {
+            self.material_sent = true;
+            self.inner.material(&m)?;
+        }
+        self.inner.ranked_object(shape, rank)
+    }
+
     fn origin(&mut self, origin: [f64; 3]) -> Result<(), Error> {
         self.inner.origin(origin)
     }

@@ -21,6 +21,14 @@ pub trait SceneSink {
     fn material(&mut self, material: &Material) -> Result<(), Error>;
     fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error>;
 
+    /// Object `rank` of the scene's input, sent by a source whose order is
+    /// not its input's (a database in spatial order) instead of
+    /// [`SceneSink::object`], so that a sink keeping input ids for ties
+    /// keeps these. The default numbers it by its place in the stream.
+    fn ranked_object(&mut self, shape: &Shape<'_>, _rank: u32) -> Result<(), Error> {
+        self.object(shape)
+    }
+
     /// The point, in world coordinates, that every object's geometry is
     /// relative to. Sent at most once, before any object. A sink that
     /// cannot keep an origin refuses any but the world's own (the default).

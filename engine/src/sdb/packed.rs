@@ -252,7 +252,9 @@ pub fn unpack_ids(
         _ => return Err("the block's object ids are cut off".into()),
     };
     if width > 32 {
-        return Err(format!("the block's object ids have a width of {width} bits"));
+        return Err(format!(
+            "the block's object ids have a width of {width} bits"
+        ));
     }
     let words = (objects as u64 * width as u64).div_ceil(32) as usize;
     let body = packed
@@ -926,6 +928,36 @@ mod tests {
             let e = unpack(&p, 20, r.len(), &mut out).unwrap_err();
             assert!(e.contains("invalid header"), "{e}");
         }
+    }
+
+    #[test]
+    fn ids_read_back_and_a_corrupt_header_is_an_error() {
+        for ids in [
+            vec![],
+            vec![7],
+            vec![5, 9, 2, 1_000_000, 3],
+            vec![u32::MAX - 1, 0],
+        ] {
+            let mut out = Vec::new();
+            pack_ids(&ids, &mut out);
+            out.push(0xdead_beef); // what follows: the records
+            let mut got = Vec::new();
+            let used = unpack_ids(&out, ids.len() as u32, u32::MAX as u64, &mut got).unwrap();
+            assert_eq!(got, ids);
+            assert_eq!(out[used], 0xdead_beef);
+            // Every cut is an error, never a panic.
+            for cut in 0..used {
+                if !ids.is_empty() || cut < 2 {
+                    assert!(unpack_ids(&out[..cut], ids.len() as u32, u64::MAX, &mut got).is_err());
+                }
+            }
+        }
+        let mut out = Vec::new();
+        pack_ids(&[3, 4], &mut out);
+        // An id past the objects, and a width past 32 bits.
+        assert!(unpack_ids(&out, 2, 4, &mut Vec::new()).is_err());
+        out[1] = 33;
+        assert!(unpack_ids(&out, 2, 100, &mut Vec::new()).is_err());
     }
 
     #[test]

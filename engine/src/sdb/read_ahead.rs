@@ -112,7 +112,8 @@ pub fn scan_blocks<P: Default + Send>(
                     break;
                 }
             };
-            let block = Block::from_words(a.index, a.first_object, a.object_count, &a.words, &a.ids);
+            let block =
+                Block::from_words(a.index, a.first_object, a.object_count, &a.words, &a.ids);
             if let Err(e) = consume(&block, &a.prepared) {
                 outcome = Err(e);
                 break;

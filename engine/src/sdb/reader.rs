@@ -257,12 +257,9 @@ impl Database {
                 "checksum mismatch: the tables are corrupt".into(),
             ));
         }
-        let (mut scene, sizes, density, models) = decode_tables(
-            &tables,
-            h.version >= VERSION_DENSITY,
-            has_models,
-        )
-        .ok_or_else(|| err("tables", "malformed tables".into()))?;
+        let (mut scene, sizes, density, models) =
+            decode_tables(&tables, h.version >= VERSION_DENSITY, has_models)
+                .ok_or_else(|| err("tables", "malformed tables".into()))?;
         // Each model lies after the tables, in order, and they fill the
         // rest of the file.
         let mut at = h.tables_offset + h.tables_len;
@@ -320,7 +317,17 @@ impl Database {
         } else {
             h.raw_bytes
         };
-        if decoded_bytes < h.raw_bytes || !decoded_bytes.is_multiple_of(4) {
+        // Version 6 blocks store their ids beside the records: at most two
+        // words per block and a word per object.
+        let ids_bytes = if ids {
+            h.block_count
+                .saturating_mul(8)
+                .saturating_add(h.object_count.saturating_mul(4))
+        } else {
+            0
+        };
+        if decoded_bytes.saturating_add(ids_bytes) < h.raw_bytes || !decoded_bytes.is_multiple_of(4)
+        {
             return Err(err(
                 "header",
                 "the records' expanded size is below their stored size".into(),
@@ -343,7 +350,14 @@ impl Database {
         } else {
             h.block_raw_max as usize
         };
-        if largest_stored > h.block_raw_max as usize {
+        // A record is at least 8 words, and an id one (version 6), with
+        // two words of the ids' header per block.
+        let ids_room = if ids {
+            h.block_raw_max as usize / 8 + 8
+        } else {
+            0
+        };
+        if largest_stored > h.block_raw_max as usize + ids_room {
             return Err(err("header", "unsupported header or block size".into()));
         }
         Ok(Database {

@@ -27,7 +27,7 @@ use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 /// Least chunk a sorter gathers before it writes a sorted file.
-pub const MIN_CHUNK_BYTES: usize = 1 << 20;
+pub const MIN_CHUNK_BYTES: usize = 256 << 10;
 /// Bytes of each file's read buffer while files are merged.
 const MERGE_BUFFER: usize = 64 << 10;
 
@@ -99,7 +99,7 @@ impl SpatialSorter {
 
     /// Bytes a sorter of `budget` holds at most.
     pub fn held_bytes(budget: usize) -> usize {
-        budget.max(MIN_CHUNK_BYTES) + super::format::MAX_BLOCK_RAW
+        budget.max(MIN_CHUNK_BYTES)
     }
 
     /// Takes object `id`'s record.
@@ -229,8 +229,10 @@ fn read_record(
     rec.clear();
     rec.extend_from_slice(&head);
     rec.resize(1 + len, 0);
-    r.read_exact(bytemuck::cast_slice_mut(&mut rec[1 + RECORD_HEADER_WORDS..]))
-        .at(path)?;
+    r.read_exact(bytemuck::cast_slice_mut(
+        &mut rec[1 + RECORD_HEADER_WORDS..],
+    ))
+    .at(path)?;
     Ok(true)
 }
 
@@ -310,7 +312,9 @@ mod tests {
         let path = dir.path().join("x.sdb");
         let mut seed = 7u64;
         let mut next = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
         };
         let records: Vec<Vec<u32>> = (0..60_000)

@@ -183,7 +183,10 @@ impl DbWriter {
 
     /// As [`DbWriter::spatial`], before the first object.
     pub fn sort_spatially(&mut self, budget: usize, dir: Option<&Path>) {
-        assert_eq!(self.objects, 0, "the order is chosen before the first object");
+        assert_eq!(
+            self.objects, 0,
+            "the order is chosen before the first object"
+        );
         if self.packer.is_none() {
             self.packer = Some(Packer::default());
         }
@@ -679,6 +682,18 @@ impl SceneSink for DbWriter {
     }
 
     fn object(&mut self, shape: &Shape<'_>) -> Result<(), Error> {
+        self.object_ranked(shape, None)
+    }
+
+    fn ranked_object(&mut self, shape: &Shape<'_>, rank: u32) -> Result<(), Error> {
+        self.object_ranked(shape, Some(rank))
+    }
+}
+
+impl DbWriter {
+    /// Writes an object, of input id `rank` if given (kept only in
+    /// spatial order), else numbered by its place.
+    fn object_ranked(&mut self, shape: &Shape<'_>, rank: Option<u32>) -> Result<(), Error> {
         if let Some(model) = self.open_model.as_mut() {
             if !matches!(shape, Shape::Polygon(_) | Shape::Patch(_)) || shape.count() != 3 {
                 return Err(Error::Scene(format!(
@@ -717,7 +732,7 @@ impl SceneSink for DbWriter {
             b.extend(bbox.to_array().iter().map(|f| f.to_bits()));
             shape.encode(b);
         };
-        let id = self.objects as u32;
+        let id = rank.unwrap_or(self.objects as u32);
         if let Some(sorter) = self.sorter.as_mut() {
             self.scratch.clear();
             encode(&mut self.scratch);
