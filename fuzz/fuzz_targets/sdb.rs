@@ -32,7 +32,7 @@ fuzz_target!(|data: &[u8]| {
         for o in block.objects() {
             let _ = o.shape.prepare();
             let _ = intersect::<f64>(&o.shape, &o.bbox, &ray, 0.0, f64::INFINITY);
-            let _ = (o.index, o.material);
+            let _ = (o.index, o.rank, o.material);
             if let Shape::Instance(i) = o.shape {
                 placements.push(Placement::of(&i));
             }

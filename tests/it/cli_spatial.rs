@@ -107,6 +107,13 @@ fn a_scrambled_mesh_in_spatial_order_renders_the_same_smaller_and_skips_more() {
             "{mode} at {memory} {extra:?}"
         );
     }
+    // Depth-first lists each voxel's objects in input id order: every
+    // count is the input order's too.
+    let tests = |n: &str| stats(d, n)["intersection_tests_by_kind"].clone();
+    assert_eq!(
+        tests("in.sdb.df.1GiB.png.json"),
+        tests("sp.sdb.df.1GiB.png.json")
+    );
     // Late passes, with few rays left, pass over more blocks.
     render(d, "in.sdb", "bf", "6MiB", &[]);
     let bytes = |n: &str| stats(d, n)["db_bytes_read"].as_u64();

@@ -134,8 +134,9 @@ impl Hierarchies {
                 (morton(q), id)
             })
             .collect();
-        // By code, then id: the same tree on every run.
-        order.sort_unstable();
+        // By code, then input id: the same tree on every run, and in a
+        // database in spatial order the tree of the input's order.
+        order.sort_unstable_by_key(|&(code, id)| (code, boxes.rank(id)));
         let root = self.nodes.len();
         self.nodes.push(Node {
             bbox: Aabb::EMPTY,

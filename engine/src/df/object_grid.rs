@@ -10,6 +10,17 @@ pub trait Boxes: Sync {
     fn count(&self) -> usize;
     fn bbox(&self, id: u32) -> Aabb;
 
+    /// The object's input id, by which ties go: its id, unless the
+    /// database is in spatial order.
+    fn rank(&self, id: u32) -> u32 {
+        id
+    }
+
+    /// Whether some object's input id is not its id.
+    fn ranked(&self) -> bool {
+        false
+    }
+
     /// Gives `f` every object's id and box, in id order.
     fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
         for id in 0..self.count() as u32 {
@@ -41,12 +52,22 @@ impl Boxes for ObjectStore {
     fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
         self.each_bbox(f)
     }
+
+    #[inline]
+    fn rank(&self, id: u32) -> u32 {
+        self.ranks().get(id as usize).copied().unwrap_or(id)
+    }
+
+    fn ranked(&self) -> bool {
+        !self.ranks().is_empty()
+    }
 }
 
 /// A uniform grid listing, per voxel, the objects whose bounding box
 /// overlaps it: one flat array of object ids and the start of each
 /// listing voxel's run (mark, count, prefix-sum, fill), in object id order
-/// within a voxel. A voxel listing more than [`MIN_OBJECTS`] objects lists
+/// within a voxel (input id order, for a database in spatial order, so
+/// that objects are met, and shadow rays stop, as in the input's order). A voxel listing more than [`MIN_OBJECTS`] objects lists
 /// instead one entry tagged [`NESTED`], a hierarchy of boxes over them
 /// (see [`super::nested`]).
 ///
@@ -145,6 +166,11 @@ impl ObjectGrid {
             }
         });
         drop(fill);
+        if boxes.ranked() {
+            for w in start.windows(2) {
+                items[w[0] as usize..w[1] as usize].sort_unstable_by_key(|&id| boxes.rank(id));
+            }
+        }
         let mut grid = ObjectGrid {
             spec,
             occupied,
