@@ -149,10 +149,21 @@ pub fn write_database(
     progress: &dyn crate::progress::Progress,
 ) -> Result<(), Error> {
     let spatial = opts.order.is_spatial_for(scene);
+    // A database in spatial order rewritten in input order goes back to
+    // the order of its input ids.
+    let restore = !spatial
+        && match scene {
+            SceneSource::Database(p) => Database::open(p)?.is_spatial(),
+            _ => false,
+        };
     // The sort's chunk comes out of the budget before the reader's share.
-    let budget = if spatial {
+    let budget = if spatial || restore {
         let sort = sort_memory(opts.memory);
-        w.sort_spatially(sort, opts.tmp_dir);
+        if spatial {
+            w.sort_spatially(sort, opts.tmp_dir);
+        } else {
+            w.sort_by_id(sort, opts.tmp_dir);
+        }
         let rest = opts
             .memory
             .saturating_sub(crate::sdb::SpatialSorter::held_bytes(sort) as u64);

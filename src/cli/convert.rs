@@ -5,7 +5,7 @@ use super::render::SetupArgs;
 use super::{OutputKind, output_kind, parse_compression};
 use anyhow::Context;
 use clap::Args;
-use sray_engine::job::{BUDGET_WRITE_BUFFER, PrepareOptions, write_database};
+use sray_engine::job::{BUDGET_WRITE_BUFFER, ObjectOrder, PrepareOptions, write_database};
 use sray_engine::mesh::MeshOptions;
 use sray_engine::nff::NffWriter;
 use sray_engine::progress::Progress;
@@ -98,6 +98,34 @@ pub fn write_scene(
         OutputKind::Nff => {
             if compress != Compression::None {
                 anyhow::bail!("--compress applies to .sdb output only");
+            }
+            // NFF numbers objects by their place: a database in spatial
+            // order is put back in its input's order first, so that ties
+            // (which go by input id) stay as they were.
+            if let SceneSource::Database(p) = source
+                && sray_engine::sdb::Database::open(p)?.is_spatial()
+            {
+                let dir = match opts.tmp_dir {
+                    Some(d) => tempfile::Builder::new().prefix("sray-").tempdir_in(d)?,
+                    None => tempfile::Builder::new().prefix("sray-").tempdir()?,
+                };
+                let restored = dir.path().join("input-order.sdb");
+                let mut w = DbWriter::create_with_buffer(&restored, compress, BUDGET_WRITE_BUFFER)?;
+                let plain = no_setup();
+                let restore = PrepareOptions {
+                    setup: &plain,
+                    order: ObjectOrder::Input,
+                    ..*opts
+                };
+                write_database(source, &mut w, &restore, progress)?;
+                w.finish()?;
+                return write_scene(
+                    &SceneSource::Database(restored),
+                    output,
+                    compress,
+                    opts,
+                    progress,
+                );
             }
             let tmp = sray_engine::fsutil::temp_beside(output)?;
             let mut w = NffWriter::new(BufWriter::with_capacity(1 << 20, tmp), output);

@@ -167,6 +167,36 @@ fn ties_go_to_the_input_id_whatever_the_order_on_disk() {
             "{mode} at {memory}"
         );
     }
+    // Written back in input order, as a database or as NFF, the objects
+    // go back to their input ids' order: the same ties.
+    ok(
+        d,
+        &[
+            "convert", "-q", "sp.sdb", "-o", "back.sdb", "--order", "input",
+        ],
+    );
+    ok(d, &["convert", "-q", "sp.sdb", "-o", "back.nff"]);
+    ok(
+        d,
+        &[
+            "convert",
+            "-q",
+            "back.nff",
+            "-o",
+            "again.sdb",
+            "--order",
+            "input",
+        ],
+    );
+    assert_eq!(info(d, "back.sdb")["order"], "input");
+    for db in ["back.sdb", "again.sdb"] {
+        assert!(render(d, db, "df", "1GiB", &[]) == want, "{db}");
+    }
+    // Rewritten with the default order (a render with an override does
+    // this too), it stays spatial and keeps its ids.
+    ok(d, &["convert", "-q", "sp.sdb", "-o", "re.sdb"]);
+    assert_eq!(info(d, "re.sdb")["order"], "spatial");
+    assert!(render(d, "re.sdb", "bf", "1GiB", &[]) == want);
 }
 
 /// The sort spills sorted chunks to files and merges them under a small

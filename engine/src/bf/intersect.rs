@@ -42,7 +42,8 @@ use crate::math::{Real, Vec3, Vec3Ext};
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
 use crate::render::KindCounts;
-use crate::sdb::{Block, Database, ObjectRef};
+use crate::scene::Aabb;
+use crate::sdb::{Block, BoxRef, Database, ObjectRef};
 use crate::shapes::{Prepared, Shape};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -1120,6 +1121,12 @@ pub(crate) struct Candidate {
     hi: [u16; 3],
 }
 
+/// Consecutive objects judged together first: in a database in spatial
+/// order they lie close together, and an aggregate whose box meets no
+/// registered voxel of any grid is passed over without looking at its
+/// objects one by one (their grid, their voxels).
+const AGGREGATE: usize = 32;
+
 /// The objects of `block` whose voxel box meets `region`, the box of the
 /// voxels rays are registered in this pass.
 fn candidates(
@@ -1129,7 +1136,45 @@ fn candidates(
     out: &mut Vec<Candidate>,
 ) {
     out.clear();
-    for b in block.boxes() {
+    let mut boxes = block.boxes();
+    let mut agg = [BoxRef {
+        at: 0,
+        index: 0,
+        rank: 0,
+        bbox: Aabb::EMPTY,
+    }; AGGREGATE];
+    loop {
+        let mut n = 0;
+        let mut bounds = Aabb::EMPTY;
+        for b in boxes.by_ref().take(AGGREGATE) {
+            bounds.union(&b.bbox);
+            agg[n] = b;
+            n += 1;
+        }
+        if n == 0 {
+            return;
+        }
+        // Each object's voxels in its own grid lie within the aggregate's
+        // voxels in that grid: passing over it drops no candidate.
+        let near = grids.grids.iter().zip(region).any(|(grid, r)| {
+            grid.spec
+                .cell_range(&bounds)
+                .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
+        });
+        if near {
+            candidates_in(&agg[..n], grids, region, out);
+        }
+    }
+}
+
+/// [`candidates`] among `boxes`, one by one.
+fn candidates_in(
+    boxes: &[BoxRef],
+    grids: &VoxelGrids,
+    region: &[Region; MAX_GRIDS],
+    out: &mut Vec<Candidate>,
+) {
+    for b in boxes {
         let g = grids.partition.group(&b.bbox);
         let Some((lo, hi)) = grids.grids[g].spec.cell_range(&b.bbox) else {
             continue;

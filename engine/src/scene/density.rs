@@ -43,7 +43,7 @@ impl Lattice {
         let s = pow2(-level);
         let mut a = [0i64; 3];
         for i in 0..3 {
-            let f = (c[i] * s).floor();
+            let f = floor(c[i] * s);
             if !(f.abs() < MAX_CELL_COORD) {
                 return None;
             }
@@ -89,10 +89,28 @@ fn centre(b: &Aabb) -> [f64; 3] {
     std::array::from_fn(|i| 0.5 * (b.min[i] as f64 + b.max[i] as f64))
 }
 
-/// `2^e` for the exponents a lattice uses.
+/// `2^e` for the exponents a lattice uses: built from its bits where it
+/// is a normal number (the breadth-first tracer asks for it for every
+/// object in every pass; `powi` is a library call), as `powi` gives it.
 #[inline]
 fn pow2(e: i32) -> f64 {
-    2f64.powi(e)
+    if (-1022..=1023).contains(&e) {
+        f64::from_bits(((e + 1023) as u64) << 52)
+    } else {
+        2f64.powi(e)
+    }
+}
+
+/// `x.floor()`, without the library call baseline x86-64 makes for it:
+/// below 2^52 in magnitude, truncation to an integer is exact.
+#[inline]
+fn floor(x: f64) -> f64 {
+    if x.abs() < 4_503_599_627_370_496.0 {
+        let t = x as i64 as f64;
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x.floor()
+    }
 }
 
 impl DensitySummary {
@@ -245,6 +263,39 @@ impl DensitySummary {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn pow2_and_floor_are_the_library_s() {
+        for e in -1100..1100 {
+            assert_eq!(pow2(e).to_bits(), 2f64.powi(e).to_bits(), "2^{e}");
+        }
+        let mut xs = vec![0.0, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5, -2.5, 1e-300, -1e-300];
+        xs.extend([
+            4.5e15,
+            -4.5e15,
+            4.6e15,
+            -4.6e15,
+            1e300,
+            -1e300,
+            f64::MAX,
+            f64::MIN,
+        ]);
+        let mut seed = 1u64;
+        for _ in 0..100_000 {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1);
+            let x = f64::from_bits(seed);
+            if x.is_finite() {
+                xs.push(x);
+                xs.push(x * 1e-300);
+            }
+            xs.push((seed >> 11) as f64 / 1e6 - 4e12);
+        }
+        for x in xs {
+            // Equal as numbers (a -0.0 may come back as 0.0).
+            assert_eq!(floor(x), x.floor(), "{x}");
+        }
+        assert!(floor(f64::NAN).is_nan());
+    }
+
     use super::*;
 
     fn cube(c: [f32; 3], r: f32) -> Aabb {

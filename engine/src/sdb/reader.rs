@@ -527,11 +527,17 @@ impl Database {
     /// stored block (packed, compressed, or both).
     pub fn scan_buffer_bytes(&self) -> usize {
         let packed = if self.runs { self.largest_stored } else { 0 };
+        // A block's ids: at most a word per record of its expanded size.
+        let ids = if self.ids {
+            self.largest_block / RECORD_HEADER_WORDS
+        } else {
+            0
+        };
         let compressed = match self.compression {
             Compression::None => 0,
             Compression::Zstd(_) => max_stored(self.largest_stored),
         };
-        self.largest_block + packed + compressed
+        self.largest_block + packed + ids + compressed
     }
 
     /// Starts a sequential scan of the objects. The first scan checks
@@ -973,6 +979,14 @@ impl Scan<'_> {
         }
         if h.index as u64 != self.next_index || h.first_object != self.next_object {
             return Err(self.err("block is out of sequence"));
+        }
+        // Before anything is decoded for them: a block holds no more objects
+        // than are left, nor more records than its expanded size has room
+        // for (a record is at least its header).
+        if h.object_count as u64 > self.db.object_count - self.next_object
+            || h.object_count as usize > self.db.largest_block / (4 * RECORD_HEADER_WORDS)
+        {
+            return Err(self.err("blocks hold more objects than the header says"));
         }
         if runs {
             self.packed.truncate(raw_len / 4);

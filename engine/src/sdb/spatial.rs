@@ -30,6 +30,9 @@ use std::path::{Path, PathBuf};
 pub const MIN_CHUNK_BYTES: usize = 256 << 10;
 /// Bytes of each file's read buffer while files are merged.
 const MERGE_BUFFER: usize = 64 << 10;
+/// Most files merged at once (and so, per level, held open): far below
+/// the usual limit of 1,024 open files.
+const MAX_FAN_IN: usize = 64;
 
 /// The Z-order key of a record (its words, header first): the centre of
 /// its box, each coordinate's order-preserving bit pattern interleaved,
@@ -74,11 +77,17 @@ pub struct SpatialSorter {
     /// Key, input id and place in `chunk` of each record there.
     entries: Vec<(u128, u32, u32)>,
     chunk_words: usize,
+    /// Files merged at once.
+    fan_in: usize,
     dir: Option<PathBuf>,
-    /// Sorted files written so far, each in the chunk's format.
-    files: Vec<std::fs::File>,
+    /// Sorted files written so far, each in the chunk's format, with its
+    /// level: 0 for a chunk, one more than its inputs' for a merge.
+    files: Vec<(u32, std::fs::File)>,
     /// Names the database being written, in errors.
     path: PathBuf,
+    /// Sorts by input id alone (back to the input's order) rather than
+    /// along the curve.
+    by_id: bool,
 }
 
 impl SpatialSorter {
@@ -86,15 +95,32 @@ impl SpatialSorter {
     /// `dir` (the system's temporary directory if `None`).
     pub fn new(budget: usize, dir: Option<&Path>, path: &Path) -> SpatialSorter {
         let chunk_bytes = budget.max(MIN_CHUNK_BYTES);
-        // A record of a triangle is 17 words, its entry 6 words more.
+        // A triangle's record is 17 words, and its entry 8 more (a `u128`
+        // is aligned to 16 bytes). Half the budget: the vectors grow by
+        // doubling.
         SpatialSorter {
             chunk: Vec::new(),
             entries: Vec::new(),
-            chunk_words: chunk_bytes / 4 * 17 / 24,
+            chunk_words: chunk_bytes / 2 / 4 * 17 / 25,
+            fan_in: (chunk_bytes / MERGE_BUFFER).clamp(2, MAX_FAN_IN),
             dir: dir.map(Path::to_path_buf),
             files: Vec::new(),
             path: path.to_path_buf(),
+            by_id: false,
         }
+    }
+
+    /// A sorter that puts records back in the order of their input ids
+    /// (a database in spatial order rewritten in its input's order).
+    pub fn by_id(budget: usize, dir: Option<&Path>, path: &Path) -> SpatialSorter {
+        SpatialSorter {
+            by_id: true,
+            ..SpatialSorter::new(budget, dir, path)
+        }
+    }
+
+    fn key(&self, record: &[u32]) -> u128 {
+        if self.by_id { 0 } else { record_key(record) }
     }
 
     /// Bytes a sorter of `budget` holds at most.
@@ -108,7 +134,7 @@ impl SpatialSorter {
             self.spill()?;
         }
         self.entries
-            .push((record_key(record), id, self.chunk.len() as u32));
+            .push((self.key(record), id, self.chunk.len() as u32));
         self.chunk.push(id);
         self.chunk.extend_from_slice(record);
         Ok(())
@@ -118,14 +144,34 @@ impl SpatialSorter {
         self.entries.sort_unstable_by_key(|&(k, id, _)| (k, id));
     }
 
-    /// Writes the chunk, sorted, to a temporary file.
+    fn temp_file(&self) -> Result<std::fs::File, Error> {
+        match &self.dir {
+            Some(d) => tempfile::tempfile_in(d).at(d),
+            None => tempfile::tempfile().at(std::env::temp_dir()),
+        }
+    }
+
+    /// Merges `files` into one new sorted file.
+    fn merge_to_file(&self, files: Vec<std::fs::File>) -> Result<std::fs::File, Error> {
+        let mut out = BufWriter::with_capacity(MERGE_BUFFER, self.temp_file()?);
+        merge(files, &self.path, self.by_id, |id, rec| {
+            out.write_all(&id.to_le_bytes()).at(&self.path)?;
+            out.write_all(bytemuck::cast_slice(rec)).at(&self.path)
+        })?;
+        let mut file = out
+            .into_inner()
+            .map_err(|e| Error::io(&self.path, e.into_error()))?;
+        file.seek(SeekFrom::Start(0)).at(&self.path)?;
+        Ok(file)
+    }
+
+    /// Writes the chunk, sorted, to a temporary file; merges the last
+    /// files of one level into one of the next whenever they number
+    /// `fan_in`, so that few files are open at a time and each record is
+    /// merged once per level.
     fn spill(&mut self) -> Result<(), Error> {
         self.sort_chunk();
-        let file = match &self.dir {
-            Some(d) => tempfile::tempfile_in(d).at(d)?,
-            None => tempfile::tempfile().at(std::env::temp_dir())?,
-        };
-        let mut out = BufWriter::with_capacity(MERGE_BUFFER, file);
+        let mut out = BufWriter::with_capacity(MERGE_BUFFER, self.temp_file()?);
         for &(_, _, at) in &self.entries {
             let at = at as usize;
             let len = 1 + record_len(&self.chunk[at + 1..]);
@@ -136,10 +182,19 @@ impl SpatialSorter {
             .into_inner()
             .map_err(|e| Error::io(&self.path, e.into_error()))?;
         file.seek(SeekFrom::Start(0)).at(&self.path)?;
-        self.files.push(file);
+        self.files.push((0, file));
         self.chunk.clear();
         self.entries.clear();
-        Ok(())
+        loop {
+            let level = self.files.last().map_or(0, |f| f.0);
+            let same = self.files.iter().rev().take_while(|f| f.0 == level).count();
+            if same < self.fan_in {
+                return Ok(());
+            }
+            let group = self.files.split_off(self.files.len() - same);
+            let merged = self.merge_to_file(group.into_iter().map(|f| f.1).collect())?;
+            self.files.push((level + 1, merged));
+        }
     }
 
     /// Gives every record, in the spatial order, to `sink` (input id,
@@ -162,29 +217,19 @@ impl SpatialSorter {
         }
         // Merge buffers take what the chunk took; files beyond that many
         // are merged into fewer first.
-        let fan_in = (self.chunk_words * 4 / MERGE_BUFFER).max(2);
         self.chunk = Vec::new();
         self.entries = Vec::new();
-        let mut files = std::mem::take(&mut self.files);
-        while files.len() > fan_in {
-            let rest = files.split_off(fan_in);
-            let file = match &self.dir {
-                Some(d) => tempfile::tempfile_in(d).at(d)?,
-                None => tempfile::tempfile().at(std::env::temp_dir())?,
-            };
-            let mut out = BufWriter::with_capacity(MERGE_BUFFER, file);
-            merge(files, &self.path, |id, rec| {
-                out.write_all(&id.to_le_bytes()).at(&self.path)?;
-                out.write_all(bytemuck::cast_slice(rec)).at(&self.path)
-            })?;
-            let mut file = out
-                .into_inner()
-                .map_err(|e| Error::io(&self.path, e.into_error()))?;
-            file.seek(SeekFrom::Start(0)).at(&self.path)?;
+        let mut files: Vec<std::fs::File> = std::mem::take(&mut self.files)
+            .into_iter()
+            .map(|f| f.1)
+            .collect();
+        while files.len() > self.fan_in {
+            let rest = files.split_off(self.fan_in);
+            let merged = self.merge_to_file(files)?;
             files = rest;
-            files.push(file);
+            files.push(merged);
         }
-        merge(files, &self.path, sink)
+        merge(files, &self.path, self.by_id, sink)
     }
 }
 
@@ -236,10 +281,12 @@ fn read_record(
     Ok(true)
 }
 
-/// Merges sorted files into `sink`, in key order, ties by input id.
+/// Merges sorted files into `sink`, in key order (or `by_id`, with no
+/// key), ties by input id.
 fn merge(
     files: Vec<std::fs::File>,
     path: &Path,
+    by_id: bool,
     mut sink: impl FnMut(u32, &[u32]) -> Result<(), Error>,
 ) -> Result<(), Error> {
     let mut readers: Vec<_> = files
@@ -247,11 +294,12 @@ fn merge(
         .map(|f| BufReader::with_capacity(MERGE_BUFFER, f))
         .collect();
     let mut recs: Vec<Vec<u32>> = vec![Vec::new(); readers.len()];
+    let key = |r: &[u32]| if by_id { 0 } else { record_key(r) };
     let mut heap = BinaryHeap::with_capacity(readers.len());
     for (i, r) in readers.iter_mut().enumerate() {
         if read_record(r, &mut recs[i], path)? {
             heap.push(Head {
-                key: record_key(&recs[i][1..]),
+                key: key(&recs[i][1..]),
                 id: recs[i][0],
                 file: i,
             });
@@ -262,7 +310,7 @@ fn merge(
         sink(h.id, &recs[i][1..])?;
         if read_record(&mut readers[i], &mut recs[i], path)? {
             heap.push(Head {
-                key: record_key(&recs[i][1..]),
+                key: key(&recs[i][1..]),
                 id: recs[i][0],
                 file: i,
             });
@@ -337,13 +385,22 @@ mod tests {
             for fan in [false, true] {
                 let mut s = SpatialSorter::new(budget, Some(dir.path()), &path);
                 if fan {
-                    // Small files, more of them than one merge takes.
+                    // Small files, many more of them than one merge takes:
+                    // merged level by level while they come.
                     s.chunk_words = 3_000;
+                    s.fan_in = 3;
                 }
                 for (i, r) in records.iter().enumerate() {
                     s.push(i as u32, r).unwrap();
                 }
                 let spilled = !s.files.is_empty();
+                if fan {
+                    // About 360 chunks: merged to levels up to 5, with at
+                    // most two files a level left open.
+                    let top = s.files.iter().map(|f| f.0).max().unwrap();
+                    assert!(top >= 4, "{top}");
+                    assert!(s.files.len() <= 2 * (top as usize + 1), "{}", s.files.len());
+                }
                 assert_eq!(spilled, budget == MIN_CHUNK_BYTES || fan);
                 let mut got = Vec::new();
                 s.finish(|id, rec| {

@@ -181,6 +181,19 @@ impl DbWriter {
         self
     }
 
+    /// Writes objects sent with their input ids
+    /// ([`SceneSink::ranked_object`], a database in spatial order) back in
+    /// the order of those ids, as their input had them (version 4 or 5),
+    /// sorting within `budget` bytes.
+    pub fn sort_by_id(&mut self, budget: usize, dir: Option<&Path>) {
+        assert_eq!(
+            self.objects, 0,
+            "the order is chosen before the first object"
+        );
+        self.sorter = Some(SpatialSorter::by_id(budget, dir, &self.path));
+        self.ids = false;
+    }
+
     /// As [`DbWriter::spatial`], before the first object.
     pub fn sort_spatially(&mut self, budget: usize, dir: Option<&Path>) {
         assert_eq!(

@@ -575,3 +575,40 @@ fn a_header_that_lies_about_runs_is_an_error() {
         assert!(e.contains(says), "{e}");
     }
 }
+
+/// A version 6 block whose header claims two billion objects, with ids
+/// of zero bits each (the fuzzer's find: a tiny file that asked for
+/// 8 GB of ids): an error before anything is decoded for them.
+#[test]
+fn a_block_claiming_more_objects_than_the_file_has_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("t.sdb");
+    let mut w = sray_engine::sdb::DbWriter::create(&path, Compression::None)
+        .unwrap()
+        .spatial(1 << 20, Some(dir.path()));
+    sray_engine::source::SceneSource::Spd {
+        scene: SpdScene::Tree,
+        size: 1,
+    }
+    .stream_into(&mut w, &sray_engine::progress::NoProgress)
+    .unwrap();
+    w.finish().unwrap();
+    assert!(Database::open(&path).unwrap().is_spatial());
+    let mut b = std::fs::read(&path).unwrap();
+    // Block 0's header follows the 256-byte file header: object_count at
+    // 16, its payload's length at 24, the CRC (of the header with a zero
+    // CRC, then the payload) at 28.
+    const H: usize = 256;
+    b[H + 16..H + 20].copy_from_slice(&0x8000_0007u32.to_le_bytes());
+    // The ids' header: the smallest id 0, width 0.
+    b[H + 32..H + 40].copy_from_slice(&[0; 8]);
+    let len = u32::from_le_bytes(b[H + 24..H + 28].try_into().unwrap()) as usize;
+    b[H + 28..H + 32].copy_from_slice(&[0; 4]);
+    let mut c = crc32fast::Hasher::new();
+    c.update(&b[H..H + 32]);
+    c.update(&b[H + 32..H + 32 + len]);
+    b[H + 28..H + 32].copy_from_slice(&c.finalize().to_le_bytes());
+    std::fs::write(&path, &b).unwrap();
+    let e = read_all(&path).unwrap_err().to_string();
+    assert!(e.contains("block 0") && e.contains("more objects"), "{e}");
+}
