@@ -188,6 +188,15 @@ pub fn write_database(
     let mut s = SetupSink::new(w, opts.setup);
     let summary = scene.stream_into_with(&mut s, progress, &mesh_opts)?;
     s.finish()?;
+    if spatial || restore {
+        // The sorted chunks are merged when the writer finishes: say so,
+        // rather than sit at the last object.
+        progress.set_message(if spatial {
+            "putting objects in spatial order"
+        } else {
+            "putting objects back in input order"
+        });
+    }
     if let Some(m) = summary.mesh
         && m.objects == 0
     {
