@@ -54,7 +54,7 @@ fn gcd(a: usize, b: usize) -> usize {
 }
 
 #[test]
-fn a_scrambled_mesh_in_spatial_order_renders_the_same_smaller_and_skips_more() {
+fn a_scrambled_mesh_in_spatial_order_renders_the_same_smaller_and_reads_less() {
     let Some(meshes) = shared_meshes() else {
         return;
     };

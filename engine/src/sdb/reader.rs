@@ -1146,15 +1146,6 @@ impl<'a> Block<'a> {
         }
     }
 
-    /// The input id of the block's `i`-th object.
-    #[inline(always)]
-    pub fn rank_of(&self, i: u32) -> u32 {
-        match self.ids.get(i as usize) {
-            Some(&r) => r,
-            None => self.first_object as u32 + i,
-        }
-    }
-
     /// Each object's place in the block and its bounding box, without
     /// decoding its geometry: what a scan needs to decide whether to look
     /// closer. [`Block::object_at`] decodes one.

@@ -158,6 +158,11 @@ impl SpatialSorter {
             out.write_all(&id.to_le_bytes()).at(&self.path)?;
             out.write_all(bytemuck::cast_slice(rec)).at(&self.path)
         })?;
+        self.rewound(out)
+    }
+
+    /// The file `out` wrote, flushed and back at its start for reading.
+    fn rewound(&self, out: BufWriter<std::fs::File>) -> Result<std::fs::File, Error> {
         let mut file = out
             .into_inner()
             .map_err(|e| Error::io(&self.path, e.into_error()))?;
@@ -178,10 +183,7 @@ impl SpatialSorter {
             out.write_all(bytemuck::cast_slice(&self.chunk[at..at + len]))
                 .at(&self.path)?;
         }
-        let mut file = out
-            .into_inner()
-            .map_err(|e| Error::io(&self.path, e.into_error()))?;
-        file.seek(SeekFrom::Start(0)).at(&self.path)?;
+        let file = self.rewound(out)?;
         self.files.push((0, file));
         self.chunk.clear();
         self.entries.clear();

@@ -235,15 +235,7 @@ fn bad_files_are_clear_errors() {
         let nodes = doc["nodes"].as_array_mut().unwrap();
         nodes.extend(std::iter::repeat_n(serde_json::json!({}), 2_000_000));
     });
-    let opts = sray_engine::mesh::MeshOptions {
-        memory: 64 << 20,
-        spill_dir: None,
-        camera_index: None,
-    };
-    let e =
-        sray_engine::mesh::gltf_scene::read_gltf(&p, &mut Recorder::default(), &NoProgress, &opts)
-            .unwrap_err()
-            .to_string();
+    let e = read_error(&p, 64 << 20);
     assert!(e.contains("objects.gltf") && e.contains("parsed"), "{e}");
     // An extension required for appearance only is ignored (a warning):
     // the shapes are read.
@@ -476,15 +468,7 @@ fn data_uri_buffers_read_as_files_do_within_the_budget() {
     let plain = record(&fixtures().join("spot4_light.gltf")).unwrap();
     assert!(record(&p).unwrap().objects().eq(plain.objects()));
     let len = std::fs::metadata(&p).unwrap().len();
-    let opts = sray_engine::mesh::MeshOptions {
-        memory: 4 * len + len / 2,
-        spill_dir: None,
-        camera_index: None,
-    };
-    let e =
-        sray_engine::mesh::gltf_scene::read_gltf(&p, &mut Recorder::default(), &NoProgress, &opts)
-            .unwrap_err()
-            .to_string();
+    let e = read_error(&p, 4 * len + len / 2);
     assert!(
         e.contains("embedded.gltf") && e.contains("data URIs"),
         "{e}"
@@ -538,4 +522,16 @@ fn sparse_accessors_replace_the_listed_elements() {
     );
     let e = error_of(&edited(dir.path(), "short.gltf", sparse(8)));
     assert!(e.contains("sparse values"), "{e}");
+}
+
+/// The error reading the glTF at `p` within `memory` bytes gives.
+fn read_error(p: &Path, memory: u64) -> String {
+    let opts = sray_engine::mesh::MeshOptions {
+        memory,
+        spill_dir: None,
+        camera_index: None,
+    };
+    sray_engine::mesh::gltf_scene::read_gltf(p, &mut Recorder::default(), &NoProgress, &opts)
+        .unwrap_err()
+        .to_string()
 }
