@@ -34,8 +34,9 @@ use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::skip::Touched;
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
+use crate::df::{Entry, Hierarchies, high_first, ray_meets};
 use crate::error::Error;
-use crate::grid::{Dda, DdaSave, GridSpec};
+use crate::grid::{Dda, DdaSave, GridSpec, aggregate};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
 use crate::math::{Real, Vec3, Vec3Ext};
@@ -233,6 +234,8 @@ struct PassCounts {
     tests: KindCounts,
     skipped_mailbox: u64,
     skipped_last_voxel: u64,
+    /// Walks of an aggregate's hierarchy.
+    aggregate_walks: u64,
 }
 
 /// Voxel box holding every registration of a pass, per grid.
@@ -331,6 +334,8 @@ pub struct IntersectStats {
     pub intersection_tests: KindCounts,
     pub tests_skipped_mailbox: u64,
     pub tests_skipped_last_voxel: u64,
+    /// Rays that walked an aggregate's hierarchy (see [`Found`]).
+    pub aggregate_walks: u64,
     pub db_scans: u64,
     pub db_bytes_read: u64,
     /// Blocks the passes left unread (no registered ray near them).
@@ -360,6 +365,12 @@ pub struct IntersectSetup<'a> {
     /// Grids of at most this many voxels get a dense voxel index per shard.
     pub dense_cells: usize,
     pub eps: f64,
+    /// Trace crowded groups of objects as aggregates (see [`Found`]); off
+    /// for the paper's passes.
+    pub aggregates: bool,
+    /// How far from its box an object's hit may be computed
+    /// ([`crate::grid::box_slack`]).
+    pub slack: f64,
     /// Work out the surface at each ray's best hit as it is found, so that
     /// shading needs no pass over the objects.
     pub carry: bool,
@@ -944,16 +955,21 @@ pub fn intersect_rays<R: Real>(
             let region = &region;
             // A reader thread may read, decompress and pick each block's
             // candidates ahead of the shards.
-            let stats = crate::sdb::scan_blocks::<Vec<Candidate>>(
+            let aggregates = setup.aggregates;
+            let walk = AggregateWalk {
+                pass: st.passes,
+                slack: setup.slack,
+            };
+            let stats = crate::sdb::scan_blocks::<Found>(
                 setup.db.scan()?,
                 setup.read_ahead,
                 &|index| grids.block_boxes(index).is_some_and(|b| !touched.meets(b)),
-                &|block, found| candidates(block, grids, region, found),
+                &|block, found| candidates(block, grids, region, aggregates, found),
                 &mut |block, found| {
                     if !found.is_empty() {
                         pool.install(|| {
                             shards.par_iter_mut().for_each(|sh| {
-                                scan_block(sh, block, found, grids, models, per_pass, carry)
+                                scan_block(sh, block, found, grids, models, per_pass, carry, &walk)
                             });
                         });
                         if per_pass && pair_bytes(shards) > pairs_cap {
@@ -992,6 +1008,7 @@ pub fn intersect_rays<R: Real>(
             st.intersection_tests += sh.counts.tests;
             st.tests_skipped_mailbox += sh.counts.skipped_mailbox;
             st.tests_skipped_last_voxel += sh.counts.skipped_last_voxel;
+            st.aggregate_walks += sh.counts.aggregate_walks;
             sh.counts = PassCounts::default();
             let done = sh.done.len();
             sh.live -= done;
@@ -1122,18 +1139,91 @@ pub(crate) struct Candidate {
 }
 
 /// Consecutive objects judged together first: in a database in spatial
-/// order they lie close together, and an aggregate whose box meets no
+/// order they lie close together, and a group whose box meets no
 /// registered voxel of any grid is passed over without looking at its
-/// objects one by one (their grid, their voxels).
-const AGGREGATE: usize = 32;
+/// objects one by one (their grid, their voxels). A crowded group is
+/// traced as an aggregate (see [`Found`]).
+const AGGREGATE: usize = aggregate::SIZE;
+
+/// What a pass does with one block, worked out once for every shard (by
+/// the reader thread, ahead of the shards): the objects some registered
+/// voxel may hold, and the aggregates among them
+/// ([`crate::grid::aggregate`]).
+///
+/// A group of the block's objects that crowds its voxels is stored in the
+/// voxels of its box like one object, and a ray met there walks a
+/// hierarchy of boxes over its objects, built when the block is read,
+/// instead of testing each. Groups are the depth-first tracer's: the
+/// objects whose index divided by [`AGGREGATE`] is the same (a group that
+/// a block boundary cuts is tested one by one). Which groups are
+/// aggregates depends on the
+/// database and the grids alone, not on the rays of the pass, so every
+/// count is still the same whatever the threads, slots or memory. The
+/// paper's passes (`--full-scans`) test objects one by one.
+#[derive(Default)]
+pub(crate) struct Found {
+    /// Objects tested one by one.
+    singles: Vec<Candidate>,
+    /// The aggregates' objects, each aggregate's together, and their boxes
+    /// (what their hierarchies are built over).
+    members: Vec<Candidate>,
+    member_boxes: Vec<Aabb>,
+    aggregates: Vec<Aggregate>,
+    trees: Hierarchies,
+    /// Room to build in.
+    ids: Vec<u32>,
+    order: Vec<(u32, u32)>,
+}
+
+impl Found {
+    fn clear(&mut self) {
+        self.singles.clear();
+        self.members.clear();
+        self.member_boxes.clear();
+        self.aggregates.clear();
+        self.trees.clear();
+    }
+
+    fn is_empty(&self) -> bool {
+        self.singles.is_empty() && self.aggregates.is_empty()
+    }
+}
+
+/// A crowded group of a block's objects, traced through its hierarchy.
+#[derive(Clone, Copy, Debug)]
+struct Aggregate {
+    /// Its objects: `members[first..first + len]`.
+    first: u32,
+    len: u32,
+    /// The entry of its hierarchy in `Found::trees` (over member indices).
+    tree: u32,
+    /// The database index of its first object, which names it in a ray's
+    /// mailbox.
+    index: u32,
+    group: u8,
+    lo: [u16; 3],
+    hi: [u16; 3],
+}
+
+/// A ray's mailbox value while it walks aggregate `index` in pass
+/// `pass`: no object's (an object's low half is zero), and no other
+/// aggregate's in the pass. A ray's mailbox outlives its pass, and an
+/// aggregate of the next pass may begin with the same object while
+/// holding others: the pass in the value keeps them apart.
+#[inline(always)]
+fn aggregate_tag(index: u32, pass: u64) -> PrimId {
+    PrimId(((index as u64) << 32) | (pass % u32::MAX as u64 + 1))
+}
 
 /// The objects of `block` whose voxel box meets `region`, the box of the
-/// voxels rays are registered in this pass.
+/// voxels rays are registered in this pass, one by one or in aggregates
+/// (when `aggregates`).
 fn candidates(
     block: &Block<'_>,
     grids: &VoxelGrids,
     region: &[Region; MAX_GRIDS],
-    out: &mut Vec<Candidate>,
+    aggregates: bool,
+    out: &mut Found,
 ) {
     out.clear();
     let mut boxes = block.boxes();
@@ -1141,12 +1231,15 @@ fn candidates(
         at: 0,
         index: 0,
         rank: 0,
+        kind: crate::shapes::ShapeKind::Sphere,
         bbox: Aabb::EMPTY,
     }; AGGREGATE];
+    // Up to the first multiple of AGGREGATE, then by AGGREGATE.
+    let mut take = AGGREGATE - (block.first_object % AGGREGATE as u64) as usize;
     loop {
         let mut n = 0;
         let mut bounds = Aabb::EMPTY;
-        for b in boxes.by_ref().take(AGGREGATE) {
+        for b in boxes.by_ref().take(std::mem::replace(&mut take, AGGREGATE)) {
             bounds.union(&b.bbox);
             agg[n] = b;
             n += 1;
@@ -1154,17 +1247,81 @@ fn candidates(
         if n == 0 {
             return;
         }
-        // Each object's voxels in its own grid lie within the aggregate's
+        // Each object's voxels in its own grid lie within the group's
         // voxels in that grid: passing over it drops no candidate.
         let near = grids.grids.iter().zip(region).any(|(grid, r)| {
             grid.spec
                 .cell_range(&bounds)
                 .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
         });
-        if near {
-            candidates_in(&agg[..n], grids, region, out);
+        if near && !(aggregates && aggregate(&agg[..n], &bounds, grids, region, out)) {
+            candidates_in(&agg[..n], grids, region, &mut out.singles);
         }
     }
+}
+
+/// Makes the group `boxes` (of box `bounds`) an aggregate of `out` if it
+/// is one: a full group of one grid's objects, no instance among them
+/// (their models are tested apart), crowding its voxels. Returns whether
+/// it is one (then it is added only if its voxels meet `region`).
+fn aggregate(
+    boxes: &[BoxRef],
+    bounds: &Aabb,
+    grids: &VoxelGrids,
+    region: &[Region; MAX_GRIDS],
+    out: &mut Found,
+) -> bool {
+    if boxes
+        .iter()
+        .any(|b| b.kind == crate::shapes::ShapeKind::Instance)
+    {
+        return false;
+    }
+    let g = grids.partition.group(&boxes[0].bbox);
+    if boxes[1..]
+        .iter()
+        .any(|b| grids.partition.group(&b.bbox) != g)
+    {
+        return false;
+    }
+    let spec = &grids.grids[g].spec;
+    let Some((lo, hi)) = aggregate::crowded(spec, bounds, boxes.iter().map(|b| &b.bbox)) else {
+        return false;
+    };
+    if !region[g].overlaps(lo, hi) {
+        return true;
+    }
+    let first = out.members.len();
+    for b in boxes {
+        // Within the group's box, so within the grid.
+        let Some((blo, bhi)) = spec.cell_range(&b.bbox) else {
+            continue;
+        };
+        out.members.push(Candidate {
+            at: b.at,
+            index: b.index,
+            rank: b.rank,
+            group: g as u8,
+            lo: blo.map(|c| c as u16),
+            hi: bhi.map(|c| c as u16),
+        });
+        out.member_boxes.push(b.bbox);
+    }
+    out.ids.clear();
+    out.ids.extend(first as u32..out.members.len() as u32);
+    let tree = out
+        .trees
+        .build_with(&out.ids, &out.member_boxes[..], &mut out.order);
+    out.aggregates.push(Aggregate {
+        first: first as u32,
+        len: (out.members.len() - first) as u32,
+        tree,
+        index: boxes[0].index,
+        group: g as u8,
+        lo: lo.map(|c| c as u16),
+        hi: hi.map(|c| c as u16),
+    });
+    true
 }
 
 /// [`candidates`] among `boxes`, one by one.
@@ -1193,8 +1350,161 @@ fn candidates_in(
     }
 }
 
-/// Tests one block's candidate objects against the shard's registered rays.
+/// Tests one block's candidate objects and aggregates against the shard's
+/// registered rays.
 fn scan_block<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    found: &Found,
+    grids: &VoxelGrids,
+    models: &Models,
+    per_pass: bool,
+    carry: bool,
+    walk: &AggregateWalk,
+) {
+    scan_singles(sh, block, &found.singles, grids, models, per_pass, carry);
+    if !found.aggregates.is_empty() {
+        scan_aggregates(sh, block, found, grids, carry, walk);
+    }
+}
+
+/// What walking an aggregate needs besides the shard: the pass (which
+/// names the aggregates in the rays' mailboxes) and how far from its box
+/// an object's hit may be computed ([`crate::grid::box_slack`]).
+#[derive(Clone, Copy, Debug)]
+struct AggregateWalk {
+    pass: u64,
+    slack: f64,
+}
+
+/// Tests the block's aggregates against the shard's registered rays: a
+/// ray stored in some voxel of an aggregate's box walks its hierarchy
+/// once (the mailbox), entering only the boxes it may meet before its
+/// best hit so far, and tests the objects there (except those its last
+/// voxel of the previous pass shows it tested then). The hierarchy may
+/// lead it to objects outside the voxels it is stored in: their hits are
+/// hits all the same, and a hit is kept only if it is the nearest so far,
+/// so the ray's final hit, and the image, do not change.
+fn scan_aggregates<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    found: &Found,
+    grids: &VoxelGrids,
+    carry: bool,
+    walk: &AggregateWalk,
+) {
+    // One aggregate's objects, decoded when its first ray meets it.
+    let mut objects: Vec<(ObjectRef<'_>, Option<Prepared>)> = Vec::new();
+    for a in &found.aggregates {
+        let g = a.group as usize;
+        if sh.regs[g].is_empty() {
+            continue;
+        }
+        let (lo, hi) = (a.lo.map(u32::from), a.hi.map(u32::from));
+        if !sh.region[g].overlaps(lo, hi) {
+            continue;
+        }
+        let grid = &grids.grids[g];
+        let dense = sh.regs[g].is_dense();
+        let members = &found.members[a.first as usize..(a.first + a.len) as usize];
+        let tag = aggregate_tag(a.index, walk.pass);
+        objects.clear();
+        let Shard {
+            regs,
+            hot,
+            cold,
+            q,
+            counts,
+            ..
+        } = &mut *sh;
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                let row = grid.spec.index([0, y, z]);
+                for x in lo[0]..=hi[0] {
+                    let v = row + x as usize;
+                    if !dense && grid.flags[v] & REGISTERED == 0 {
+                        continue;
+                    }
+                    for &slot in regs[g].slots_in(v as u32) {
+                        let s = &mut hot[slot as usize];
+                        if s.blocked {
+                            continue;
+                        }
+                        if s.mailbox == tag {
+                            counts.skipped_mailbox += 1;
+                            continue;
+                        }
+                        s.mailbox = tag;
+                        if objects.is_empty() {
+                            for m in members {
+                                // Records were checked when the block was read.
+                                let Some(o) = block.object_at(m.at, m.index, m.rank) else {
+                                    return;
+                                };
+                                objects.push((o, o.shape.prepare()));
+                            }
+                        }
+                        counts.aggregate_walks += 1;
+                        let c = &mut cold[slot as usize];
+                        let q = &q[slot as usize];
+                        let (o, inv) = (c.o, c.inv);
+                        let prev = s.prev[g];
+                        found
+                            .trees
+                            .visit(a.tree, high_first(c.d), (), &mut |e| match e {
+                                Entry::Box(b, ()) => ray_meets(
+                                    o,
+                                    inv,
+                                    s.t_min.to_f64(),
+                                    s.upper.to_f64(),
+                                    b,
+                                    walk.slack,
+                                )
+                                .then_some(()),
+                                Entry::Object(id, ()) => {
+                                    let k = id as usize - a.first as usize;
+                                    let m = &members[k];
+                                    if prev[0] != NONE16
+                                        && (0..3).all(|i| (m.lo[i]..=m.hi[i]).contains(&prev[i]))
+                                    {
+                                        // Tested in the previous pass (Fig. 5b).
+                                        counts.skipped_last_voxel += 1;
+                                        return Some(());
+                                    }
+                                    let (ob, pr) = &objects[k];
+                                    counts.tests.add(ob.shape.kind());
+                                    if let Some(t) = ob.shape.intersect(
+                                        pr.as_ref(),
+                                        &ob.bbox,
+                                        q,
+                                        s.t_min,
+                                        s.upper,
+                                    ) {
+                                        let t = t.to_f64();
+                                        offer(
+                                            s,
+                                            c,
+                                            t,
+                                            PrimId::object(m.index),
+                                            m.rank,
+                                            carry,
+                                            |ray| Some((ob.shape.surface(ray, t), ob.material)),
+                                        );
+                                    }
+                                    // A shadow ray is done at its first blocker.
+                                    (!s.blocked).then_some(())
+                                }
+                            });
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Tests one block's candidate objects, one by one, against the shard's
+/// registered rays.
+fn scan_singles<R: Real>(
     sh: &mut Shard<R>,
     block: &Block<'_>,
     candidates: &[Candidate],

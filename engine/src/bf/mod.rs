@@ -314,6 +314,8 @@ pub struct BfStats {
     pub ray_voxel_registrations: u64,
     pub tests_skipped_last_voxel: u64,
     pub tests_skipped_mailbox: u64,
+    /// Rays that walked an aggregate's hierarchy.
+    pub aggregate_walks: u64,
     pub memory_budget_bytes: u64,
     pub budget: Option<Budget>,
     pub store_number: String,

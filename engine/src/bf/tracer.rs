@@ -152,6 +152,8 @@ pub struct Tracer<'db, R: Real> {
     pub threads: usize,
     pub spill: SpillDir,
     pub eps: f64,
+    /// How far from its box an object's hit may be computed.
+    slack: f64,
     shading: super::Shading,
     shade_scene: ShadeScene,
     /// The models the database's instances place, held for the render.
@@ -290,6 +292,7 @@ impl<'db, R: Real> Tracer<'db, R> {
 
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");
+        let slack = crate::grid::box_slack(&db.scene().view.from, &specs);
         let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
         let preprocess_seconds = models_seconds + t0.elapsed().as_secs_f64();
         let stats = BfStats {
@@ -313,6 +316,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             threads,
             spill,
             eps,
+            slack,
             shading: bf.shading,
             shade_scene,
             materials: models.material_table(&db.scene().materials),
@@ -395,6 +399,8 @@ impl<'db, R: Real> Tracer<'db, R> {
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
             eps: self.eps,
+            aggregates: !self.db.full_scans(),
+            slack: self.slack,
         };
         let ist = {
             let mut emit_sorted;
@@ -436,6 +442,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.ray_voxel_registrations += ist.registrations;
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
+        st.aggregate_walks += ist.aggregate_walks;
         self.tests += ist.intersection_tests;
         // The phases take turns with the budget: shading gets the slots'
         // share, unless they are small beside the budget (then keeping them

@@ -11,7 +11,7 @@ mod polygon;
 mod single;
 mod trace;
 
-pub(crate) use nested::{Entry, NESTED, high_first, ray_meets};
+pub(crate) use nested::{Entry, Hierarchies, NESTED, high_first, ray_meets};
 pub(crate) use object_grid::Boxes;
 pub use object_grid::ObjectGrid;
 
@@ -330,25 +330,8 @@ impl<'t> DfScene<'t> {
             return Err(crate::grid::outside_its_grid(db, id as u64));
         }
         let eps = epsilon(&db.bbox(), opts.precision);
-        // Single precision rounds a position to about 6e-8 of its size;
-        // the grids' margin is 1e-6 of a voxel. Eye rays start at the eye,
-        // which may lie far outside the grids: their hits are rounded
-        // relative to the eye's distance from the origin too.
         let header = db.scene();
-        let mut scale: f64 = header
-            .view
-            .from
-            .iter()
-            .fold(0.0, |m, c| m.max(2.0 * c.abs()));
-        for g in &grids {
-            for i in 0..3 {
-                scale = scale
-                    .max(g.spec.hi[i] - g.spec.lo[i])
-                    .max(g.spec.lo[i].abs())
-                    .max(g.spec.hi[i].abs());
-            }
-        }
-        let slack = 1e-5 * scale;
+        let slack = crate::grid::box_slack(&header.view.from, grids.iter().map(|g| &g.spec));
         Ok(DfScene {
             objects,
             records,

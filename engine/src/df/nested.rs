@@ -64,6 +64,12 @@ pub struct Hierarchies {
 }
 
 impl Hierarchies {
+    /// Forgets every hierarchy, keeping the memory.
+    pub fn clear(&mut self) {
+        self.nodes.clear();
+        self.objects.clear();
+    }
+
     /// Objects listed in the leaves.
     pub fn len(&self) -> usize {
         self.objects.len()
@@ -116,6 +122,17 @@ impl Hierarchies {
     /// each level moved every object once per level (and cost the dragon
     /// scene twice the build time for the same number of tests).
     pub fn build(&mut self, ids: &[u32], boxes: &(impl Boxes + ?Sized)) -> u32 {
+        self.build_with(ids, boxes, &mut Vec::new())
+    }
+
+    /// [`Hierarchies::build`], with `order` as room to sort in (kept by a
+    /// caller that builds many small hierarchies).
+    pub fn build_with(
+        &mut self,
+        ids: &[u32],
+        boxes: &(impl Boxes + ?Sized),
+        order: &mut Vec<(u32, u32)>,
+    ) -> u32 {
         let mut centres = Aabb::EMPTY;
         for &id in ids {
             centres.add_point(centre(&boxes.bbox(id)));
@@ -124,16 +141,13 @@ impl Hierarchies {
             let e = centres.max[i] - centres.min[i];
             if e > 0.0 { 1023.0 / e } else { 0.0 }
         });
-        let mut order: Vec<(u32, u32)> = ids
-            .iter()
-            .map(|&id| {
-                let c = centre(&boxes.bbox(id));
-                let q: [u32; 3] = std::array::from_fn(|i| {
-                    (((c[i] - centres.min[i]) * scale[i]) as u32).min(1023)
-                });
-                (morton(q), id)
-            })
-            .collect();
+        order.clear();
+        order.extend(ids.iter().map(|&id| {
+            let c = centre(&boxes.bbox(id));
+            let q: [u32; 3] =
+                std::array::from_fn(|i| (((c[i] - centres.min[i]) * scale[i]) as u32).min(1023));
+            (morton(q), id)
+        }));
         // By code, then input id: the same tree on every run, and in a
         // database in spatial order the tree of the input's order.
         order.sort_unstable_by_key(|&(code, id)| (code, boxes.rank(id)));
@@ -143,7 +157,7 @@ impl Hierarchies {
             first: 0,
             count: 0,
         });
-        self.split(root, &order, boxes);
+        self.split(root, order, boxes);
         NESTED | root as u32
     }
 

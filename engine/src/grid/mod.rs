@@ -6,6 +6,7 @@
 //! Both tracers use this module, so they agree on which voxels a ray
 //! crosses and which voxels an object occupies.
 
+pub mod aggregate;
 mod dda;
 mod partition;
 
@@ -161,6 +162,26 @@ impl GridSpec {
     pub fn cell_size(&self) -> [f64; 3] {
         self.cell
     }
+}
+
+/// How far from its bounding box a hit may be computed, for tests that
+/// pass over a box (a hierarchy's, an aggregate's) only when no object
+/// inside can give a hit: 1e-5 of the scene's scale, well above the
+/// rounding of single precision (about 6e-8 of a position's size) and the
+/// grids' margin around an object (1e-6 of a voxel). Eye rays start at the
+/// eye, which may lie far outside the grids: their hits are rounded
+/// relative to the eye's distance from the origin too.
+pub fn box_slack<'a>(eye: &[f64; 3], grids: impl IntoIterator<Item = &'a GridSpec>) -> f64 {
+    let mut scale: f64 = eye.iter().fold(0.0, |m, c| m.max(2.0 * c.abs()));
+    for g in grids {
+        for i in 0..3 {
+            scale = scale
+                .max(g.hi[i] - g.lo[i])
+                .max(g.lo[i].abs())
+                .max(g.hi[i].abs());
+        }
+    }
+    1e-5 * scale
 }
 
 #[cfg(test)]

@@ -508,6 +508,13 @@ impl Database {
         self.full_scans = on;
     }
 
+    /// Whether scans are the paper's ([`Database::set_full_scans`]): the
+    /// breadth-first tracer then also tests objects one by one, without
+    /// aggregates, as the paper does.
+    pub fn full_scans(&self) -> bool {
+        self.full_scans
+    }
+
     /// Bytes of the blocks, headers and payloads: what a full scan reads.
     pub fn blocks_bytes(&self) -> u64 {
         self.tables_offset - HEADER_BYTES as u64
@@ -1210,6 +1217,7 @@ pub struct BoxRef {
     pub index: u32,
     /// The input id (see [`ObjectRef::rank`]).
     pub rank: u32,
+    pub kind: ShapeKind,
     pub bbox: Aabb,
 }
 
@@ -1249,6 +1257,7 @@ impl Iterator for BoxIter<'_> {
             at: self.pos as u32,
             index: self.index,
             rank: rank(self.ids, self.first, self.index),
+            kind,
             bbox: Aabb {
                 min: [f(2), f(3), f(4)],
                 max: [f(5), f(6), f(7)],

@@ -307,3 +307,71 @@ fn a_region_and_a_huge_floor_make_three_grids_in_both_tracers() {
         assert_same(&format!("{what}, three grids"), &want, r);
     }
 }
+
+/// With one grid the model crowds a few voxels, and the breadth-first
+/// tracer traces its groups of objects as aggregates (a hierarchy per
+/// group, built as the block is read): the image of the depth-first
+/// tracer and of the paper's one-by-one tests (`--full-scans`), in both
+/// precisions, in a database in input order and in spatial order, and the
+/// same counts whatever the threads or the memory (in 4 MiB the rays take
+/// many passes, so their mailboxes and last voxels carry over).
+#[test]
+fn crowded_groups_are_aggregates_in_breadth_first_and_the_image_is_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let nff = crowd_nff(6000, 3000, 1.0);
+    let spatial = {
+        let path = dir.path().join("spatial.sdb");
+        let mut w = DbWriter::create(&path, Compression::None)
+            .unwrap()
+            .spatial(64 << 20, None);
+        read_nff_from(nff.as_bytes(), Path::new("crowd.nff"), &mut w, &NoProgress).unwrap();
+        w.finish().unwrap();
+        Database::open(&path).unwrap()
+    };
+    let input = database(&nff, dir.path());
+    let walks = |r: &Render| {
+        r.1.details.as_ref().unwrap()["aggregate_walks"]
+            .as_u64()
+            .unwrap()
+    };
+    for (order, db) in [("input order", &input), ("spatial order", &spatial)] {
+        for precision in [Precision::Double, Precision::Single] {
+            let what = format!("{order}, {precision:?}");
+            let want = df_render(db, &one_grid(2, precision));
+            let bf = bf_render(db, &one_grid(2, precision), StoreNumber::Adaptive, 1 << 30);
+            assert!(walks(&bf) > 1000, "{what}: {} aggregate walks", walks(&bf));
+            assert_same(&format!("{what}: bf against df"), &want, &bf);
+            for (threads, memory) in [(1, 1 << 30), (2, 4 << 20), (3, 4 << 20)] {
+                let other = bf_render(
+                    db,
+                    &one_grid(threads, precision),
+                    StoreNumber::Adaptive,
+                    memory,
+                );
+                let how = format!("{what}: {threads} threads in {memory} bytes");
+                assert_same(&how, &want, &other);
+                assert_eq!(
+                    bf.1.intersection_tests_by_kind, other.1.intersection_tests_by_kind,
+                    "{how}"
+                );
+                assert_eq!(walks(&bf), walks(&other), "{how}");
+            }
+            let mut paper = db.clone();
+            paper.set_full_scans(true);
+            let full = bf_render(
+                &paper,
+                &one_grid(2, precision),
+                StoreNumber::Adaptive,
+                4 << 20,
+            );
+            assert_same(&format!("{what}: the paper's passes"), &want, &full);
+            assert_eq!(walks(&full), 0, "{what}");
+            assert!(
+                bf.1.intersection_tests * 2 < full.1.intersection_tests,
+                "{what}: {} tests in aggregates, {} one by one",
+                bf.1.intersection_tests,
+                full.1.intersection_tests
+            );
+        }
+    }
+}
