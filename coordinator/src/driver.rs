@@ -243,6 +243,7 @@ impl Job {
                         hi: s.hi,
                         nested_voxels: 0,
                         nested_objects: 0,
+                        aggregates: 0,
                     })
                     .collect();
                 // The most triangles any model has: no instance hit can name

@@ -236,7 +236,7 @@ impl Models {
             .num_threads(self.threads)
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-        let grid = ObjectGrid::build(&padded, &bounds, res, &pool, |_| true)?;
+        let grid = ObjectGrid::build(&padded, &bounds, res, &pool, true, |_| true)?;
         Ok(Model {
             objects,
             grid,

@@ -7,7 +7,7 @@ use clap::Args;
 use sray_engine::bf::{ModelHolding, Shading, StoreNumber};
 use sray_engine::job::{PrepareOptions, RenderRequest, Stages, render};
 use sray_engine::progress::Progress;
-use sray_engine::render::{GridRes, Mode, Precision, RenderOptions};
+use sray_engine::render::{Aggregates, GridRes, Mode, Precision, RenderOptions};
 use sray_engine::scene::setup::{CameraOverride, Setup, parse_light, parse_material};
 use sray_engine::scene::{Light, Material};
 use sray_engine::source::SceneSource;
@@ -90,6 +90,11 @@ pub struct RenderArgs {
     /// Grids: auto (set huge objects apart in their own grid) or 1
     #[arg(long, value_enum, default_value_t = Grids::Auto)]
     pub grids: Grids,
+    /// Crowded groups of objects as aggregates, each with a hierarchy of
+    /// its own: auto (breadth-first), on (both tracers), off (objects one
+    /// by one, as the paper does). The image is the same
+    #[arg(long, value_enum, default_value_t = AggregatesArg::Auto)]
+    pub aggregates: AggregatesArg,
     /// Worker threads (default: all cores)
     #[arg(long, allow_negative_numbers = true)]
     pub threads: Option<usize>,
@@ -176,6 +181,18 @@ fn parse_store(s: &str) -> Result<StoreNumber, String> {
     }
 }
 
+/// `--aggregates`: which tracers hold crowded groups of objects as
+/// aggregates (Section 2.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AggregatesArg {
+    /// Breadth-first
+    Auto,
+    /// Both tracers
+    On,
+    /// Neither
+    Off,
+}
+
 /// `--grids`: how objects are split into grids (Section 2.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Grids {
@@ -214,6 +231,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             grid_res: a.grid_res,
             grid_density: a.grid_density,
             multiple_grids: a.grids == Grids::Auto,
+            aggregates: match a.aggregates {
+                AggregatesArg::Auto => Aggregates::Auto,
+                AggregatesArg::On => Aggregates::On,
+                AggregatesArg::Off => Aggregates::Off,
+            },
             precision: a.precision,
             profile: a.profile,
             samples: a.samples,

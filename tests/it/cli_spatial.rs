@@ -235,3 +235,105 @@ fn the_sort_writes_the_same_database_whatever_its_memory() {
         .collect();
     assert_eq!(left.len(), 2, "{left:?}");
 }
+
+/// A ball of 7,200 small triangles on a floor a hundred times wider, in one
+/// grid (`--grids 1`): the ball crowds a few voxels. By default the
+/// breadth-first tracer holds its groups of 64 as aggregates; `--aggregates
+/// off` tests them one by one and `on` gives the depth-first tracer
+/// aggregates too; on a cluster of local workers too. Every image is the
+/// same.
+#[test]
+fn aggregates_change_no_image_in_either_tracer_or_on_a_cluster() {
+    use std::fmt::Write;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut nff = String::from(
+        "v\nfrom 1.5 1.2 2\nat 0 0.5 0\nup 0 1 0\nangle 40\nhither 0.001\nresolution 96 96\n\
+         b 0.1 0.1 0.2\nl 3 8 4\nf 0.6 0.6 0.6 1 0 0 0 1\n\
+         p 4\n-50 0 -50\n-50 0 50\n50 0 50\n50 0 -50\nf 0.9 0.5 0.2 0.7 0.3 20 0 1\n",
+    );
+    // A UV sphere of radius 0.5 standing on the floor, in latitude bands.
+    let (bands, sectors) = (60, 60);
+    let at = |i: usize, j: usize| {
+        let (t, p) = (
+            std::f64::consts::PI * i as f64 / bands as f64,
+            std::f64::consts::TAU * j as f64 / sectors as f64,
+        );
+        [
+            0.5 * t.sin() * p.cos(),
+            0.5 + 0.5 * t.cos(),
+            0.5 * t.sin() * p.sin(),
+        ]
+    };
+    for i in 0..bands {
+        for j in 0..sectors {
+            for tri in [
+                [at(i, j), at(i + 1, j), at(i + 1, j + 1)],
+                [at(i, j), at(i + 1, j + 1), at(i, j + 1)],
+            ] {
+                nff.push_str("p 3\n");
+                for v in tri {
+                    writeln!(nff, "{} {} {}", v[0], v[1], v[2]).unwrap();
+                }
+            }
+        }
+    }
+    std::fs::write(d.join("ball.nff"), nff).unwrap();
+    ok(d, &["convert", "ball.nff", "-o", "ball.sdb", "-q"]);
+    let want = render(d, "ball.sdb", "df", "1GiB", &["--grids", "1"]);
+    let df = stats(d, "ball.sdb.df.1GiB.png.json");
+    assert!(df["grids"][0].get("aggregates").is_none(), "{df}");
+    assert!(df["grids"][0]["nested_voxels"].as_u64() > Some(0), "{df}");
+    let walks = |name: &str| stats(d, name)["aggregate_walks"].as_u64().unwrap();
+    for (mode, memory, how) in [
+        ("bf", "64MiB", "auto"),
+        ("bf", "2MiB", "auto"),
+        ("bf", "3MiB", "off"),
+        ("df", "1GiB", "on"),
+        ("df", "2GiB", "off"),
+    ] {
+        let got = render(
+            d,
+            "ball.sdb",
+            mode,
+            memory,
+            &["--grids", "1", "--aggregates", how],
+        );
+        assert!(got == want, "{mode} under {memory}, aggregates {how}");
+        let st = stats(d, &format!("ball.sdb.{mode}.{memory}.png.json"));
+        match (mode, how) {
+            ("bf", "auto") => assert!(walks(&format!("ball.sdb.bf.{memory}.png.json")) > 0),
+            ("bf", _) => assert_eq!(walks("ball.sdb.bf.3MiB.png.json"), 0),
+            (_, "on") => assert!(st["grids"][0]["aggregates"].as_u64() > Some(10), "{st}"),
+            _ => assert!(st["grids"][0].get("aggregates").is_none(), "{st}"),
+        }
+    }
+    // The workers get the setting with the job.
+    for how in ["auto", "off"] {
+        let png = format!("cluster-{how}.png");
+        ok(
+            d,
+            &[
+                "render",
+                "ball.sdb",
+                "-o",
+                &png,
+                "--local-workers",
+                "2",
+                "--width",
+                "96",
+                "--height",
+                "96",
+                "--grids",
+                "1",
+                "--aggregates",
+                how,
+                "-q",
+            ],
+        );
+        assert!(
+            std::fs::read(d.join(&png)).unwrap() == want,
+            "cluster, aggregates {how}"
+        );
+    }
+}

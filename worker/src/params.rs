@@ -2,7 +2,7 @@
 //! engine takes them.
 
 use sray_engine::bf::StoreNumber;
-use sray_engine::render::{GridRes, Precision, RenderOptions};
+use sray_engine::render::{Aggregates, GridRes, Precision, RenderOptions};
 use sray_proto::v1;
 
 /// The settings of a job, to send.
@@ -29,6 +29,7 @@ pub fn to_proto(o: &RenderOptions, store: StoreNumber) -> v1::RenderParams {
             StoreNumber::Adaptive => 0,
         },
         samples: o.samples,
+        no_aggregates: o.aggregates == Aggregates::Off,
     }
 }
 
@@ -53,6 +54,11 @@ pub fn from_proto(
         grid_res,
         grid_density: p.grid_density,
         multiple_grids: p.multiple_grids,
+        aggregates: if p.no_aggregates {
+            Aggregates::Off
+        } else {
+            Aggregates::Auto
+        },
         precision: match v1::Precision::try_from(p.precision) {
             Ok(v1::Precision::Single) => Precision::Single,
             Ok(v1::Precision::Double) => Precision::Double,
@@ -82,6 +88,7 @@ mod tests {
             grid_res: GridRes::Fixed([4, 5, 6]),
             grid_density: 2.5,
             multiple_grids: false,
+            aggregates: Aggregates::Off,
             precision: Precision::Single,
             threads: 7,
             samples: 9,

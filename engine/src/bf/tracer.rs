@@ -154,6 +154,8 @@ pub struct Tracer<'db, R: Real> {
     pub eps: f64,
     /// How far from its box an object's hit may be computed.
     slack: f64,
+    /// Trace crowded groups of objects as aggregates.
+    aggregates: bool,
     shading: super::Shading,
     shade_scene: ShadeScene,
     /// The models the database's instances place, held for the render.
@@ -334,6 +336,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             preprocess_seconds,
             intersect_seconds: 0.0,
             read_ahead,
+            aggregates: opts.aggregates.breadth_first(),
             shade_seconds: 0.0,
         })
     }
@@ -399,7 +402,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
             eps: self.eps,
-            aggregates: !self.db.full_scans(),
+            aggregates: self.aggregates && !self.db.full_scans(),
             slack: self.slack,
         };
         let ist = {

@@ -106,6 +106,7 @@ impl VoxelGrids {
                 hi: g.spec.hi,
                 nested_voxels: 0,
                 nested_objects: 0,
+                aggregates: 0,
             })
             .collect()
     }

@@ -316,9 +316,14 @@ impl<'t> DfScene<'t> {
                 (0, GridRes::Fixed(r)) => r,
                 _ => choose_resolution(bounds, count, opts.grid_density, MAX_CELLS),
             };
-            grids.push(ObjectGrid::build(objects, bounds, res, &pool, |id| {
-                group[id] as usize == g
-            })?);
+            grids.push(ObjectGrid::build(
+                objects,
+                bounds,
+                res,
+                &pool,
+                opts.aggregates.depth_first(),
+                |id| group[id] as usize == g,
+            )?);
         }
         let mut outside = None;
         objects.each_bbox(&mut |id, b| {
@@ -484,6 +489,7 @@ impl<'t> DfScene<'t> {
                 hi: g.spec.hi,
                 nested_voxels: g.nested_voxels,
                 nested_objects: g.nested_entries,
+                aggregates: g.aggregates,
             })
             .collect()
     }
@@ -612,7 +618,7 @@ mod tests {
                 });
                 b
             });
-            let one = ObjectGrid::build(&objects, &all, [1, 1, 1], &pool, |_| true).unwrap();
+            let one = ObjectGrid::build(&objects, &all, [1, 1, 1], &pool, false, |_| true).unwrap();
             assert!(one.single_cell() && one.nested_voxels == 1);
             s.grids.push(one);
             let (got, ..) = trace::render(&s, &opts, &NoProgress).unwrap();

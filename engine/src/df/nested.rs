@@ -91,6 +91,11 @@ impl Hierarchies {
         self.nodes.len()
     }
 
+    /// The box of the hierarchy of entry `entry` (tagged [`NESTED`]).
+    pub fn bbox(&self, entry: u32) -> Aabb {
+        self.nodes[(entry & !NESTED) as usize].bbox
+    }
+
     /// Appends `other` (built on its own), returning the voxel entry of
     /// its first hierarchy, or `None` if the nodes would outgrow the
     /// entry's 31 bits.
@@ -223,8 +228,10 @@ impl Hierarchies {
         f: &mut impl FnMut(Entry<'_, S>) -> Option<S>,
     ) -> bool {
         // Each level splits on a bit of the 30-bit codes below the
-        // parent's, or halves the objects: depth < 30 + 32.
-        let mut stack = [(0u32, state); 64];
+        // parent's, or halves the objects: depth < 30 + 32, and a leaf
+        // entering an aggregate's hierarchy (of 64 objects) adds at most
+        // 30 + 6 levels and a pending entry per leaf entry.
+        let mut stack = [(0u32, state); 192];
         let mut sp = 0;
         let (mut n, mut st) = ((entry & !NESTED) as usize, state);
         loop {
@@ -233,7 +240,13 @@ impl Hierarchies {
                 if node.count & INTERIOR == 0 {
                     let first = node.first as usize;
                     for &id in &self.objects[first..first + node.count as usize] {
-                        if f(Entry::Object(id, inner)).is_none() {
+                        if id & NESTED != 0 {
+                            // Another hierarchy of this store (an
+                            // aggregate's, in a crowded voxel's): walked
+                            // next, as a child.
+                            stack[sp] = ((id & !NESTED), inner);
+                            sp += 1;
+                        } else if f(Entry::Object(id, inner)).is_none() {
                             return false;
                         }
                     }

@@ -1,6 +1,7 @@
 use super::nested::{Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use crate::error::Error;
 use crate::grid::GridSpec;
+use crate::grid::aggregate;
 use crate::objects::ObjectStore;
 use crate::scene::Aabb;
 use rayon::prelude::*;
@@ -89,36 +90,58 @@ pub struct ObjectGrid {
     /// Voxels with a hierarchy, and the object entries they replace.
     pub nested_voxels: u64,
     pub nested_entries: u64,
+    /// Groups of objects held as aggregates ([`crate::grid::aggregate`]).
+    pub aggregates: u64,
 }
 
 impl ObjectGrid {
-    /// Builds the grid over `bounds` for the objects (by id) `member` selects;
-    /// `pool` builds the crowded voxels' hierarchies.
+    /// Builds the grid over `bounds` for the objects (by id) `member` selects,
+    /// holding crowded groups as aggregates if `aggregates`; `pool` builds
+    /// the crowded voxels' hierarchies.
     pub fn build(
         boxes: &(impl Boxes + ?Sized),
         bounds: &Aabb,
         res: [u32; 3],
         pool: &rayon::ThreadPool,
+        aggregates: bool,
         member: impl Fn(usize) -> bool,
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
         let cells = spec.cells();
+        let (nested, groups) = if aggregates {
+            find_aggregates(boxes, &spec, &member)
+        } else {
+            Default::default()
+        };
+        // Aggregates come in id order: the one that may hold `id`.
+        let grouped = |id: u32| {
+            let k = groups.partition_point(|g| g.first + aggregate::SIZE as u32 <= id);
+            groups.get(k).is_some_and(|g| g.first <= id)
+        };
+        // Each object's voxels, then each aggregate's, whose entry follows
+        // the objects in every voxel's list.
         let each = |f: &mut dyn FnMut(u32, usize)| {
-            boxes.each(&mut |id, b| {
-                if !member(id as usize) {
-                    return;
-                }
-                if let Some((lo, hi)) = spec.cell_range(&b) {
-                    for z in lo[2]..=hi[2] {
-                        for y in lo[1]..=hi[1] {
-                            let row = spec.index([lo[0], y, z]);
-                            for x in 0..=(hi[0] - lo[0]) as usize {
-                                f(id, row + x);
-                            }
+            let mut cover = |entry: u32, lo: [u32; 3], hi: [u32; 3]| {
+                for z in lo[2]..=hi[2] {
+                    for y in lo[1]..=hi[1] {
+                        let row = spec.index([lo[0], y, z]);
+                        for x in 0..=(hi[0] - lo[0]) as usize {
+                            f(entry, row + x);
                         }
                     }
                 }
-            })
+            };
+            boxes.each(&mut |id, b| {
+                if !member(id as usize) || grouped(id) {
+                    return;
+                }
+                if let Some((lo, hi)) = spec.cell_range(&b) {
+                    cover(id, lo, hi);
+                }
+            });
+            for g in &groups {
+                cover(g.entry, g.lo, g.hi);
+            }
         };
         let mut occupied = vec![0u64; cells.div_ceil(64)];
         let mut total: u64 = 0;
@@ -162,13 +185,20 @@ impl ObjectGrid {
             fill[k] += 1;
             if id != last {
                 last = id;
-                n += 1;
+                n += if id & NESTED == 0 {
+                    1
+                } else {
+                    aggregate::SIZE as u64
+                };
             }
         });
         drop(fill);
         if boxes.ranked() {
+            // Objects by input id; aggregates after them, as listed.
             for w in start.windows(2) {
-                items[w[0] as usize..w[1] as usize].sort_unstable_by_key(|&id| boxes.rank(id));
+                let list = &mut items[w[0] as usize..w[1] as usize];
+                let objects = list.partition_point(|&e| e & NESTED == 0);
+                list[..objects].sort_unstable_by_key(|&id| boxes.rank(id));
             }
         }
         let mut grid = ObjectGrid {
@@ -178,9 +208,10 @@ impl ObjectGrid {
             start,
             items,
             objects: n,
-            nested: Hierarchies::default(),
+            nested,
             nested_voxels: 0,
             nested_entries: 0,
+            aggregates: groups.len() as u64,
         };
         grid.nest(boxes, pool)?;
         Ok(grid)
@@ -201,13 +232,19 @@ impl ObjectGrid {
             return Ok(());
         }
         let (start, items) = (&self.start, &self.items);
+        // A crowded voxel's aggregates are boxes of its hierarchy, with
+        // their own hierarchies below them.
+        let listed = Entries {
+            boxes,
+            aggregates: &self.nested,
+        };
         let built: Vec<Hierarchies> = pool.install(|| {
             crowded
                 .par_iter()
                 .map(|&c| {
                     let ids = &items[start[c] as usize..start[c + 1] as usize];
                     let mut h = Hierarchies::default();
-                    h.build(ids, boxes);
+                    h.build(ids, &listed);
                     h
                 })
                 .collect()
@@ -314,16 +351,96 @@ impl ObjectGrid {
     }
 }
 
+/// A voxel's entries as boxes: objects, and aggregates (tagged
+/// [`NESTED`]) by the box of their hierarchy.
+struct Entries<'a, B: ?Sized> {
+    boxes: &'a B,
+    aggregates: &'a Hierarchies,
+}
+
+impl<B: Boxes + ?Sized> Boxes for Entries<'_, B> {
+    fn count(&self) -> usize {
+        self.boxes.count()
+    }
+
+    fn bbox(&self, e: u32) -> Aabb {
+        if e & NESTED == 0 {
+            self.boxes.bbox(e)
+        } else {
+            self.aggregates.bbox(e)
+        }
+    }
+
+    /// Objects by input id; an aggregate by its entry, above them all.
+    fn rank(&self, e: u32) -> u32 {
+        if e & NESTED == 0 {
+            self.boxes.rank(e)
+        } else {
+            e
+        }
+    }
+}
+
+/// A group of objects held as an aggregate: its first object, the entry
+/// of its hierarchy, and its voxel box.
+struct Group {
+    first: u32,
+    entry: u32,
+    lo: [u32; 3],
+    hi: [u32; 3],
+}
+
+/// The groups of [`aggregate::SIZE`] consecutive objects, all `member`s,
+/// that crowd their voxels of `spec`, in id order, and their hierarchies.
+fn find_aggregates(
+    boxes: &(impl Boxes + ?Sized),
+    spec: &GridSpec,
+    member: &impl Fn(usize) -> bool,
+) -> (Hierarchies, Vec<Group>) {
+    let mut nested = Hierarchies::default();
+    let mut groups = Vec::new();
+    let (mut ids, mut group, mut order) = (Vec::new(), Vec::new(), Vec::new());
+    let mut close = |ids: &mut Vec<u32>, group: &mut Vec<Aabb>| {
+        let mut bounds = Aabb::EMPTY;
+        for b in group.iter() {
+            bounds.union(b);
+        }
+        if let Some((lo, hi)) = aggregate::crowded(spec, &bounds, group.iter()) {
+            let entry = nested.build_with(ids, boxes, &mut order);
+            groups.push(Group {
+                first: ids[0],
+                entry,
+                lo,
+                hi,
+            });
+        }
+        ids.clear();
+        group.clear();
+    };
+    boxes.each(&mut |id, b| {
+        if ids
+            .first()
+            .is_some_and(|&f| f as usize / aggregate::SIZE != id as usize / aggregate::SIZE)
+        {
+            close(&mut ids, &mut group);
+        }
+        if member(id as usize) {
+            ids.push(id);
+            group.push(b);
+        }
+    });
+    close(&mut ids, &mut group);
+    (nested, groups)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Every voxel lists exactly the objects whose box overlaps it, in id
-    /// order, whether it is the first or last of its word of 64 voxels,
-    /// and an empty voxel lists none; a crowded voxel lists one
-    /// hierarchy.
-    #[test]
-    fn each_voxel_lists_the_objects_overlapping_it() {
+    /// Small boxes spread thinly, some wide ones, and a crowd of 160 in
+    /// one corner (ids 300 to 459: groups 5 and 6 of 64 whole, the tail of
+    /// group 4 before them and the head of group 7 after).
+    fn scattered_and_crowded() -> Vec<Aabb> {
         let mut x: u64 = 5;
         let mut next = || {
             x = x
@@ -331,8 +448,6 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (x >> 40) as f32 / (1u64 << 24) as f32
         };
-        // Small boxes spread thinly, some wide ones, and a crowd in one
-        // corner.
         let mut boxes: Vec<Aabb> = (0..300)
             .map(|i| {
                 let c = [next(), next(), next()];
@@ -343,10 +458,35 @@ mod tests {
                 }
             })
             .collect();
-        boxes.extend((0..100).map(|_| Aabb {
+        boxes.extend((0..160).map(|_| Aabb {
             min: [0.001; 3],
             max: [0.002; 3],
         }));
+        boxes
+    }
+
+    /// The objects whose box overlaps voxel `index` of `spec`.
+    fn overlapping(spec: &GridSpec, boxes: &[Aabb], index: usize) -> Vec<u32> {
+        (0..boxes.len() as u32)
+            .filter(|&id| {
+                spec.cell_range(&boxes[id as usize])
+                    .is_some_and(|(lo, hi)| {
+                        (lo[0]..=hi[0]).any(|x| {
+                            (lo[1]..=hi[1])
+                                .any(|y| (lo[2]..=hi[2]).any(|z| spec.index([x, y, z]) == index))
+                        })
+                    })
+            })
+            .collect()
+    }
+
+    /// Every voxel lists exactly the objects whose box overlaps it, in id
+    /// order, whether it is the first or last of its word of 64 voxels,
+    /// and an empty voxel lists none; a crowded voxel lists one
+    /// hierarchy.
+    #[test]
+    fn each_voxel_lists_the_objects_overlapping_it() {
+        let boxes = scattered_and_crowded();
         let bounds = Aabb {
             min: [0.0; 3],
             max: [1.0; 3],
@@ -356,22 +496,11 @@ mod tests {
             .build()
             .unwrap();
         for res in [[1, 1, 1], [7, 9, 10], [64, 3, 2], [13, 13, 13]] {
-            let g = ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, |_| true).unwrap();
+            let g =
+                ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, false, |_| true).unwrap();
             let mut listing = 0;
             for index in 0..g.spec.cells() {
-                let want: Vec<u32> = (0..boxes.len() as u32)
-                    .filter(|&id| {
-                        g.spec
-                            .cell_range(&boxes[id as usize])
-                            .is_some_and(|(lo, hi)| {
-                                (lo[0]..=hi[0]).any(|x| {
-                                    (lo[1]..=hi[1]).any(|y| {
-                                        (lo[2]..=hi[2]).any(|z| g.spec.index([x, y, z]) == index)
-                                    })
-                                })
-                            })
-                    })
-                    .collect();
+                let want = overlapping(&g.spec, &boxes, index);
                 listing += !want.is_empty() as usize;
                 let got = g.cell(index);
                 if want.len() > MIN_OBJECTS {
@@ -388,6 +517,46 @@ mod tests {
                 res == [1, 1, 1] || listing < g.spec.cells(),
                 "{res:?}: no empty voxel"
             );
+        }
+    }
+
+    /// With aggregates, the crowd's two whole groups (at least) are each
+    /// held by their box, and a walk of a voxel (every box entered) meets every
+    /// object overlapping it exactly once, through a crowded voxel's
+    /// hierarchy and the aggregates' below it alike.
+    #[test]
+    fn a_walk_meets_each_object_of_a_voxel_once_through_aggregates() {
+        let boxes = scattered_and_crowded();
+        let bounds = Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        for res in [[1, 1, 1], [7, 9, 10], [13, 13, 13]] {
+            let g =
+                ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, true, |_| true).unwrap();
+            assert!(g.aggregates >= 2, "{res:?}: {} aggregates", g.aggregates);
+            assert_eq!(g.objects, boxes.len() as u64, "{res:?}");
+            for index in 0..g.spec.cells() {
+                let want = overlapping(&g.spec, &boxes, index);
+                let mut got = Vec::new();
+                g.visit(index, 0, (), &mut |e| {
+                    if let Entry::Object(id, ()) = e {
+                        got.push(id);
+                    }
+                    Some(())
+                });
+                got.sort_unstable();
+                let mut once = got.clone();
+                once.dedup();
+                assert_eq!(once, got, "{res:?} voxel {index}: met twice");
+                // An aggregate is met whole wherever its box is: in the
+                // crowd's corner voxel, its objects all overlap it.
+                assert_eq!(got, want, "{res:?} voxel {index}");
+            }
         }
     }
 }

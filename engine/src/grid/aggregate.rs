@@ -26,7 +26,7 @@ pub const SIZE: usize = 64;
 /// aggregate: a ray stored in one of those voxels would test that many
 /// objects one by one, where the hierarchy leads it to the few it may
 /// hit (a walk costs about as much as a dozen tests).
-pub const CROWD: usize = 4;
+pub const CROWD: usize = 16;
 
 /// Voxels of the box from `lo` to `hi`.
 #[inline]

@@ -414,6 +414,10 @@ pub struct GridStat {
     pub nested_voxels: u64,
     #[serde(skip_serializing_if = "is_zero")]
     pub nested_objects: u64,
+    /// Depth-first: groups of objects held as aggregates (see
+    /// [`super::aggregate`]).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub aggregates: u64,
 }
 
 fn is_zero(n: &u64) -> bool {

@@ -12,7 +12,7 @@ mod stats;
 
 pub use camera::Camera;
 pub use frame::{Contribution, FIXED_ONE, Frame, ImageFormat, to_fixed};
-pub use options::{GridRes, Mode, Precision, RenderOptions};
+pub use options::{Aggregates, GridRes, Mode, Precision, RenderOptions};
 pub use sampling::{EyeRays, MAX_SAMPLES, Sampling};
 pub use shade::{ShadeScene, Spawn, shade};
 pub use stats::{KindCounts, RayCounts, RenderStats};

@@ -48,6 +48,32 @@ impl std::str::FromStr for Precision {
     }
 }
 
+/// Which tracers hold crowded groups of objects as aggregates, each with
+/// a hierarchy of its own (see [`crate::grid::aggregate`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Aggregates {
+    /// Breadth-first only. A depth-first voxel too crowded for a list
+    /// gets a hierarchy of its objects, which was measured faster than
+    /// aggregates held by their boxes (BENCHMARKS.md, "Aggregates").
+    #[default]
+    Auto,
+    /// Both tracers.
+    On,
+    /// Neither: objects are tested one by one, as the paper does.
+    Off,
+}
+
+impl Aggregates {
+    pub fn breadth_first(self) -> bool {
+        self != Aggregates::Off
+    }
+
+    pub fn depth_first(self) -> bool {
+        self == Aggregates::On
+    }
+}
+
 /// Grid resolution: chosen from the scene, or given.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum GridRes {
@@ -91,6 +117,8 @@ pub struct RenderOptions {
     pub grid_density: f64,
     /// Allow the scene to be split into several grids (`--grids 1` = no).
     pub multiple_grids: bool,
+    /// Which tracers hold crowded groups of objects as aggregates.
+    pub aggregates: Aggregates,
     pub precision: Precision,
     /// Time the depth-first tracer's intersection queries, to split its
     /// trace time into intersection and shading (costs a little time).
@@ -110,6 +138,7 @@ impl Default for RenderOptions {
             grid_res: GridRes::Auto,
             grid_density: crate::grid::DEFAULT_DENSITY,
             multiple_grids: true,
+            aggregates: Aggregates::Auto,
             precision: Precision::Double,
             profile: false,
             samples: 1,

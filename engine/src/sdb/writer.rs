@@ -5,6 +5,7 @@ use super::format::*;
 use super::packed::{PackCounts, Packer};
 use super::spatial::SpatialSorter;
 use crate::error::{Error, IoContext};
+use crate::grid::aggregate;
 use crate::scene::{
     Aabb, DensitySummary, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View,
 };
@@ -218,8 +219,9 @@ impl DbWriter {
 
     /// Memory a writer holds besides its output buffer, at most: one
     /// block of records, the block as stored, one compressed block, the
-    /// packer's tables, and room for a record past the block's target.
-    pub const HELD_BYTES: usize = 3 * BLOCK_TARGET + (96 << 10);
+    /// packer's tables, and room for a record and the rest of a group of
+    /// objects past the block's target.
+    pub const HELD_BYTES: usize = 3 * (BLOCK_TARGET + BLOCK_TARGET / 8) + (96 << 10);
 
     fn run_counts(&self) -> PackCounts {
         self.packer.as_ref().map(|p| p.counts).unwrap_or_default()
@@ -292,11 +294,19 @@ impl DbWriter {
         Ok(())
     }
 
-    /// Adds a record to the block being filled (closing it first if the
-    /// record would take it past its target), as object `id` of the input
-    /// when blocks store ids.
+    /// Adds a record to the block being filled, as object `id` of the
+    /// input, in a database in spatial order: the block is closed first if
+    /// the record would take it past its target and the record begins a
+    /// group of [`aggregate::SIZE`] objects (so that no aggregate is cut,
+    /// and a pass that passes over a block passes over whole aggregates),
+    /// or if it would take it an eighth past its target all the same.
     fn place(&mut self, id: u32, record: &[u32]) -> Result<(), Error> {
-        if self.block_objects > 0 && (self.block.len() + record.len()) * 4 > BLOCK_TARGET {
+        let bytes = (self.block.len() + record.len()) * 4;
+        let group_starts =
+            (self.block_first + self.block_objects as u64).is_multiple_of(aggregate::SIZE as u64);
+        if self.block_objects > 0
+            && ((bytes > BLOCK_TARGET && group_starts) || bytes > BLOCK_TARGET + BLOCK_TARGET / 8)
+        {
             self.flush_block()?;
         }
         self.block.extend_from_slice(record);

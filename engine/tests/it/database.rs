@@ -612,3 +612,39 @@ fn a_block_claiming_more_objects_than_the_file_has_is_an_error() {
     let e = read_all(&path).unwrap_err().to_string();
     assert!(e.contains("block 0") && e.contains("more objects"), "{e}");
 }
+
+/// In spatial order a block ends where a group of 64 objects (an
+/// aggregate's) begins, so that no aggregate is cut and a pass that
+/// passes over a block passes over whole aggregates; in input order
+/// blocks end where their bytes say, as before.
+#[test]
+fn spatial_blocks_begin_where_a_group_of_objects_begins() {
+    let dir = tempfile::tempdir().unwrap();
+    let firsts = |spatial: bool| {
+        let path = dir.path().join(format!("t{spatial}.sdb"));
+        let mut w = sray_engine::sdb::DbWriter::create(&path, Compression::None).unwrap();
+        if spatial {
+            w = w.spatial(1 << 20, Some(dir.path()));
+        }
+        sray_engine::source::SceneSource::Spd {
+            scene: SpdScene::Gears,
+            size: 3,
+        }
+        .stream_into(&mut w, &sray_engine::progress::NoProgress)
+        .unwrap();
+        w.finish().unwrap();
+        let db = Database::open(&path).unwrap();
+        let mut scan = db.scan().unwrap();
+        let mut firsts = Vec::new();
+        while let Some(b) = scan.next_block().unwrap() {
+            firsts.push(b.first_object);
+        }
+        firsts
+    };
+    let spatial = firsts(true);
+    assert!(spatial.len() > 3, "{spatial:?}");
+    let group = sray_engine::grid::aggregate::SIZE as u64;
+    assert!(spatial.iter().all(|f| f % group == 0), "{spatial:?}");
+    let input = firsts(false);
+    assert!(input.iter().any(|f| f % group != 0), "{input:?}");
+}
