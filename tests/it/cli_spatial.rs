@@ -302,8 +302,14 @@ fn aggregates_change_no_image_in_either_tracer_or_on_a_cluster() {
         assert!(got == want, "{mode} under {memory}, aggregates {how}");
         let st = stats(d, &format!("ball.sdb.{mode}.{memory}.png.json"));
         match (mode, how) {
-            ("bf", "auto") => assert!(walks(&format!("ball.sdb.bf.{memory}.png.json")) > 0),
-            ("bf", _) => assert_eq!(walks("ball.sdb.bf.3MiB.png.json"), 0),
+            ("bf", "auto") => {
+                assert!(walks(&format!("ball.sdb.bf.{memory}.png.json")) > 0);
+                assert!(st["grids"][0]["aggregates"].as_u64() > Some(10), "{st}");
+            }
+            ("bf", _) => {
+                assert_eq!(walks("ball.sdb.bf.3MiB.png.json"), 0);
+                assert!(st["grids"][0].get("aggregates").is_none(), "{st}");
+            }
             (_, "on") => assert!(st["grids"][0]["aggregates"].as_u64() > Some(10), "{st}"),
             _ => assert!(st["grids"][0].get("aggregates").is_none(), "{st}"),
         }

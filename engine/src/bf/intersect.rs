@@ -33,7 +33,7 @@
 use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::skip::Touched;
-use super::voxels::{OCCUPIED, REGISTERED, VoxelGrids, entry_face};
+use super::voxels::{OCCUPIED, REGISTERED, VoxelGrid, VoxelGrids, entry_face};
 use crate::df::{Entry, Hierarchies, high_first, ray_meets};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec, aggregate};
@@ -1138,12 +1138,19 @@ pub(crate) struct Candidate {
     hi: [u16; 3],
 }
 
-/// Consecutive objects judged together first: in a database in spatial
-/// order they lie close together, and a group whose box meets no
-/// registered voxel of any grid is passed over without looking at its
-/// objects one by one (their grid, their voxels). A crowded group is
-/// traced as an aggregate (see [`Found`]).
-const AGGREGATE: usize = aggregate::SIZE;
+impl Candidate {
+    /// Object `b` of grid `g`, over voxels `lo..=hi` there.
+    fn new(b: &BoxRef, g: usize, lo: [u32; 3], hi: [u32; 3]) -> Candidate {
+        Candidate {
+            at: b.at,
+            index: b.index,
+            rank: b.rank,
+            group: g as u8,
+            lo: lo.map(|c| c as u16),
+            hi: hi.map(|c| c as u16),
+        }
+    }
+}
 
 /// What a pass does with one block, worked out once for every shard (by
 /// the reader thread, ahead of the shards): the objects some registered
@@ -1154,8 +1161,11 @@ const AGGREGATE: usize = aggregate::SIZE;
 /// voxels of its box like one object, and a ray met there walks a
 /// hierarchy of boxes over its objects, built when the block is read,
 /// instead of testing each. Groups are the depth-first tracer's: the
-/// objects whose index divided by [`AGGREGATE`] is the same (a group that
-/// a block boundary cuts is tested one by one). Which groups are
+/// objects whose index divided by [`aggregate::SIZE`] is the same (a
+/// group that a block boundary cuts is tested one by one). Every group is
+/// first judged by its box: one that meets no registered voxel of any
+/// grid is passed over without looking at its objects one by one (their
+/// grid, their voxels). Which groups are
 /// aggregates depends on the
 /// database and the grids alone, not on the rays of the pass, so every
 /// count is still the same whatever the threads, slots or memory. The
@@ -1226,86 +1236,92 @@ fn candidates(
     out: &mut Found,
 ) {
     out.clear();
-    let mut boxes = block.boxes();
-    let mut agg = [BoxRef {
-        at: 0,
-        index: 0,
-        rank: 0,
-        kind: crate::shapes::ShapeKind::Sphere,
-        bbox: Aabb::EMPTY,
-    }; AGGREGATE];
-    // Up to the first multiple of AGGREGATE, then by AGGREGATE.
-    let mut take = AGGREGATE - (block.first_object % AGGREGATE as u64) as usize;
-    loop {
-        let mut n = 0;
-        let mut bounds = Aabb::EMPTY;
-        for b in boxes.by_ref().take(std::mem::replace(&mut take, AGGREGATE)) {
-            bounds.union(&b.bbox);
-            agg[n] = b;
-            n += 1;
-        }
-        if n == 0 {
+    let spec = |g: usize| grids.grids.get(g).map(|v| &v.spec);
+    // Each object's voxels in its own grid lie within its group's voxels
+    // in that grid: passing over a group whose box is near no registered
+    // voxel drops no candidate.
+    let near = |bounds: &Aabb| {
+        grids.grids.iter().zip(region).any(|(grid, r)| {
+            grid.spec
+                .cell_range(bounds)
+                .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
+        })
+    };
+    let mut placed = [(0, None); aggregate::SIZE];
+    aggregate::each_group(block, |group, bounds| {
+        if !near(bounds) {
             return;
         }
-        // Each object's voxels in its own grid lie within the group's
-        // voxels in that grid: passing over it drops no candidate.
-        let near = grids.grids.iter().zip(region).any(|(grid, r)| {
-            grid.spec
-                .cell_range(&bounds)
-                .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
-        });
-        if near && !(aggregates && aggregate(&agg[..n], &bounds, grids, region, out)) {
-            candidates_in(&agg[..n], grids, region, &mut out.singles);
+        if aggregates && aggregate::may_be(spec(grids.partition.group(&group[0].bbox)), bounds) {
+            aggregate::place(group, &grids.partition, spec, &mut placed);
+            let placed = &placed[..group.len()];
+            match aggregate::of_grids(group, placed, bounds, spec) {
+                Some((g, lo, hi)) => {
+                    if region[g].overlaps(lo, hi) {
+                        add_aggregate(group, placed, g, lo, hi, out);
+                    }
+                }
+                None => {
+                    // Placed already: one by one.
+                    for (b, &(g, cells)) in group.iter().zip(placed) {
+                        if let Some((lo, hi)) = cells
+                            && region[g].overlaps(lo, hi)
+                        {
+                            out.singles.push(Candidate::new(b, g, lo, hi));
+                        }
+                    }
+                }
+            }
+            return;
+        }
+        // One by one, each half of the group judged by its box first.
+        for half in group.chunks(aggregate::SIZE / 2) {
+            let mut bounds = Aabb::EMPTY;
+            for b in half {
+                bounds.union(&b.bbox);
+            }
+            if near(&bounds) {
+                candidates_in(half, grids, region, &mut out.singles);
+            }
+        }
+    });
+}
+
+/// [`candidates`] among `boxes`, one by one.
+fn candidates_in(
+    boxes: &[BoxRef],
+    grids: &VoxelGrids,
+    region: &[Region; MAX_GRIDS],
+    out: &mut Vec<Candidate>,
+) {
+    for b in boxes {
+        let g = grids.partition.group(&b.bbox);
+        if let Some((lo, hi)) = grids.grids[g].spec.cell_range(&b.bbox)
+            && region[g].overlaps(lo, hi)
+        {
+            out.push(Candidate::new(b, g, lo, hi));
         }
     }
 }
 
-/// Makes the group `boxes` (of box `bounds`) an aggregate of `out` if it
-/// is one: a full group of one grid's objects, no instance among them
-/// (their models are tested apart), crowding its voxels. Returns whether
-/// it is one (then it is added only if its voxels meet `region`).
-fn aggregate(
+/// Adds the group `boxes` (placed in the grids as `placed` says), an
+/// aggregate of grid `g` over voxels `lo..=hi`, to `out`, with its
+/// hierarchy.
+fn add_aggregate(
     boxes: &[BoxRef],
-    bounds: &Aabb,
-    grids: &VoxelGrids,
-    region: &[Region; MAX_GRIDS],
+    placed: &[aggregate::Placed],
+    g: usize,
+    lo: [u32; 3],
+    hi: [u32; 3],
     out: &mut Found,
-) -> bool {
-    if boxes
-        .iter()
-        .any(|b| b.kind == crate::shapes::ShapeKind::Instance)
-    {
-        return false;
-    }
-    let g = grids.partition.group(&boxes[0].bbox);
-    if boxes[1..]
-        .iter()
-        .any(|b| grids.partition.group(&b.bbox) != g)
-    {
-        return false;
-    }
-    let spec = &grids.grids[g].spec;
-    let Some((lo, hi)) = aggregate::crowded(spec, bounds, boxes.iter().map(|b| &b.bbox)) else {
-        return false;
-    };
-    if !region[g].overlaps(lo, hi) {
-        return true;
-    }
+) {
     let first = out.members.len();
-    for b in boxes {
+    for (b, &(_, cells)) in boxes.iter().zip(placed) {
         // Within the group's box, so within the grid.
-        let Some((blo, bhi)) = spec.cell_range(&b.bbox) else {
-            continue;
-        };
-        out.members.push(Candidate {
-            at: b.at,
-            index: b.index,
-            rank: b.rank,
-            group: g as u8,
-            lo: blo.map(|c| c as u16),
-            hi: bhi.map(|c| c as u16),
-        });
-        out.member_boxes.push(b.bbox);
+        if let Some((blo, bhi)) = cells {
+            out.members.push(Candidate::new(b, g, blo, bhi));
+            out.member_boxes.push(b.bbox);
+        }
     }
     out.ids.clear();
     out.ids.extend(first as u32..out.members.len() as u32);
@@ -1321,33 +1337,6 @@ fn aggregate(
         lo: lo.map(|c| c as u16),
         hi: hi.map(|c| c as u16),
     });
-    true
-}
-
-/// [`candidates`] among `boxes`, one by one.
-fn candidates_in(
-    boxes: &[BoxRef],
-    grids: &VoxelGrids,
-    region: &[Region; MAX_GRIDS],
-    out: &mut Vec<Candidate>,
-) {
-    for b in boxes {
-        let g = grids.partition.group(&b.bbox);
-        let Some((lo, hi)) = grids.grids[g].spec.cell_range(&b.bbox) else {
-            continue;
-        };
-        if !region[g].overlaps(lo, hi) {
-            continue;
-        }
-        out.push(Candidate {
-            at: b.at,
-            index: b.index,
-            rank: b.rank,
-            group: g as u8,
-            lo: lo.map(|c| c as u16),
-            hi: hi.map(|c| c as u16),
-        });
-    }
 }
 
 /// Tests one block's candidate objects and aggregates against the shard's
@@ -1404,8 +1393,6 @@ fn scan_aggregates<R: Real>(
         if !sh.region[g].overlaps(lo, hi) {
             continue;
         }
-        let grid = &grids.grids[g];
-        let dense = sh.regs[g].is_dense();
         let members = &found.members[a.first as usize..(a.first + a.len) as usize];
         let tag = aggregate_tag(a.index, walk.pass);
         objects.clear();
@@ -1417,86 +1404,131 @@ fn scan_aggregates<R: Real>(
             counts,
             ..
         } = &mut *sh;
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                let row = grid.spec.index([0, y, z]);
-                for x in lo[0]..=hi[0] {
-                    let v = row + x as usize;
-                    if !dense && grid.flags[v] & REGISTERED == 0 {
-                        continue;
-                    }
-                    for &slot in regs[g].slots_in(v as u32) {
-                        let s = &mut hot[slot as usize];
-                        if s.blocked {
-                            continue;
-                        }
-                        if s.mailbox == tag {
-                            counts.skipped_mailbox += 1;
-                            continue;
-                        }
-                        s.mailbox = tag;
-                        if objects.is_empty() {
-                            for m in members {
-                                // Records were checked when the block was read.
-                                let Some(o) = block.object_at(m.at, m.index, m.rank) else {
-                                    return;
-                                };
-                                objects.push((o, o.shape.prepare()));
-                            }
-                        }
-                        counts.aggregate_walks += 1;
-                        let c = &mut cold[slot as usize];
-                        let q = &q[slot as usize];
-                        let (o, inv) = (c.o, c.inv);
-                        let prev = s.prev[g];
-                        found
-                            .trees
-                            .visit(a.tree, high_first(c.d), (), &mut |e| match e {
-                                Entry::Box(b, ()) => ray_meets(
-                                    o,
-                                    inv,
-                                    s.t_min.to_f64(),
-                                    s.upper.to_f64(),
-                                    b,
-                                    walk.slack,
-                                )
-                                .then_some(()),
-                                Entry::Object(id, ()) => {
-                                    let k = id as usize - a.first as usize;
-                                    let m = &members[k];
-                                    if prev[0] != NONE16
-                                        && (0..3).all(|i| (m.lo[i]..=m.hi[i]).contains(&prev[i]))
-                                    {
-                                        // Tested in the previous pass (Fig. 5b).
-                                        counts.skipped_last_voxel += 1;
-                                        return Some(());
-                                    }
-                                    let (ob, pr) = &objects[k];
-                                    counts.tests.add(ob.shape.kind());
-                                    if let Some(t) = ob.shape.intersect(
-                                        pr.as_ref(),
-                                        &ob.bbox,
-                                        q,
-                                        s.t_min,
-                                        s.upper,
-                                    ) {
-                                        let t = t.to_f64();
-                                        offer(
-                                            s,
-                                            c,
-                                            t,
-                                            PrimId::object(m.index),
-                                            m.rank,
-                                            carry,
-                                            |ray| Some((ob.shape.surface(ray, t), ob.material)),
-                                        );
-                                    }
-                                    // A shadow ray is done at its first blocker.
-                                    (!s.blocked).then_some(())
-                                }
-                            });
-                    }
+        for slot in registered(&regs[g], &grids.grids[g], lo, hi) {
+            let s = &mut hot[slot as usize];
+            if s.blocked {
+                continue;
+            }
+            if s.mailbox == tag {
+                counts.skipped_mailbox += 1;
+                continue;
+            }
+            s.mailbox = tag;
+            if objects.is_empty() {
+                for m in members {
+                    // Records were checked when the block was read.
+                    let Some(o) = block.object_at(m.at, m.index, m.rank) else {
+                        return;
+                    };
+                    objects.push((o, o.shape.prepare()));
                 }
+            }
+            counts.aggregate_walks += 1;
+            let c = &mut cold[slot as usize];
+            let q = &q[slot as usize];
+            let (o, inv) = (c.o, c.inv);
+            let prev = s.prev[g];
+            found
+                .trees
+                .visit(a.tree, high_first(c.d), (), &mut |e| match e {
+                    Entry::Box(b, ()) => {
+                        ray_meets(o, inv, s.t_min.to_f64(), s.upper.to_f64(), b, walk.slack)
+                            .then_some(())
+                    }
+                    Entry::Object(id, ()) => {
+                        let k = id as usize - a.first as usize;
+                        let m = &members[k];
+                        if prev[0] != NONE16
+                            && (0..3).all(|i| (m.lo[i]..=m.hi[i]).contains(&prev[i]))
+                        {
+                            // Tested in the previous pass (Fig. 5b).
+                            counts.skipped_last_voxel += 1;
+                            return Some(());
+                        }
+                        let (ob, pr) = &objects[k];
+                        counts.tests.add(ob.shape.kind());
+                        if let Some(t) =
+                            ob.shape
+                                .intersect(pr.as_ref(), &ob.bbox, q, s.t_min, s.upper)
+                        {
+                            let t = t.to_f64();
+                            offer(s, c, t, PrimId::object(m.index), m.rank, carry, |ray| {
+                                Some((ob.shape.surface(ray, t), ob.material))
+                            });
+                        }
+                        // A shadow ray is done at its first blocker.
+                        (!s.blocked).then_some(())
+                    }
+                });
+        }
+    }
+}
+
+/// The rays (slots) of a shard stored in the voxels of box `lo..=hi` of
+/// `grid` (the shard's registrations there being `regs`), voxel by voxel:
+/// a ray stored in several of them comes once from each.
+#[inline(always)]
+fn registered<'a>(
+    regs: &'a RegMap,
+    grid: &'a VoxelGrid,
+    lo: [u32; 3],
+    hi: [u32; 3],
+) -> Registered<'a> {
+    Registered {
+        regs,
+        grid,
+        dense: regs.is_dense(),
+        lo,
+        hi,
+        // Just before the first voxel.
+        at: [lo[0].wrapping_sub(1), lo[1], lo[2]],
+        row: grid.spec.index([0, lo[1], lo[2]]),
+        slots: [].iter(),
+    }
+}
+
+/// The iterator of [`registered`]: the nested loops over a box's voxels,
+/// unrolled by hand (an iterator of iterators costs a tenth of a scan's
+/// instructions).
+struct Registered<'a> {
+    regs: &'a RegMap,
+    grid: &'a VoxelGrid,
+    dense: bool,
+    lo: [u32; 3],
+    hi: [u32; 3],
+    /// The voxel whose slots `slots` holds the rest of.
+    at: [u32; 3],
+    row: usize,
+    slots: std::slice::Iter<'a, u32>,
+}
+
+impl Iterator for Registered<'_> {
+    type Item = u32;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<u32> {
+        loop {
+            if let Some(&s) = self.slots.next() {
+                return Some(s);
+            }
+            // The next voxel, x fastest.
+            if self.at[0].wrapping_add(1) <= self.hi[0] {
+                self.at[0] = self.at[0].wrapping_add(1);
+            } else {
+                self.at[0] = self.lo[0];
+                if self.at[1] < self.hi[1] {
+                    self.at[1] += 1;
+                } else if self.at[2] < self.hi[2] {
+                    self.at[1] = self.lo[1];
+                    self.at[2] += 1;
+                } else {
+                    return None;
+                }
+                self.row = self.grid.spec.index([0, self.at[1], self.at[2]]);
+            }
+            let v = self.row + self.at[0] as usize;
+            if self.dense || self.grid.flags[v] & REGISTERED != 0 {
+                self.slots = self.regs.slots_in(v as u32).iter();
             }
         }
     }
@@ -1522,8 +1554,6 @@ fn scan_singles<R: Real>(
         if !sh.region[g].overlaps(lo, hi) {
             continue;
         }
-        let grid = &grids.grids[g];
-        let dense = sh.regs[g].is_dense();
         // Decoded on the first ray to test, and then kept.
         let mut object: Option<(ObjectRef<'_>, Option<Prepared>, Option<Placement>)> = None;
         // Where this instance went in `sh.placed`, when models are read
@@ -1531,116 +1561,89 @@ fn scan_singles<R: Real>(
         let mut placed_at = u32::MAX;
         let index = c.index;
         let prim = PrimId::object(index);
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                let row = grid.spec.index([0, y, z]);
-                for x in lo[0]..=hi[0] {
-                    let v = row + x as usize;
-                    if !dense && grid.flags[v] & REGISTERED == 0 {
-                        continue;
-                    }
-                    for &slot in sh.regs[g].slots_in(v as u32) {
-                        let s = &mut sh.hot[slot as usize];
-                        if s.blocked {
-                            continue;
-                        }
-                        if s.mailbox == prim {
-                            sh.counts.skipped_mailbox += 1;
-                            continue;
-                        }
-                        s.mailbox = prim;
-                        let p = s.prev[g];
-                        if p[0] != NONE16
-                            && (lo[0]..=hi[0]).contains(&(p[0] as u32))
-                            && (lo[1]..=hi[1]).contains(&(p[1] as u32))
-                            && (lo[2]..=hi[2]).contains(&(p[2] as u32))
-                        {
-                            // Tested in the previous pass, when the ray was
-                            // stored in its last voxel, which this object's
-                            // voxel box contains (Fig. 5b).
-                            sh.counts.skipped_last_voxel += 1;
-                            continue;
-                        }
-                        if object.is_none() {
-                            // Records were checked when the block was read.
-                            let Some(o) = block.object_at(c.at, c.index, c.rank) else {
-                                return;
-                            };
-                            let placement = match &o.shape {
-                                Shape::Instance(i) => Some(Placement::of(i)),
-                                _ => None,
-                            };
-                            if let (true, Some(pl)) = (per_pass, placement) {
-                                placed_at = sh.placed.len() as u32;
-                                sh.placed.push((index, c.rank, pl));
-                            }
-                            object = Some((o, o.shape.prepare(), placement));
-                        }
-                        let Some((o, pr, placement)) = &object else {
-                            continue;
-                        };
-                        sh.counts.tests.add(o.shape.kind());
-                        if placed_at != u32::MAX {
-                            // Tested once the model is read, after the
-                            // world's objects.
-                            sh.pairs.push(Pair {
-                                slot,
-                                placed: placed_at,
-                            });
-                            continue;
-                        }
-                        let q = &sh.q[slot as usize];
-                        let found = match placement {
-                            None => o
-                                .shape
-                                .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
-                                .map(|t| (t, prim)),
-                            Some(pl) => {
-                                let c = &sh.cold[slot as usize];
-                                if s.shadow {
-                                    models
-                                        .blocks(
-                                            pl,
-                                            q,
-                                            c.o,
-                                            c.d,
-                                            s.t_min,
-                                            s.upper,
-                                            &mut sh.counts.tests,
-                                        )
-                                        .then_some((s.upper, prim))
-                                } else {
-                                    models
-                                        .nearest(
-                                            pl,
-                                            q,
-                                            c.o,
-                                            c.d,
-                                            s.t_min,
-                                            s.upper,
-                                            &mut sh.counts.tests,
-                                        )
-                                        .map(|(t, p)| (t, PrimId::instance(index, p)))
-                                }
-                            }
-                        };
-                        if let Some((t, prim)) = found {
-                            let t = t.to_f64();
-                            offer(
-                                s,
-                                &mut sh.cold[slot as usize],
-                                t,
-                                prim,
-                                c.rank,
-                                carry,
-                                |ray| match (placement, prim.instance_parts()) {
-                                    (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
-                                    _ => Some((o.shape.surface(ray, t), o.material)),
-                                },
-                            );
-                        }
+        for slot in registered(&sh.regs[g], &grids.grids[g], lo, hi) {
+            let s = &mut sh.hot[slot as usize];
+            if s.blocked {
+                continue;
+            }
+            if s.mailbox == prim {
+                sh.counts.skipped_mailbox += 1;
+                continue;
+            }
+            s.mailbox = prim;
+            let p = s.prev[g];
+            if p[0] != NONE16
+                && (lo[0]..=hi[0]).contains(&(p[0] as u32))
+                && (lo[1]..=hi[1]).contains(&(p[1] as u32))
+                && (lo[2]..=hi[2]).contains(&(p[2] as u32))
+            {
+                // Tested in the previous pass, when the ray was
+                // stored in its last voxel, which this object's
+                // voxel box contains (Fig. 5b).
+                sh.counts.skipped_last_voxel += 1;
+                continue;
+            }
+            if object.is_none() {
+                // Records were checked when the block was read.
+                let Some(o) = block.object_at(c.at, c.index, c.rank) else {
+                    return;
+                };
+                let placement = match &o.shape {
+                    Shape::Instance(i) => Some(Placement::of(i)),
+                    _ => None,
+                };
+                if let (true, Some(pl)) = (per_pass, placement) {
+                    placed_at = sh.placed.len() as u32;
+                    sh.placed.push((index, c.rank, pl));
+                }
+                object = Some((o, o.shape.prepare(), placement));
+            }
+            let Some((o, pr, placement)) = &object else {
+                continue;
+            };
+            sh.counts.tests.add(o.shape.kind());
+            if placed_at != u32::MAX {
+                // Tested once the model is read, after the
+                // world's objects.
+                sh.pairs.push(Pair {
+                    slot,
+                    placed: placed_at,
+                });
+                continue;
+            }
+            let q = &sh.q[slot as usize];
+            let found = match placement {
+                None => o
+                    .shape
+                    .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
+                    .map(|t| (t, prim)),
+                Some(pl) => {
+                    let c = &sh.cold[slot as usize];
+                    if s.shadow {
+                        models
+                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .then_some((s.upper, prim))
+                    } else {
+                        models
+                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .map(|(t, p)| (t, PrimId::instance(index, p)))
                     }
                 }
+            };
+            if let Some((t, prim)) = found {
+                let t = t.to_f64();
+                offer(
+                    s,
+                    &mut sh.cold[slot as usize],
+                    t,
+                    prim,
+                    c.rank,
+                    carry,
+                    |ray| match (placement, prim.instance_parts()) {
+                        (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
+                        _ => Some((o.shape.surface(ray, t), o.material)),
+                    },
+                );
             }
         }
     }

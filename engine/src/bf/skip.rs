@@ -163,6 +163,7 @@ mod tests {
                 flags: vec![0; spec.cells()],
                 spec: spec.clone(),
                 objects: 0,
+                aggregates: 0,
             }],
             partition: crate::grid::Partition::one(),
             blocks: Vec::new(),

@@ -295,7 +295,9 @@ impl<'db, R: Real> Tracer<'db, R> {
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");
         let slack = crate::grid::box_slack(&db.scene().view.from, &specs);
-        let (grids, pre) = VoxelGrids::build(db, specs, partition, progress)?;
+        // The paper's passes test objects one by one.
+        let aggregates = opts.aggregates.breadth_first() && !db.full_scans();
+        let (grids, pre) = VoxelGrids::build(db, specs, partition, aggregates, progress)?;
         let preprocess_seconds = models_seconds + t0.elapsed().as_secs_f64();
         let stats = BfStats {
             memory_budget_bytes: bf.memory,
@@ -336,7 +338,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             preprocess_seconds,
             intersect_seconds: 0.0,
             read_ahead,
-            aggregates: opts.aggregates.breadth_first(),
+            aggregates,
             shade_seconds: 0.0,
         })
     }
@@ -402,7 +404,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
             eps: self.eps,
-            aggregates: self.aggregates && !self.db.full_scans(),
+            aggregates: self.aggregates,
             slack: self.slack,
         };
         let ist = {

@@ -5,7 +5,7 @@
 
 use super::skip::CellBox;
 use crate::error::Error;
-use crate::grid::{GridSpec, GridStat, Partition};
+use crate::grid::{GridSpec, GridStat, MAX_GROUPS, Partition, aggregate};
 use crate::progress::Progress;
 use crate::sdb::{Database, DbStats};
 
@@ -32,6 +32,8 @@ pub struct VoxelGrid {
     pub spec: GridSpec,
     pub flags: Vec<u8>,
     pub objects: u64,
+    /// Groups of objects the passes hold as aggregates.
+    pub aggregates: u64,
 }
 
 pub struct VoxelGrids {
@@ -43,11 +45,14 @@ pub struct VoxelGrids {
 }
 
 impl VoxelGrids {
-    /// Marks occupancy and face flags with one scan of `db`.
+    /// Marks occupancy and face flags with one scan of `db`, counting the
+    /// groups of objects that are aggregates if the passes will hold
+    /// them (`aggregates`).
     pub fn build(
         db: &Database,
         specs: Vec<GridSpec>,
         partition: Partition,
+        aggregates: bool,
         progress: &dyn Progress,
     ) -> Result<(VoxelGrids, DbStats), Error> {
         let mut grids: Vec<VoxelGrid> = specs
@@ -56,6 +61,7 @@ impl VoxelGrids {
                 flags: vec![0u8; spec.cells()],
                 spec,
                 objects: 0,
+                aggregates: 0,
             })
             .collect();
         let n = grids.len();
@@ -77,6 +83,26 @@ impl VoxelGrids {
                 };
                 blocks[at + gi].add(lo, hi);
                 mark_box(&g.spec, &mut g.flags, lo, hi);
+            }
+            // The groups the passes will hold as aggregates (counted for
+            // the statistics; the passes find them again from the block).
+            if aggregates {
+                let mut placed = [(0, None); aggregate::SIZE];
+                let mut found = [0u64; MAX_GROUPS];
+                let spec = |g: usize| grids.get(g).map(|v| &v.spec);
+                aggregate::each_group(&block, |group, bounds| {
+                    if !aggregate::may_be(spec(partition.group(&group[0].bbox)), bounds) {
+                        return;
+                    }
+                    aggregate::place(group, &partition, spec, &mut placed);
+                    let placed = &placed[..group.len()];
+                    if let Some((g, ..)) = aggregate::of_grids(group, placed, bounds, spec) {
+                        found[g] += 1;
+                    }
+                });
+                for (g, n) in grids.iter_mut().zip(found) {
+                    g.aggregates += n;
+                }
             }
             progress.inc(block.object_count as u64);
         }
@@ -106,7 +132,7 @@ impl VoxelGrids {
                 hi: g.spec.hi,
                 nested_voxels: 0,
                 nested_objects: 0,
-                aggregates: 0,
+                aggregates: g.aggregates,
             })
             .collect()
     }

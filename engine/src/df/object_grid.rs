@@ -405,7 +405,12 @@ fn find_aggregates(
         for b in group.iter() {
             bounds.union(b);
         }
-        if let Some((lo, hi)) = aggregate::crowded(spec, &bounds, group.iter()) {
+        if let Some((lo, hi)) = aggregate::crowded(
+            spec,
+            &bounds,
+            group.len(),
+            aggregate::pairs(spec, group.iter()),
+        ) {
             let entry = nested.build_with(ids, boxes, &mut order);
             groups.push(Group {
                 first: ids[0],

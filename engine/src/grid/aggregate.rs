@@ -16,8 +16,10 @@
 //! each: aggregates make that model a region of a few hundred objects of
 //! the grid, each with a small structure of its own.
 
-use super::GridSpec;
+use super::{GridSpec, Partition};
 use crate::scene::Aabb;
+use crate::sdb::{Block, BoxRef};
+use crate::shapes::ShapeKind;
 
 /// Objects in a group.
 pub const SIZE: usize = 64;
@@ -28,29 +30,122 @@ pub const SIZE: usize = 64;
 /// hit (a walk costs about as much as a dozen tests).
 pub const CROWD: usize = 16;
 
+/// Most voxels an aggregate's box may span: a group spread wider is taken
+/// as objects (whose boxes a pass judges in halves first, so that a wide
+/// group near few rays costs little).
+pub const MAX_VOXELS: usize = 8;
+
 /// Voxels of the box from `lo` to `hi`.
 #[inline]
 pub fn volume(lo: [u32; 3], hi: [u32; 3]) -> usize {
     (0..3).map(|i| (hi[i] - lo[i] + 1) as usize).product()
 }
 
-/// The voxel box of a group of objects (of boxes `boxes`, whose union is
-/// `bounds`) in grid `spec` if the group is an aggregate there: a whole
-/// group, crowding its voxels.
-pub fn crowded<'a>(
+/// The voxel box of a group of `n` objects of box `bounds` in grid `spec`
+/// if the group is an aggregate there: a whole group whose objects
+/// overlap `pairs` voxels in all (each counting every voxel of its own
+/// box), crowding the voxels of its box, which are at most
+/// [`MAX_VOXELS`].
+pub fn crowded(
     spec: &GridSpec,
     bounds: &Aabb,
-    boxes: impl ExactSizeIterator<Item = &'a Aabb>,
+    n: usize,
+    pairs: usize,
 ) -> Option<([u32; 3], [u32; 3])> {
-    if boxes.len() != SIZE {
+    if n != SIZE {
         return None;
     }
     let (lo, hi) = spec.cell_range(bounds)?;
-    let pairs: usize = boxes
+    let v = volume(lo, hi);
+    (v <= MAX_VOXELS && pairs >= CROWD * v).then_some((lo, hi))
+}
+
+/// Whether a group of box `bounds` whose first object is in grid `spec`
+/// may be an aggregate: its box spans at most [`MAX_VOXELS`] voxels there
+/// (a cheap test before its objects are placed one by one).
+pub fn may_be(spec: Option<&GridSpec>, bounds: &Aabb) -> bool {
+    spec.and_then(|s| s.cell_range(bounds))
+        .is_some_and(|(lo, hi)| volume(lo, hi) <= MAX_VOXELS)
+}
+
+/// The voxels of grid `spec` the objects of boxes `boxes` overlap, each
+/// counting every voxel of its own box.
+pub fn pairs<'a>(spec: &GridSpec, boxes: impl Iterator<Item = &'a Aabb>) -> usize {
+    boxes
         .filter_map(|b| spec.cell_range(b))
         .map(|(lo, hi)| volume(lo, hi))
+        .sum()
+}
+
+/// An object of a group in the grids: the grid it belongs to, and its
+/// voxel box there (`None` outside it).
+pub type Placed = (usize, Option<([u32; 3], [u32; 3])>);
+
+/// Places each object of `boxes` in the grids (`spec` gives each by
+/// number) that `partition` shares objects among.
+pub fn place<'a>(
+    boxes: &[BoxRef],
+    partition: &Partition,
+    spec: impl Fn(usize) -> Option<&'a GridSpec>,
+    out: &mut [Placed; SIZE],
+) {
+    for (b, p) in boxes.iter().zip(out.iter_mut()) {
+        let g = partition.group(&b.bbox);
+        *p = (g, spec(g).and_then(|s| s.cell_range(&b.bbox)));
+    }
+}
+
+/// The group of a block's objects `boxes` (of box `bounds`, placed in the
+/// grids as `placed` says; `spec` gives each grid by number) as an
+/// aggregate: its grid and its voxel box there, or `None` if it is not
+/// one (not a whole group, not all of one grid, an instance among them,
+/// or not crowding its voxels).
+pub fn of_grids<'a>(
+    boxes: &[BoxRef],
+    placed: &[Placed],
+    bounds: &Aabb,
+    spec: impl Fn(usize) -> Option<&'a GridSpec>,
+) -> Option<(usize, [u32; 3], [u32; 3])> {
+    let g = placed.first()?.0;
+    if boxes.iter().any(|b| b.kind == ShapeKind::Instance) || placed.iter().any(|p| p.0 != g) {
+        return None;
+    }
+    let pairs = placed
+        .iter()
+        .filter_map(|p| p.1)
+        .map(|(lo, hi)| volume(lo, hi))
         .sum();
-    (pairs >= CROWD * volume(lo, hi)).then_some((lo, hi))
+    let (lo, hi) = crowded(spec(g)?, bounds, boxes.len(), pairs)?;
+    Some((g, lo, hi))
+}
+
+/// Calls `f` with each group of the objects of `block`, in order, and its
+/// box: the objects whose index divided by [`SIZE`] is the same (so the
+/// first and last group of a block not aligned to [`SIZE`] are short).
+pub fn each_group(block: &Block<'_>, mut f: impl FnMut(&[BoxRef], &Aabb)) {
+    let mut boxes = block.boxes();
+    let mut group = [BoxRef {
+        at: 0,
+        index: 0,
+        rank: 0,
+        kind: ShapeKind::Sphere,
+        bbox: Aabb::EMPTY,
+    }; SIZE];
+    // Up to the first multiple of SIZE, then by SIZE.
+    let mut take = SIZE - (block.first_object % SIZE as u64) as usize;
+    loop {
+        let mut n = 0;
+        let mut bounds = Aabb::EMPTY;
+        for b in boxes.by_ref().take(std::mem::replace(&mut take, SIZE)) {
+            bounds.union(&b.bbox);
+            group[n] = b;
+            n += 1;
+        }
+        if n == 0 {
+            return;
+        }
+        f(&group[..n], &bounds);
+    }
 }
 
 #[cfg(test)]
@@ -80,13 +175,18 @@ mod tests {
         let close: Vec<Aabb> = (0..SIZE)
             .map(|i| cube([0.1 + 0.01 * i as f32, 0.5, 0.5], 0.05))
             .collect();
-        let (lo, hi) = crowded(&spec, &union(&close), close.iter()).expect("crowded");
+        let (lo, hi) =
+            crowded(&spec, &union(&close), SIZE, pairs(&spec, close.iter())).expect("crowded");
         assert!(volume(lo, hi) <= 2, "{lo:?} {hi:?}");
         let apart: Vec<Aabb> = (0..SIZE)
             .map(|i| cube([(i % 16) as f32 - 7.5, (i / 16) as f32 - 7.5, 0.5], 0.05))
             .collect();
-        assert_eq!(crowded(&spec, &union(&apart), apart.iter()), None);
+        let apart_pairs = pairs(&spec, apart.iter());
+        assert_eq!(crowded(&spec, &union(&apart), SIZE, apart_pairs), None);
         let few = &close[..SIZE - 1];
-        assert_eq!(crowded(&spec, &union(few), few.iter()), None);
+        assert_eq!(
+            crowded(&spec, &union(few), few.len(), pairs(&spec, few.iter())),
+            None
+        );
     }
 }

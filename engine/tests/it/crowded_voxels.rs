@@ -387,6 +387,8 @@ fn crowded_groups_are_aggregates_in_both_tracers_and_the_image_is_the_same() {
             let bf = bf_render(db, &one_grid(2, precision), StoreNumber::Adaptive, 1 << 30);
             if held > 0 {
                 assert!(walks(&bf) > 1000, "{what}: {} aggregate walks", walks(&bf));
+                // Found from the same groups of the same grid.
+                assert_eq!(bf.1.grids[0].aggregates, held, "{what}");
             }
             assert_same(&format!("{what}: bf against df"), &want, &bf);
             for (threads, memory) in [(1, 1 << 30), (2, 4 << 20), (3, 4 << 20)] {
@@ -414,6 +416,7 @@ fn crowded_groups_are_aggregates_in_both_tracers_and_the_image_is_the_same() {
             );
             assert_same(&format!("{what}: the paper's passes"), &want, &full);
             assert_eq!(walks(&full), 0, "{what}");
+            assert_eq!(full.1.grids[0].aggregates, 0, "{what}");
             if held > 0 {
                 assert!(
                     bf.1.intersection_tests * 3 < full.1.intersection_tests * 2,
