@@ -193,6 +193,42 @@ pub fn scene_info(path: &Path, progress: &dyn Progress) -> Result<SceneInfo, Err
     scene_info_with(path, progress, &MeshOptions::default())
 }
 
+/// The groups of objects of the database at `path` that the
+/// breadth-first tracer holds as aggregates in the grids it plans by
+/// default, and the objects they hold: one scan of the whole file.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct AggregateInfo {
+    pub aggregates: u64,
+    pub aggregate_objects: u64,
+}
+
+/// Counts a database's aggregates ([`AggregateInfo`]).
+pub fn aggregate_info(path: &Path, progress: &dyn Progress) -> Result<AggregateInfo, Error> {
+    use crate::grid::aggregate;
+    let db = Database::open(path)?;
+    let (specs, partition) =
+        crate::bf::plan_grids(&db, &crate::render::RenderOptions::default(), 1 << 30);
+    let spec = |g: usize| specs.get(g);
+    let mut placed = [(0, None); aggregate::SIZE];
+    let mut found = AggregateInfo::default();
+    let mut scan = db.scan()?;
+    progress.set_total(db.object_count());
+    while let Some(block) = scan.next_block()? {
+        aggregate::each_group(&block, |group, bounds| {
+            if !aggregate::may_be(spec(partition.group(&group[0].bbox)), bounds) {
+                return;
+            }
+            aggregate::place(group, &partition, spec, &mut placed);
+            if aggregate::of_grids(group, &placed[..group.len()], bounds, spec).is_some() {
+                found.aggregates += 1;
+                found.aggregate_objects += group.len() as u64;
+            }
+        });
+        progress.inc(block.object_count as u64);
+    }
+    Ok(found)
+}
+
 /// As [`scene_info`], a mesh within the memory of `opts`.
 pub fn scene_info_with(
     path: &Path,

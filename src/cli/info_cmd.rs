@@ -2,7 +2,7 @@
 
 use super::bar::Bar;
 use clap::Args;
-use sray_engine::info::{SceneInfo, scene_info_with};
+use sray_engine::info::{SceneInfo, aggregate_info, scene_info_with};
 use sray_engine::mesh::MeshOptions;
 use sray_engine::shapes::ShapeKind;
 use std::path::PathBuf;
@@ -22,6 +22,11 @@ pub struct InfoArgs {
     /// Directory for temporary files (default: the system's)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
+    /// Object database only: count the groups of objects the
+    /// breadth-first tracer holds as aggregates in its default grids
+    /// (reads the whole file)
+    #[arg(long)]
+    pub aggregates: bool,
     /// No progress bar (errors are still printed)
     #[arg(short, long)]
     pub quiet: bool,
@@ -44,10 +49,37 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
     };
     let info = scene_info_with(&a.file, &bar, &opts)?;
     bar.finish();
+    let aggregates = if a.aggregates {
+        if info.format != "sdb" {
+            anyhow::bail!(
+                "--aggregates is for an object database (.sdb); convert {} first",
+                a.file.display()
+            );
+        }
+        let bar = Bar::new("aggregates", "");
+        let found = aggregate_info(&a.file, &bar)?;
+        bar.finish();
+        Some(found)
+    } else {
+        None
+    };
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&info)?);
+        let mut v = serde_json::to_value(&info)?;
+        if let (Some(found), Some(map)) = (aggregates, v.as_object_mut()) {
+            map.insert("aggregates".into(), found.aggregates.into());
+            map.insert("aggregate_objects".into(), found.aggregate_objects.into());
+        }
+        println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print_human(&a.file, &info);
+        if let Some(f) = aggregates {
+            println!(
+                "  aggregates   {} groups of {} objects ({} objects) in the breadth-first grids",
+                f.aggregates,
+                sray_engine::grid::aggregate::SIZE,
+                f.aggregate_objects
+            );
+        }
     }
     Ok(())
 }

@@ -314,6 +314,31 @@ fn aggregates_change_no_image_in_either_tracer_or_on_a_cluster() {
             _ => assert!(st["grids"][0].get("aggregates").is_none(), "{st}"),
         }
     }
+    // `sray info --aggregates` counts the groups a breadth-first render
+    // with the default grids holds as aggregates; a scene file is refused.
+    render(d, "ball.sdb", "bf", "32MiB", &[]);
+    let st = stats(d, "ball.sdb.bf.32MiB.png.json");
+    let held: u64 = st["grids"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| g["aggregates"].as_u64().unwrap_or(0))
+        .sum();
+    let info = json(&ok(
+        d,
+        &["info", "ball.sdb", "--aggregates", "--json", "-q"],
+    ));
+    assert_eq!(info["aggregates"].as_u64(), Some(held), "{info} {st}");
+    assert_eq!(
+        info["aggregate_objects"].as_u64(),
+        Some(64 * held),
+        "{info}"
+    );
+    let err = common::fails(d, &["info", "ball.nff", "--aggregates", "-q"]);
+    assert!(
+        err.contains("--aggregates") && err.contains("convert"),
+        "{err}"
+    );
     // The workers get the setting with the job.
     for how in ["auto", "off"] {
         let png = format!("cluster-{how}.png");

@@ -1165,8 +1165,7 @@ impl Candidate {
 /// group that a block boundary cuts is tested one by one). Every group is
 /// first judged by its box: one that meets no registered voxel of any
 /// grid is passed over without looking at its objects one by one (their
-/// grid, their voxels). Which groups are
-/// aggregates depends on the
+/// grid, their voxels). Which groups are aggregates depends on the
 /// database and the grids alone, not on the rays of the pass, so every
 /// count is still the same whatever the threads, slots or memory. The
 /// paper's passes (`--full-scans`) test objects one by one.
@@ -1217,9 +1216,9 @@ struct Aggregate {
 
 /// A ray's mailbox value while it walks aggregate `index` in pass
 /// `pass`: no object's (an object's low half is zero), and no other
-/// aggregate's in the pass. A ray's mailbox outlives its pass, and an
-/// aggregate of the next pass may begin with the same object while
-/// holding others: the pass in the value keeps them apart.
+/// aggregate's. A ray's mailbox outlives its pass; with the pass in the
+/// value, which aggregates a ray walks in a pass depends on that pass's
+/// registrations alone.
 #[inline(always)]
 fn aggregate_tag(index: u32, pass: u64) -> PrimId {
     PrimId(((index as u64) << 32) | (pass % u32::MAX as u64 + 1))
