@@ -153,15 +153,24 @@ pub struct Models {
     /// Threads that build a model's grid when it is read (the render's
     /// `--threads`).
     threads: usize,
+    /// Whether a model's grid holds crowded groups as aggregates (the
+    /// depth-first tracer's setting: a model's grid is its structure).
+    aggregates: bool,
     /// Each model's triangles, from its header.
     triangles: Vec<u64>,
 }
 
 impl Models {
     /// Reads and indexes every model of `db` (none for a database
-    /// without models), building each grid on `threads` threads.
-    pub fn load(db: &Database, threads: usize, progress: &dyn Progress) -> Result<Models, Error> {
-        let mut models = Models::open(db, threads)?;
+    /// without models), building each grid on `threads` threads, with
+    /// aggregates if `aggregates`.
+    pub fn load(
+        db: &Database,
+        threads: usize,
+        aggregates: bool,
+        progress: &dyn Progress,
+    ) -> Result<Models, Error> {
+        let mut models = Models::open(db, threads, aggregates)?;
         for m in 0..models.len() {
             progress.set_message(&format!("loading model {} of {}", m + 1, models.len()));
             models.list[m] = Some(models.read_model(db, m, progress)?);
@@ -170,14 +179,16 @@ impl Models {
     }
 
     /// The models of `db` by their materials alone: none is read. A
-    /// model read later builds its grid on `threads` threads.
-    pub fn open(db: &Database, threads: usize) -> Result<Models, Error> {
+    /// model read later builds its grid on `threads` threads, with
+    /// aggregates if `aggregates`.
+    pub fn open(db: &Database, threads: usize, aggregates: bool) -> Result<Models, Error> {
         let n = db.models().len();
         let mut models = Models {
             list: (0..n).map(|_| None).collect(),
             bases: Vec::with_capacity(n),
             materials: Vec::new(),
             threads: threads.max(1),
+            aggregates,
             triangles: Vec::with_capacity(n),
         };
         let world_materials = db.scene().materials.len();
@@ -236,7 +247,7 @@ impl Models {
             .num_threads(self.threads)
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-        let grid = ObjectGrid::build(&padded, &bounds, res, &pool, true, |_| true)?;
+        let grid = ObjectGrid::build(&padded, &bounds, res, &pool, self.aggregates, |_| true)?;
         Ok(Model {
             objects,
             grid,

@@ -40,7 +40,7 @@ fuzz_target!(|data: &[u8]| {
     }
     // Models are small in the seeds; a mutated count must not ask for
     // more memory than the file backs.
-    let Ok(models) = Models::load(&db, 1, &NoProgress) else { return };
+    let Ok(models) = Models::load(&db, 1, false, &NoProgress) else { return };
     let mut tests = KindCounts::default();
     for pl in &placements {
         if let Some((t, p)) = models.nearest(pl, &ray, o, d, 0.0, f64::INFINITY, &mut tests) {

@@ -334,7 +334,8 @@ pub struct IntersectStats {
     pub intersection_tests: KindCounts,
     pub tests_skipped_mailbox: u64,
     pub tests_skipped_last_voxel: u64,
-    /// Rays that walked an aggregate's hierarchy (see [`Found`]).
+    /// Rays that walked an aggregate's hierarchy (see
+    /// [`crate::grid::aggregate`]).
     pub aggregate_walks: u64,
     pub db_scans: u64,
     pub db_bytes_read: u64,
@@ -1160,9 +1161,10 @@ impl Candidate {
 /// A group of the block's objects that crowds its voxels is stored in the
 /// voxels of its box like one object, and a ray met there walks a
 /// hierarchy of boxes over its objects, built when the block is read,
-/// instead of testing each. Groups are the depth-first tracer's: the
-/// objects whose index divided by [`aggregate::SIZE`] is the same (a
-/// group that a block boundary cuts is tested one by one). Every group is
+/// instead of testing each. Groups are the objects whose index divided by
+/// [`aggregate::SIZE`] is the same, as in the depth-first tracer (which
+/// also takes a group with instances, or one a block boundary cuts: here
+/// those are tested one by one). Every group is
 /// first judged by its box: one that meets no registered voxel of any
 /// grid is passed over without looking at its objects one by one (their
 /// grid, their voxels). Which groups are aggregates depends on the

@@ -238,12 +238,12 @@ impl<'db, R: Real> Tracer<'db, R> {
         };
         let (models, models_bytes) = match holding {
             ModelHolding::PerPass => {
-                let m = Models::open(db, threads)?;
+                let m = Models::open(db, threads, opts.aggregates.depth_first())?;
                 let b = m.bytes() + largest;
                 (m, b)
             }
             _ => {
-                let m = Models::load(db, threads, progress)?;
+                let m = Models::load(db, threads, opts.aggregates.depth_first(), progress)?;
                 let b = m.bytes();
                 (m, b)
             }

@@ -510,7 +510,12 @@ pub fn render(
     let t0 = Instant::now();
     progress.set_message("loading objects, building grids");
     let objects = ObjectStore::load(db, progress)?;
-    let models = Models::load(db, trace::thread_count(opts), progress)?;
+    let models = Models::load(
+        db,
+        trace::thread_count(opts),
+        opts.aggregates.depth_first(),
+        progress,
+    )?;
     let scene = DfScene::new(db, &objects, models, opts)?;
     let preprocess = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();

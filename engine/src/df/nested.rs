@@ -227,11 +227,13 @@ impl Hierarchies {
         state: S,
         f: &mut impl FnMut(Entry<'_, S>) -> Option<S>,
     ) -> bool {
+        // Pending entries: one far child per level of the current path.
         // Each level splits on a bit of the 30-bit codes below the
-        // parent's, or halves the objects: depth < 30 + 32, and a leaf
-        // entering an aggregate's hierarchy (of 64 objects) adds at most
-        // 30 + 6 levels and a pending entry per leaf entry.
-        let mut stack = [(0u32, state); 192];
+        // parent's, or halves the objects: fewer than 30 + 32 levels. A
+        // leaf (at most 8 entries) may push as many aggregates'
+        // hierarchies (of 64 objects: fewer than 30 + 6 levels each, and
+        // no aggregate in their leaves): 62 + 8 + 36 = 106 at most.
+        let mut stack = [(0u32, state); 106];
         let mut sp = 0;
         let (mut n, mut st) = ((entry & !NESTED) as usize, state);
         loop {
