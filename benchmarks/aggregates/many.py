@@ -7,19 +7,13 @@ crowd a few voxels of the floor's grid.
 
     python3 many.py bunny.nff many.nff 16 20000
 """
+import os
 import random
 import sys
 
-
-def triangles(path):
-    lines = open(path).read().split("\n")
-    i = 0
-    while i < len(lines):
-        if lines[i].startswith("p 3"):
-            yield [tuple(map(float, lines[i + k].split())) for k in (1, 2, 3)]
-            i += 4
-        else:
-            i += 1
+# The NFF triangle reader of the dense-in-sparse scene.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "dense_in_sparse"))
+from scene import triangles  # noqa: E402
 
 
 def main(src, out, copies, spheres):

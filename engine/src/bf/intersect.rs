@@ -1262,16 +1262,8 @@ fn candidates(
                         add_aggregate(group, placed, g, lo, hi, out);
                     }
                 }
-                None => {
-                    // Placed already: one by one.
-                    for (b, &(g, cells)) in group.iter().zip(placed) {
-                        if let Some((lo, hi)) = cells
-                            && region[g].overlaps(lo, hi)
-                        {
-                            out.singles.push(Candidate::new(b, g, lo, hi));
-                        }
-                    }
-                }
+                // Placed already: one by one.
+                None => push_placed(group, placed, region, &mut out.singles),
             }
             return;
         }
@@ -1295,9 +1287,26 @@ fn candidates_in(
     region: &[Region; MAX_GRIDS],
     out: &mut Vec<Candidate>,
 ) {
-    for b in boxes {
-        let g = grids.partition.group(&b.bbox);
-        if let Some((lo, hi)) = grids.grids[g].spec.cell_range(&b.bbox)
+    let mut placed = [(0, None); aggregate::SIZE];
+    aggregate::place(
+        boxes,
+        &grids.partition,
+        |g| grids.grids.get(g).map(|v| &v.spec),
+        &mut placed,
+    );
+    push_placed(boxes, &placed[..boxes.len()], region, out);
+}
+
+/// The objects `boxes`, placed in the grids as `placed` says, whose voxel
+/// box meets `region`, as candidates.
+fn push_placed(
+    boxes: &[BoxRef],
+    placed: &[aggregate::Placed],
+    region: &[Region; MAX_GRIDS],
+    out: &mut Vec<Candidate>,
+) {
+    for (b, &(g, cells)) in boxes.iter().zip(placed) {
+        if let Some((lo, hi)) = cells
             && region[g].overlaps(lo, hi)
         {
             out.push(Candidate::new(b, g, lo, hi));

@@ -470,6 +470,20 @@ mod tests {
         boxes
     }
 
+    /// The grid of resolution `res` over the unit cube for `boxes`, with
+    /// aggregates if `aggregates`.
+    fn unit_grid(boxes: &[Aabb], res: [u32; 3], aggregates: bool) -> ObjectGrid {
+        let bounds = Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        };
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        ObjectGrid::build(boxes, &bounds, res, &pool, aggregates, |_| true).unwrap()
+    }
+
     /// The objects whose box overlaps voxel `index` of `spec`.
     fn overlapping(spec: &GridSpec, boxes: &[Aabb], index: usize) -> Vec<u32> {
         (0..boxes.len() as u32)
@@ -492,17 +506,8 @@ mod tests {
     #[test]
     fn each_voxel_lists_the_objects_overlapping_it() {
         let boxes = scattered_and_crowded();
-        let bounds = Aabb {
-            min: [0.0; 3],
-            max: [1.0; 3],
-        };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
         for res in [[1, 1, 1], [7, 9, 10], [64, 3, 2], [13, 13, 13]] {
-            let g =
-                ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, false, |_| true).unwrap();
+            let g = unit_grid(&boxes, res, false);
             let mut listing = 0;
             for index in 0..g.spec.cells() {
                 let want = overlapping(&g.spec, &boxes, index);
@@ -532,17 +537,8 @@ mod tests {
     #[test]
     fn a_walk_meets_each_object_of_a_voxel_once_through_aggregates() {
         let boxes = scattered_and_crowded();
-        let bounds = Aabb {
-            min: [0.0; 3],
-            max: [1.0; 3],
-        };
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap();
         for res in [[1, 1, 1], [7, 9, 10], [13, 13, 13]] {
-            let g =
-                ObjectGrid::build(boxes.as_slice(), &bounds, res, &pool, true, |_| true).unwrap();
+            let g = unit_grid(&boxes, res, true);
             assert!(g.aggregates >= 2, "{res:?}: {} aggregates", g.aggregates);
             assert_eq!(g.objects, boxes.len() as u64, "{res:?}");
             for index in 0..g.spec.cells() {
