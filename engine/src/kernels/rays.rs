@@ -1,0 +1,234 @@
+//! A group of up to [`LANES`] rays held one array per coordinate, in the
+//! precision of the tests: what the kernels test one primitive against.
+
+use crate::math::{Real, V3, Vec3, Vec3Ext};
+
+/// Most rays in a group (a depth-first packet of 8 x 8 eye rays; a
+/// breadth-first voxel's rays are tested 64 at a time).
+pub const LANES: usize = 64;
+
+/// A set of lanes of a group, one bit each.
+pub type Lanes = u64;
+
+/// Iterates over the lanes of a mask, lowest first.
+#[inline(always)]
+pub fn each_lane(mut m: Lanes) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (m != 0).then(|| {
+            let i = m.trailing_zeros() as usize;
+            m &= m - 1;
+            i
+        })
+    })
+}
+
+/// The rays of a group. Lane `i` holds the ray given to the `i`th
+/// [`RayLanes::push`]; each is prepared exactly as a single ray is for the
+/// scalar tests ([`crate::intersect::RayQ::with_inverse`]): origin,
+/// direction and `1 / direction` computed in `f64` and rounded to `R`, so
+/// that a kernel's lane finds the bits the scalar test finds.
+#[repr(C, align(64))]
+pub struct RayLanes<R> {
+    /// Rays held.
+    pub n: usize,
+    pub o: [[R; LANES]; 3],
+    pub d: [[R; LANES]; 3],
+    pub inv: [[R; LANES]; 3],
+    /// The interval of distances that count: a hit at `t` counts when
+    /// `t_min < t < t_max` (the kernels take the upper end per call).
+    pub t_min: [R; LANES],
+    pub t_max: [R; LANES],
+    /// The watertight triangle test's axes (Woop, Benthin and Wald): the
+    /// index (0, 1 or 2, as a number) of the axes that become x, y and z
+    /// after the direction's largest component is made z.
+    pub kx: [R; LANES],
+    pub ky: [R; LANES],
+    pub kz: [R; LANES],
+    /// The same as bytes, for the scalar fallbacks.
+    pub axes: [[u8; 3]; LANES],
+    /// Its shear constants.
+    pub sx: [R; LANES],
+    pub sy: [R; LANES],
+    pub sz: [R; LANES],
+    /// `d . d` and its reciprocal (the sphere test's).
+    pub a: [R; LANES],
+    pub inv_a: [R; LANES],
+    /// Origin, direction and interval as given, in `f64`: what shading,
+    /// instances (placed models are walked in `f64`) and the packets'
+    /// bounds use.
+    pub o64: [[f64; LANES]; 3],
+    pub d64: [[f64; LANES]; 3],
+    pub inv64: [[f64; LANES]; 3],
+    pub t_min64: [f64; LANES],
+    pub t_max64: [f64; LANES],
+    /// Whether every ray held has the same axes (`axes[0]`): the
+    /// triangle kernel then needs no per-lane selection of coordinates.
+    pub same_axes: bool,
+}
+
+impl<R: Real> Default for RayLanes<R> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<R: Real> RayLanes<R> {
+    pub fn new() -> Self {
+        let z = [R::ZERO; LANES];
+        RayLanes {
+            n: 0,
+            o: [z; 3],
+            d: [[R::ONE; LANES]; 3],
+            inv: [[R::ONE; LANES]; 3],
+            t_min: z,
+            t_max: [R::INFINITY; LANES],
+            kx: z,
+            ky: [R::ONE; LANES],
+            kz: [R::TWO; LANES],
+            axes: [[0, 1, 2]; LANES],
+            sx: z,
+            sy: z,
+            sz: [R::ONE; LANES],
+            a: [R::ONE; LANES],
+            inv_a: [R::ONE; LANES],
+            o64: [[0.0; LANES]; 3],
+            d64: [[1.0; LANES]; 3],
+            inv64: [[1.0; LANES]; 3],
+            t_min64: [0.0; LANES],
+            t_max64: [f64::INFINITY; LANES],
+            same_axes: true,
+        }
+    }
+
+    /// Forgets every ray.
+    #[inline]
+    pub fn clear(&mut self) {
+        self.n = 0;
+        self.same_axes = true;
+    }
+
+    /// Whether no more rays fit.
+    #[inline]
+    pub fn is_full(&self) -> bool {
+        self.n == LANES
+    }
+
+    /// Every lane in use.
+    #[inline]
+    pub fn all(&self) -> Lanes {
+        if self.n >= LANES {
+            Lanes::MAX
+        } else {
+            (1 << self.n) - 1
+        }
+    }
+
+    /// Appends the ray `o + t d`, `t_min < t < t_max` (`d` not zero);
+    /// returns its lane.
+    #[inline]
+    pub fn push(&mut self, o: Vec3, d: Vec3, t_min: f64, t_max: f64) -> usize {
+        let i = self.n;
+        assert!(i < LANES, "a ray group holds {LANES} rays");
+        let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+        self.set(i, o, d, inv, t_min, t_max);
+        self.n += 1;
+        i
+    }
+
+    /// Puts the ray in lane `i` (see [`RayLanes::push`]); `inv` = 1/d.
+    #[inline]
+    pub fn set(&mut self, i: usize, o: Vec3, d: Vec3, inv: Vec3, t_min: f64, t_max: f64) {
+        let (or, dr, ir): (V3<R>, V3<R>, V3<R>) = (o.cast(), d.cast(), inv.cast());
+        for a in 0..3 {
+            self.o[a][i] = or[a];
+            self.d[a][i] = dr[a];
+            self.inv[a][i] = ir[a];
+            self.o64[a][i] = o[a];
+            self.d64[a][i] = d[a];
+            self.inv64[a][i] = inv[a];
+        }
+        self.t_min[i] = R::from_f64(t_min);
+        self.t_max[i] = R::from_f64(t_max);
+        self.t_min64[i] = t_min;
+        self.t_max64[i] = t_max;
+        // As `RayQ::with_inverse`, in the precision of the tests.
+        let kz = dr.max_axis();
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if dr[kz] < R::ZERO {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = ir[kz];
+        self.axes[i] = [kx as u8, ky as u8, kz as u8];
+        self.kx[i] = R::from_f64(kx as f64);
+        self.ky[i] = R::from_f64(ky as f64);
+        self.kz[i] = R::from_f64(kz as f64);
+        self.sx[i] = dr[kx] * sz;
+        self.sy[i] = dr[ky] * sz;
+        self.sz[i] = sz;
+        let a = dr.dot(dr);
+        self.a[i] = a;
+        self.inv_a[i] = R::ONE / a;
+        if i == 0 {
+            self.same_axes = true;
+        } else {
+            self.same_axes &= self.axes[i] == self.axes[0];
+        }
+    }
+
+    /// Copies lane `from` of `src` into lane `to`.
+    #[inline]
+    pub fn copy_lane(&mut self, to: usize, src: &RayLanes<R>, from: usize) {
+        for a in 0..3 {
+            self.o[a][to] = src.o[a][from];
+            self.d[a][to] = src.d[a][from];
+            self.inv[a][to] = src.inv[a][from];
+            self.o64[a][to] = src.o64[a][from];
+            self.d64[a][to] = src.d64[a][from];
+            self.inv64[a][to] = src.inv64[a][from];
+        }
+        self.t_min[to] = src.t_min[from];
+        self.t_max[to] = src.t_max[from];
+        self.t_min64[to] = src.t_min64[from];
+        self.t_max64[to] = src.t_max64[from];
+        self.kx[to] = src.kx[from];
+        self.ky[to] = src.ky[from];
+        self.kz[to] = src.kz[from];
+        self.axes[to] = src.axes[from];
+        self.sx[to] = src.sx[from];
+        self.sy[to] = src.sy[from];
+        self.sz[to] = src.sz[from];
+        self.a[to] = src.a[from];
+        self.inv_a[to] = src.inv_a[from];
+        if to == 0 {
+            self.same_axes = true;
+        } else {
+            self.same_axes &= self.axes[to] == self.axes[0];
+        }
+    }
+
+    /// Lane `i`'s origin, direction and `1 / direction` in `f64`.
+    #[inline(always)]
+    pub fn o(&self, i: usize) -> Vec3 {
+        Vec3::new(self.o64[0][i], self.o64[1][i], self.o64[2][i])
+    }
+
+    #[inline(always)]
+    pub fn d(&self, i: usize) -> Vec3 {
+        Vec3::new(self.d64[0][i], self.d64[1][i], self.d64[2][i])
+    }
+
+    #[inline(always)]
+    pub fn inv(&self, i: usize) -> Vec3 {
+        Vec3::new(self.inv64[0][i], self.inv64[1][i], self.inv64[2][i])
+    }
+
+    /// Lane `i` as a single ray for the scalar tests.
+    #[inline]
+    pub fn ray(&self, i: usize) -> crate::intersect::RayQ<R> {
+        crate::intersect::RayQ::with_inverse(
+            V3::new(self.o[0][i], self.o[1][i], self.o[2][i]),
+            V3::new(self.d[0][i], self.d[1][i], self.d[2][i]),
+            V3::new(self.inv[0][i], self.inv[1][i], self.inv[2][i]),
+        )
+    }
+}
