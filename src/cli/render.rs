@@ -135,6 +135,16 @@ pub struct RenderArgs {
     /// 4, 9, 16, ... take that many jittered samples per pixel
     #[arg(long, allow_negative_numbers = true, default_value_t = 1)]
     pub samples: u32,
+    /// SIMD width of the intersection kernels: auto (the widest this CPU
+    /// has, or the one the SRAY_SIMD environment variable names),
+    /// portable, sse, avx2, avx512 or neon. The image and every count are
+    /// the same with each
+    #[arg(
+        long,
+        default_value = "auto",
+        value_name = "auto|portable|sse|avx2|avx512|neon"
+    )]
+    pub simd: SimdWidth,
     /// Time the depth-first tracer's intersection queries, to split its
     /// trace time into intersection and shading (costs a little time)
     #[arg(long)]
@@ -211,6 +221,20 @@ impl Stages for BarStages {
     }
 }
 
+/// `--simd`: `auto` (no forced width) or an instruction set's name.
+#[derive(Clone, Copy, Debug)]
+pub struct SimdWidth(pub Option<sray_engine::simd::Isa>);
+
+impl std::str::FromStr for SimdWidth {
+    type Err = String;
+    fn from_str(s: &str) -> Result<SimdWidth, String> {
+        match s {
+            "auto" => Ok(SimdWidth(None)),
+            s => s.parse().map(|i| SimdWidth(Some(i))),
+        }
+    }
+}
+
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     super::bar::set_quiet(a.quiet);
     if a.threads == Some(0) {
@@ -239,6 +263,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             precision: a.precision,
             profile: a.profile,
             samples: a.samples,
+            simd: a.simd.0,
         },
         mode: a.mode,
         memory: a.memory,

@@ -66,6 +66,9 @@ pub fn from_proto(
         },
         profile: false,
         samples: p.samples,
+        // Each node runs the widest kernels it has (or SRAY_SIMD's): the
+        // results are the same bits on every width.
+        simd: None,
     };
     o.validate().map_err(|e| e.to_string())?;
     let store = match p.store_number {

@@ -4,12 +4,13 @@
 //! fast path for scenes that fit in memory.
 
 mod lanes;
+mod mailbox;
 mod nested;
 mod object_grid;
-mod packet;
 mod polygon;
-mod single;
+mod pyramid;
 mod trace;
+mod walk;
 
 pub(crate) use nested::{Entry, Hierarchies, NESTED, high_first, ray_meets};
 pub(crate) use object_grid::Boxes;
@@ -51,7 +52,8 @@ pub struct DfScene<'t> {
     /// precision) and above the grids' margin around an object: packets of
     /// rays skip a candidate only when it lies at least this far from them.
     pub slack: f64,
-    pub tune: Tune,
+    /// The boxes of each grid's blocks, grown by `slack` (by grid).
+    blocks: Vec<pyramid::BlockBounds>,
     /// The models instances place, and each instance's placement (by
     /// `Held::placement`).
     pub models: Models,
@@ -168,40 +170,6 @@ impl Candidate<'_, '_> {
                 }
                 (_, shape) => shape.intersect(s.prep(h), &h.bbox, ray, t_min, t_max),
             },
-        }
-    }
-}
-
-/// Knobs of the packet tracer. The defaults were chosen by instruction
-/// counts (callgrind) over the seven SPD scenes; any values give the same
-/// images.
-#[derive(Clone, Copy, Debug)]
-pub struct Tune {
-    /// Side of a block of eye rays traced as one packet (at most
-    /// `PACKET_SIDE`).
-    pub eye_side: usize,
-    /// Fewest rays worth walking as a packet.
-    pub min_packet: u32,
-    /// A packet walks together if the voxels it covers per slab are at
-    /// most `worth` times the voxels its rays would visit one by one.
-    pub worth: f64,
-    /// Lanes are culled per candidate when the lines pass within `apex`
-    /// voxels of one point.
-    pub apex: f64,
-    /// Whether shadow rays, and rays spawned at hits, may go in packets.
-    pub shadow_packets: bool,
-    pub spawn_packets: bool,
-}
-
-impl Default for Tune {
-    fn default() -> Tune {
-        Tune {
-            eye_side: lanes::PACKET_SIDE,
-            min_packet: 3,
-            worth: 0.5,
-            apex: 0.25,
-            shadow_packets: true,
-            spawn_packets: true,
         }
     }
 }
@@ -337,6 +305,10 @@ impl<'t> DfScene<'t> {
         let eps = epsilon(&db.bbox(), opts.precision);
         let header = db.scene();
         let slack = crate::grid::box_slack(&header.view.from, grids.iter().map(|g| &g.spec));
+        let blocks = grids
+            .iter()
+            .map(|g| pyramid::BlockBounds::new(&g.spec, g.pyramid.height(), slack))
+            .collect();
         Ok(DfScene {
             objects,
             records,
@@ -347,7 +319,7 @@ impl<'t> DfScene<'t> {
             shade: ShadeScene::new(header, opts.max_depth, eps),
             camera: Camera::new(&header.view, opts.width, opts.height)?,
             slack,
-            tune: Tune::default(),
+            blocks,
             models,
             placements,
         })
@@ -359,6 +331,15 @@ impl<'t> DfScene<'t> {
         match h.prep {
             PLAIN => None,
             i => Some(&self.preps[i as usize]),
+        }
+    }
+
+    /// A many-sided polygon's binned edges, if it has them.
+    #[inline(always)]
+    fn bins(&self, h: &Held) -> Option<&EdgeBins> {
+        match h.bins {
+            PLAIN => None,
+            i => Some(&self.edge_bins[i as usize]),
         }
     }
 

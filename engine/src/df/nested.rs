@@ -56,6 +56,19 @@ pub enum Entry<'a, S> {
     Object(u32, S),
 }
 
+/// What a node of a hierarchy holds.
+pub enum Holds<'a> {
+    /// A leaf's entries: objects, and (tagged [`NESTED`]) the roots of
+    /// aggregates' hierarchies, walked as its children.
+    Leaf(&'a [u32]),
+    /// Two children, the nearer (for the walk's direction) first.
+    Children(u32, u32),
+}
+
+/// Most nodes a walk of one voxel's hierarchy keeps pending (see
+/// [`Hierarchies::visit`]).
+pub const MAX_PENDING: usize = 106;
+
 /// The hierarchies of one grid's crowded voxels, in two flat arrays.
 #[derive(Default)]
 pub struct Hierarchies {
@@ -212,6 +225,23 @@ impl Hierarchies {
         bbox
     }
 
+    /// Node `n`'s box and what it holds; `high_first` orders an interior
+    /// node's children as [`Hierarchies::visit`] does. (For walks that
+    /// keep their own stack, with no closure in their inner loop.)
+    #[inline(always)]
+    pub fn node(&self, n: u32, high_first: u8) -> (&Aabb, Holds<'_>) {
+        let node = &self.nodes[n as usize];
+        let holds = if node.count & INTERIOR == 0 {
+            let first = node.first as usize;
+            Holds::Leaf(&self.objects[first..first + node.count as usize])
+        } else if high_first >> (node.count & 3) & 1 != 0 {
+            Holds::Children(node.first + 1, node.first)
+        } else {
+            Holds::Children(node.first, node.first + 1)
+        };
+        (&node.bbox, holds)
+    }
+
     /// Walks the hierarchy of voxel entry `entry` (tagged [`NESTED`]),
     /// starting in state `state`: `f` is given each box with its parent's
     /// state and returns the state to descend with (`None`: pass over the
@@ -219,7 +249,7 @@ impl Hierarchies {
     /// state, returning `None` to stop the walk. `high_first` has bit
     /// `axis` set where the upper child along that axis should be visited
     /// first (toward where the rays go). Returns `false` if `f` stopped it.
-    #[inline]
+    #[inline(always)]
     pub fn visit<S: Copy>(
         &self,
         entry: u32,
@@ -233,7 +263,7 @@ impl Hierarchies {
         // leaf (at most 8 entries) may push as many aggregates'
         // hierarchies (of 64 objects: fewer than 30 + 6 levels each, and
         // no aggregate in their leaves): 62 + 8 + 36 = 106 at most.
-        let mut stack = [(0u32, state); 106];
+        let mut stack = [(0u32, state); MAX_PENDING];
         let mut sp = 0;
         let (mut n, mut st) = ((entry & !NESTED) as usize, state);
         loop {

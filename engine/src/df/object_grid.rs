@@ -1,4 +1,5 @@
 use super::nested::{Entry, Hierarchies, MIN_OBJECTS, NESTED};
+use super::pyramid::Pyramid;
 use crate::error::Error;
 use crate::grid::GridSpec;
 use crate::grid::aggregate;
@@ -92,6 +93,8 @@ pub struct ObjectGrid {
     pub nested_entries: u64,
     /// Groups of objects held as aggregates ([`crate::grid::aggregate`]).
     pub aggregates: u64,
+    /// Coarser copies of `occupied`, for walks that skip empty space.
+    pub pyramid: Pyramid,
 }
 
 impl ObjectGrid {
@@ -212,8 +215,10 @@ impl ObjectGrid {
             nested_voxels: 0,
             nested_entries: 0,
             aggregates: groups.len() as u64,
+            pyramid: Pyramid::default(),
         };
         grid.nest(boxes, pool)?;
+        grid.pyramid = Pyramid::build(grid.spec.res, &grid.occupied);
         Ok(grid)
     }
 
@@ -312,6 +317,19 @@ impl ObjectGrid {
         self.list(self.before[index >> 6] as usize + (w & (bit - 1)).count_ones() as usize)
     }
 
+    /// The hierarchies of the crowded voxels (the entries tagged
+    /// [`NESTED`]).
+    #[inline(always)]
+    pub fn hierarchies(&self) -> &Hierarchies {
+        &self.nested
+    }
+
+    /// Whether voxel `index` lists anything.
+    #[inline(always)]
+    pub fn occupied(&self, index: usize) -> bool {
+        self.occupied[index >> 6] >> (index & 63) & 1 != 0
+    }
+
     /// Entries listed, and voxels listing any.
     pub fn sizes(&self) -> (usize, usize) {
         (self.items.len(), self.start.len() - 1)
@@ -321,7 +339,8 @@ impl ObjectGrid {
     pub fn bytes(&self) -> u64 {
         (8 * self.occupied.len()
             + 4 * (self.before.len() + self.start.len() + self.items.len())
-            + self.nested.bytes()) as u64
+            + self.nested.bytes()
+            + self.pyramid.bytes()) as u64
     }
 
     /// Gives `f` the objects of voxel `index` with state `state`: listed

@@ -124,11 +124,20 @@ impl EdgeBins {
         }
         let p = ray.at(t);
         let (iu, iv) = (pl.iu as usize, pl.iv as usize);
-        let (pu, pv) = (p[iu], p[iv]);
+        self.inside(v, p[iu], p[iv]).then_some(t)
+    }
+
+    /// Whether the point (`pu`, `pv`) of the polygon's plane, in its
+    /// projection's axes, lies inside polygon `v` (whose bins these are):
+    /// the crossings test over the edges of the point's bin.
+    #[inline]
+    pub fn inside<R: Real>(&self, v: &[[f32; 3]], pu: R, pv: R) -> bool {
+        let pl = &self.plane;
+        let (iu, iv) = (pl.iu as usize, pl.iv as usize);
         // No edge straddles a v outside the polygon's range (nor a NaN).
         let x = pv.to_f64();
         if !(x >= self.v_lo && x <= self.v_hi) {
-            return None;
+            return false;
         }
         let bins = self.start.len() - 1;
         let b = (((x - self.v_lo) * self.scale) as usize).min(bins - 1);
@@ -146,7 +155,7 @@ impl EdgeBins {
                 }
             }
         }
-        inside.then_some(t)
+        inside
     }
 }
 

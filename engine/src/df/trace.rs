@@ -6,17 +6,21 @@
 //! the order in which a slot's contributions arrive does not matter.
 
 use super::DfScene;
-use super::lanes::{LANES, LaneTests, Mask, PACKET_SIDE, Rays, lanes};
-use super::packet::{self, Hits, Plan};
-use super::single;
+use super::lanes::Found;
+use super::walk::{self, Hits};
 use crate::error::Error;
 use crate::intersect::RayQ;
-use crate::math::{Real, Vec3};
+use crate::kernels::{LANES, Lanes, RayLanes, each_lane};
+use crate::math::Vec3;
 use crate::progress::Progress;
 use crate::render::{
     EyeRays, Frame, KindCounts, Precision, RayCounts, RenderOptions, Spawn, shade, to_fixed,
 };
+use crate::simd::{Elem, Isa};
 use rayon::prelude::*;
+
+/// Eye rays go in packets of PACKET_SIDE x PACKET_SIDE frame slots.
+pub const PACKET_SIDE: usize = 8;
 
 /// Rows of frame slots per task: packets are square blocks of slots, so a
 /// task takes a band of rows.
@@ -39,31 +43,31 @@ struct Level<R> {
     /// The shadow rays of the packet's hits, lane by lane, each lane's in
     /// the order of the lights.
     shadows: Vec<ShadowRay>,
-    toward_light: Rays<R>,
-    reflect: Rays<R>,
-    refract: Rays<R>,
+    toward_light: RayLanes<R>,
+    reflect: RayLanes<R>,
+    refract: RayLanes<R>,
     reflect_carry: Carry,
     refract_carry: Carry,
 }
 
-impl<R: Real> Level<R> {
+impl<R: Elem> Level<R> {
     fn new(lights: usize) -> Box<Level<R>> {
         Box::new(Level {
             shadows: Vec::with_capacity(LANES * lights),
-            toward_light: Rays::new(),
-            reflect: Rays::new(),
-            refract: Rays::new(),
+            toward_light: RayLanes::new(),
+            reflect: RayLanes::new(),
+            refract: RayLanes::new(),
             reflect_carry: Carry::EMPTY,
             refract_carry: Carry::EMPTY,
         })
     }
 }
 
-/// Per-thread state: the mailbox (the last query that tested each object),
-/// the shadow cache, buffers, and counters.
+/// Per-thread state: the mailbox, the shadow cache, buffers, and
+/// counters.
 pub struct Scratch<R = f64> {
-    pub mail: Vec<u32>,
-    stamp: u32,
+    /// The kernels' instruction set.
+    pub isa: Isa,
     /// Last blocker found per (light, depth): tested first by the next
     /// shadow rays toward that light from that depth (Haines' shadow
     /// cache). Cleared at the start of every band, so what a band does
@@ -77,44 +81,27 @@ pub struct Scratch<R = f64> {
     /// With profiling: nanoseconds spent finding hits and blockers.
     profile: bool,
     intersect_ns: u64,
+    /// What the last candidate's test found.
+    pub found: Box<Found<R>>,
+    /// Which lanes of the current walk tested which objects.
+    pub mailbox: super::mailbox::Mailbox,
 }
 
 pub const NO_OBJECT: u32 = u32::MAX;
 
-impl<R: Real> Scratch<R> {
-    fn new(objects: usize, lights: usize, max_depth: usize) -> Scratch<R> {
+impl<R: Elem> Scratch<R> {
+    fn new(isa: Isa, lights: usize, max_depth: usize) -> Scratch<R> {
         Scratch {
-            mail: vec![0; objects],
-            stamp: 0,
+            isa,
             shadow_cache: vec![NO_OBJECT; lights * max_depth],
             levels: (0..=max_depth).map(|_| Some(Level::new(lights))).collect(),
             tests: KindCounts::default(),
             rays: RayCounts::default(),
             profile: false,
             intersect_ns: 0,
+            found: Found::new(),
+            mailbox: Default::default(),
         }
-    }
-
-    /// A stamp no object's mailbox holds.
-    #[inline]
-    /// Makes sure the next `n` stamps are taken without the counter
-    /// wrapping: a query that holds one stamp while it takes others (a
-    /// packet walking some grids lane by lane) must not see the mailboxes
-    /// cleared and its own stamp come round again.
-    pub fn reserve_stamps(&mut self, n: u32) {
-        if self.stamp > u32::MAX - n {
-            self.mail.fill(0);
-            self.stamp = 0;
-        }
-    }
-
-    pub fn next_stamp(&mut self) -> u32 {
-        if self.stamp == u32::MAX {
-            self.mail.fill(0);
-            self.stamp = 0;
-        }
-        self.stamp += 1;
-        self.stamp
     }
 }
 
@@ -137,7 +124,7 @@ pub fn render(
     }
 }
 
-fn render_in<R: Real>(
+fn render_in<R: Elem>(
     scene: &DfScene,
     opts: &RenderOptions,
     progress: &dyn Progress,
@@ -152,6 +139,7 @@ fn render_in<R: Real>(
     let rows = frame.slots.len() / row_len;
     let lights = scene.shade.lights.len();
     let max_depth = scene.shade.max_depth as usize;
+    let isa = Isa::choose(opts.simd)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(thread_count(opts))
         .build()
@@ -165,7 +153,7 @@ fn render_in<R: Real>(
             .enumerate()
             .map_init(
                 || {
-                    let mut sc = Scratch::<R>::new(scene.len(), lights, max_depth);
+                    let mut sc = Scratch::<R>::new(isa, lights, max_depth);
                     sc.profile = opts.profile;
                     sc
                 },
@@ -215,7 +203,7 @@ impl Carry {
 
 /// Traces the eye rays of a band of slot rows starting at slot `first`,
 /// in packets of square blocks of slots.
-fn trace_band<R: Real>(
+fn trace_band<R: Elem>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     eye: &EyeRays,
@@ -225,18 +213,26 @@ fn trace_band<R: Real>(
 ) {
     let spp = eye.sampling.per_slot() as usize;
     // Blocks of side x side slots, of at most LANES rays when they fit.
-    let mut side = s.tune.eye_side;
+    let mut side = PACKET_SIDE;
     while side > 1 && side * side * spp > LANES {
         side /= 2;
     }
     let rows = out.len() / row_len;
     let origin = eye.camera.eye;
-    let mut rays = Rays::<R>::new();
+    let mut rays = RayLanes::<R>::new();
     let mut carry = Carry::EMPTY;
     for by in (0..rows).step_by(side) {
         for bx in (0..row_len).step_by(side) {
-            for y in by..(by + side).min(rows) {
-                for x in bx..(bx + side).min(row_len) {
+            // The block's slots in Z order, so that the lanes of any
+            // aligned square of slots are neighbours: the rays that reach
+            // a voxel or a block of the grid fill few vectors.
+            debug_assert!(side * side <= 1 << 16);
+            for k in 0..side * side {
+                let (x, y) = (bx + even_bits(k), by + even_bits(k >> 1));
+                if x >= row_len || y >= rows {
+                    continue;
+                }
+                {
                     let slot = y * row_len + x;
                     let i0 = ((first + slot) * spp) as u64;
                     for i in i0..i0 + spp as u64 {
@@ -244,23 +240,31 @@ fn trace_band<R: Real>(
                         let lane = rays.push(origin, d, 0.0, f64::INFINITY);
                         carry.slot[lane] = slot as u32;
                         carry.weight[lane] = 1.0;
-                        if rays.n == LANES {
+                        if rays.is_full() {
                             sc.rays.eye_rays += rays.n as u64;
-                            rays.pad();
-                            trace_packet(s, sc, &rays, &carry, 1, Some(origin), out);
-                            rays.n = 0;
+                            trace_packet(s, sc, &rays, &carry, 1, out);
+                            rays.clear();
                         }
                     }
                 }
             }
             if rays.n > 0 {
                 sc.rays.eye_rays += rays.n as u64;
-                rays.pad();
-                trace_packet(s, sc, &rays, &carry, 1, Some(origin), out);
-                rays.n = 0;
+                trace_packet(s, sc, &rays, &carry, 1, out);
+                rays.clear();
             }
         }
     }
+}
+
+/// The even bits of `k` (below 2^16), packed: the x of Z-order index `k`
+/// (and of `k >> 1`, its y).
+#[inline]
+fn even_bits(k: usize) -> usize {
+    let mut x = k & 0x5555;
+    x = (x | x >> 1) & 0x3333;
+    x = (x | x >> 2) & 0x0f0f;
+    (x | x >> 4) & 0x00ff
 }
 
 #[inline]
@@ -273,20 +277,18 @@ fn add(out: &mut [[i64; 3]], slot: u32, c: [f32; 3]) {
 }
 
 /// Follows a packet of rays of tree depth `depth` (eye rays: 1) and
-/// everything they spawn, adding colour to `out`. `reference` is a point
-/// the rays' lines pass through (the eye), if there is one.
-fn trace_packet<R: Real>(
+/// everything they spawn, adding colour to `out`.
+fn trace_packet<R: Elem>(
     s: &DfScene,
     sc: &mut Scratch<R>,
-    rays: &Rays<R>,
+    rays: &RayLanes<R>,
     carry: &Carry,
     depth: u8,
-    reference: Option<Vec3>,
     out: &mut [[i64; 3]],
 ) {
     let t0 = sc.profile.then(std::time::Instant::now);
-    let mut best = Hits::<R>::new();
-    nearest_all(s, sc, rays, reference, &mut best);
+    let mut best = Hits::<R>::new(rays);
+    walk::nearest(s, sc, rays, rays.all(), &mut best);
     if let Some(t0) = t0 {
         sc.intersect_ns += t0.elapsed().as_nanos() as u64;
     }
@@ -303,8 +305,8 @@ fn trace_packet<R: Real>(
         refract_carry,
     } = &mut *lv;
     shadows.clear();
-    reflect.n = 0;
-    refract.n = 0;
+    reflect.clear();
+    refract.clear();
     let mut points = [Vec3::ZERO; LANES];
     // Where each lane's shadow rays end in `shadows`.
     let mut ends = [0u32; LANES];
@@ -382,7 +384,7 @@ fn trace_packet<R: Real>(
         if light == u32::MAX {
             break;
         }
-        toward_light.n = 0;
+        toward_light.clear();
         for i in 0..rays.n {
             if next[i] < ends[i] && shadows[next[i] as usize].light == light {
                 let r = &shadows[next[i] as usize];
@@ -391,14 +393,13 @@ fn trace_packet<R: Real>(
                 next[i] += 1;
             }
         }
-        toward_light.pad();
         let slot = light as usize * max_depth + depth as usize - 1;
         let t0 = sc.profile.then(std::time::Instant::now);
-        let lit = occluded_all(s, sc, toward_light, slot, s.shade.lights[light as usize].0);
+        let lit = occluded_all(s, sc, toward_light, slot);
         if let Some(t0) = t0 {
             sc.intersect_ns += t0.elapsed().as_nanos() as u64;
         }
-        for j in lanes(lit) {
+        for j in each_lane(lit) {
             let r = &shadows[member[j] as usize];
             add(out, carry.slot[r.lane as usize], r.color);
         }
@@ -408,137 +409,71 @@ fn trace_packet<R: Real>(
         (&mut *refract, &*refract_carry),
     ] {
         if next.n > 0 {
-            next.pad();
-            trace_packet(s, sc, next, next_carry, depth + 1, None, out);
+            trace_packet(s, sc, next, next_carry, depth + 1, out);
         }
     }
     sc.levels[depth as usize] = Some(lv);
 }
 
-/// The mean of the origins of the lanes `m`.
-fn mean_origin<R>(rays: &Rays<R>, m: Mask) -> Vec3 {
-    let mut sum = Vec3::ZERO;
-    for i in lanes(m) {
-        sum += rays.o(i);
-    }
-    sum / m.count_ones() as f64
+/// The lanes a shadow cache's blocker blocks.
+struct CachedBlocker<'a, 't, R> {
+    s: &'a DfScene<'t>,
+    c: super::Candidate<'a, 't>,
+    rays: &'a RayLanes<R>,
+    found: &'a mut Found<R>,
+    tests: &'a mut KindCounts,
 }
 
-/// The nearest hit of every ray of the packet: walking together if they
-/// are coherent enough, else one by one.
-fn nearest_all<R: Real>(
+impl<R: Elem> crate::simd::Job for CachedBlocker<'_, '_, R> {
+    type Out = Lanes;
+
+    #[inline(always)]
+    fn run<L: crate::simd::Lanes>(self) -> Lanes {
+        let rays = self.rays;
+        super::lanes::test::<R, L>(
+            self.s,
+            self.c,
+            rays,
+            rays.all(),
+            &rays.t_max,
+            super::lanes::Want::Any,
+            self.found,
+            self.tests,
+        )
+    }
+}
+
+/// The lanes of a packet of shadow rays (toward one light) that nothing
+/// blocks; `slot` is their shadow cache slot. The cached blocker is tried
+/// on every lane first (Haines' shadow cache), then the lanes it leaves
+/// open walk the grids together; a blocker they find becomes the cached
+/// one.
+fn occluded_all<R: Elem>(
     s: &DfScene,
     sc: &mut Scratch<R>,
-    rays: &Rays<R>,
-    reference: Option<Vec3>,
-    best: &mut Hits<R>,
-) {
-    let all = rays.all();
-    let mut rest = all;
-    let min_packet = s.tune.min_packet;
-    if rays.n as u32 >= min_packet && (reference.is_some() || s.tune.spawn_packets) {
-        let whole = reference.unwrap_or_else(|| mean_origin(rays, all));
-        if let Some(plan) = Plan::new(s, rays, all, whole) {
-            packet::nearest(s, sc, rays, all, &plan, best);
-            return;
-        }
-        for m in octants(rays, all) {
-            if m != all && m.count_ones() >= min_packet {
-                let at = reference.unwrap_or_else(|| mean_origin(rays, m));
-                if let Some(plan) = Plan::new(s, rays, m, at) {
-                    packet::nearest(s, sc, rays, m, &plan, best);
-                    rest &= !m;
-                }
-            }
-        }
-    }
-    for i in lanes(rest) {
-        single::nearest(
-            s,
-            sc,
-            &rays.q[i],
-            rays.o(i),
-            rays.d(i),
-            rays.inv(i),
-            rays.t_min[i],
-            best,
-            i,
-        );
-    }
-}
-
-/// The lanes of `m` in each octant of directions: a packet that is not
-/// coherent as a whole may be in parts.
-fn octants<R>(rays: &Rays<R>, m: Mask) -> [Mask; 8] {
-    let mut octants = [0 as Mask; 8];
-    for i in lanes(m) {
-        let o = (rays.d[0][i] < 0.0) as usize
-            | ((rays.d[1][i] < 0.0) as usize) << 1
-            | ((rays.d[2][i] < 0.0) as usize) << 2;
-        octants[o] |= 1 << i;
-    }
-    octants
-}
-
-/// The lanes of a packet of shadow rays toward the light at `light` that
-/// nothing blocks; `slot` is their shadow cache slot. The cached blocker
-/// is tried on every lane first; if it blocks most of them the cache is
-/// doing the work, and the rest go one by one (each updating the cache as
-/// it finds a blocker), else they walk together where they can.
-fn occluded_all<R: Real>(
-    s: &DfScene,
-    sc: &mut Scratch<R>,
-    rays: &Rays<R>,
+    rays: &RayLanes<R>,
     slot: usize,
-    light: Vec3,
-) -> Mask {
+) -> Lanes {
     let all = rays.all();
     let cached = sc.shadow_cache[slot];
     let mut open = all;
     if cached != NO_OBJECT {
-        LaneTests::new(s, s.candidate(cached), cached).blocks(rays, &mut open, &mut sc.tests);
-    }
-    let mut lit = open;
-    let mut rest = open;
-    let min_packet = s.tune.min_packet;
-    let cache_works = 2 * open.count_ones() < all.count_ones();
-    if open.count_ones() >= min_packet && s.tune.shadow_packets && !cache_works {
-        let split = octants(rays, open).into_iter().filter(|&m| m != open);
-        for m in std::iter::once(open).chain(split) {
-            if m.count_ones() < min_packet {
-                continue;
-            }
-            let Some(plan) = Plan::new(s, rays, m, light) else {
-                continue;
-            };
-            let mut unblocked = m;
-            let mut last = NO_OBJECT;
-            packet::occluded(s, sc, rays, &mut unblocked, &plan, cached, &mut last);
-            if last != NO_OBJECT {
-                sc.shadow_cache[slot] = last;
-            }
-            lit &= !(m & !unblocked);
-            rest &= !m;
-            if rest == 0 {
-                break;
-            }
-        }
-    }
-    for i in lanes(rest) {
-        if single::occluded(
+        let c = s.candidate(cached);
+        let hit = sc.isa.run(CachedBlocker {
             s,
-            sc,
-            slot,
-            &rays.q[i],
-            rays.o(i),
-            rays.d(i),
-            rays.inv(i),
-            rays.t_min[i],
-            rays.t_max[i],
-            cached,
-        ) {
-            lit &= !(1 << i);
-        }
+            c,
+            rays,
+            found: &mut sc.found,
+            tests: &mut sc.tests,
+        });
+        open &= !hit;
     }
-    lit
+    if open == 0 {
+        return 0;
+    }
+    let (blocked, blocker) = walk::occluded(s, sc, rays, open, cached);
+    if blocker != NO_OBJECT {
+        sc.shadow_cache[slot] = blocker;
+    }
+    open & !blocked
 }

@@ -7,16 +7,22 @@
 //! begin with (so it must give the same answer bit for bit).
 
 use super::rays::{LANES, Lanes, RayLanes};
-use super::{chunks, lane_mask};
+use super::{for_chunks, lane_mask, ld};
 use crate::math::Real;
 use crate::simd::{Elem, Float, Job, Lanes as Simd, Mask};
 
 /// The lanes of `m` whose rays may meet the box `[lo, hi]` at some `t`
-/// in `[t_min, limit]`. Along an axis where a ray's direction is zero the
-/// box is ruled out only when the origin lies outside its slab (the
-/// arithmetic gives 0 x inf = NaN for an origin on a face, which rules
-/// nothing out). Callers grow the box by a pad far above the rounding of
-/// the arithmetic, so that no box a ray touches is missed.
+/// in `[t_min, limit]` (`t_min` is never negative). Callers grow the box
+/// by a pad far above the rounding of the arithmetic, so that no box a
+/// ray touches is missed.
+///
+/// Along an axis where a ray's direction is zero, `1 / d` is the largest
+/// finite number ([`RayLanes::inv`]), never an infinity: an origin on a
+/// face of the grown box gives `0`, not NaN, and an origin inside the
+/// grown box is at least the pad from its faces, so its slab spans every
+/// `t` from `0` to far beyond any distance in the scene. (An origin
+/// outside the slab may be let through a tiny distance: a box let
+/// through costs time, never a hit.)
 pub struct BoxLanes<'a, R> {
     pub lo: [R; 3],
     pub hi: [R; 3],
@@ -31,10 +37,10 @@ impl<R: Elem> Job for BoxLanes<'_, R> {
     #[inline(always)]
     fn run<L: Simd>(self) -> Lanes {
         let mut out = 0;
-        for (c, bits) in chunks::<R::V<L>>(self.m) {
+        for_chunks!(R::V<L>, self.m, |c, bits| {
             let h = meets::<R, R::V<L>>(&self.lo, &self.hi, self.rays, c, self.limit);
             out |= (h & bits) << c;
-        }
+        });
         out
     }
 }
@@ -48,17 +54,15 @@ pub(super) fn meets<R: Elem, V: Float<Elem = R>>(
     c: usize,
     limit: &[R; LANES],
 ) -> u64 {
-    let mut t0 = V::load(&rays.t_min[c..]);
-    let mut t1 = V::load(&limit[c..]);
-    let (ninf, inf) = (V::splat(-R::INFINITY), V::splat(R::INFINITY));
+    let mut t0 = ld::<V>(&rays.t_min, c);
+    let mut t1 = ld::<V>(limit, c);
     for i in 0..3 {
-        let o = V::load(&rays.o[i][c..]);
-        let inv = V::load(&rays.inv[i][c..]);
+        let o = ld::<V>(&rays.o[i], c);
+        let inv = ld::<V>(&rays.inv[i], c);
         let a = (V::splat(lo[i]) - o) * inv;
         let z = (V::splat(hi[i]) - o) * inv;
-        let nan = a.eq(a).and(z.eq(z)).not();
-        t0 = t0.max(V::select(nan, ninf, a.min(z)));
-        t1 = t1.min(V::select(nan, inf, a.max(z)));
+        t0 = t0.max(a.min(z));
+        t1 = t1.min(a.max(z));
     }
     t0.le(t1).bits() & lane_mask::<V>()
 }
@@ -78,10 +82,10 @@ impl<R: Elem> Job for MayHitBox<'_, R> {
     #[inline(always)]
     fn run<L: Simd>(self) -> Lanes {
         let mut out = 0;
-        for (c, bits) in chunks::<R::V<L>>(self.m) {
+        for_chunks!(R::V<L>, self.m, |c, bits| {
             let h = may_hit_box::<R, R::V<L>>(self.b, self.rays, c, self.limit);
             out |= (h & bits) << c;
-        }
+        });
         out
     }
 }
@@ -94,8 +98,8 @@ pub(super) fn may_hit_box<R: Elem, V: Float<Elem = R>>(
     c: usize,
     limit: &[R; LANES],
 ) -> u64 {
-    let mut t0 = V::load(&rays.t_min[c..]);
-    let mut t1 = V::load(&limit[c..]);
+    let mut t0 = ld::<V>(&rays.t_min, c);
+    let mut t1 = ld::<V>(limit, c);
     let zero = V::splat(R::ZERO);
     let eps = V::splat(R::EPSILON * R::from_f32(16.0));
     // Lanes the scalar test has returned `false` for.
@@ -105,12 +109,12 @@ pub(super) fn may_hit_box<R: Elem, V: Float<Elem = R>>(
             V::splat(R::from_f32(b.min[i])),
             V::splat(R::from_f32(b.max[i])),
         );
-        let o = V::load(&rays.o[i][c..]);
-        let flat = V::load(&rays.d[i][c..]).eq(zero);
+        let o = ld::<V>(&rays.o[i], c);
+        let flat = ld::<V>(&rays.d[i], c).eq(zero);
         // A zero direction: out if the origin is outside the slab, and
         // the axis changes nothing.
         out = out.or(flat.and(o.lt(lo).or(o.gt(hi))));
-        let inv = V::load(&rays.inv[i][c..]);
+        let inv = ld::<V>(&rays.inv[i], c);
         let (a0, z0) = ((lo - o) * inv, (hi - o) * inv);
         let swap = a0.gt(z0);
         let (a, z) = (V::select(swap, z0, a0), V::select(swap, a0, z0));

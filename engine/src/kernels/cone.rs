@@ -5,7 +5,7 @@
 
 use super::boxes::may_hit_box;
 use super::rays::{LANES, Lanes, RayLanes};
-use super::{chunks, lane_mask};
+use super::{dot3, for_chunks, lane_mask, ld, ld3, of_f64, splat3, sub_scaled3, sub3};
 use crate::scene::Aabb;
 use crate::shapes::ConeFrame;
 use crate::simd::{Elem, Float, Job, Lanes as Simd, Mask};
@@ -28,13 +28,13 @@ impl<R: Elem> Job for ConeLanes<'_, R> {
     #[inline(always)]
     fn run<L: Simd>(self) -> Lanes {
         let mut out = 0;
-        for (c, bits) in chunks::<R::V<L>>(self.m) {
+        for_chunks!(R::V<L>, self.m, |c, bits| {
             let mut h = may_hit_box::<R, R::V<L>>(self.bbox, self.rays, c, self.limit);
             if h & bits != 0 {
                 h &= chunk::<R, R::V<L>>(self.frame, self.rays, c, self.limit, self.t_out);
             }
             out |= (h & bits) << c;
-        }
+        });
         out
     }
 }
@@ -47,23 +47,25 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     limit: &[R; LANES],
     t_out: &mut [R; LANES],
 ) -> u64 {
-    let ld = |a: &[R; LANES]| V::load(&a[c..]);
-    let s = |x: f64| V::splat(R::from_f64(x));
-    let (base, axis) = (f.base.to_array().map(s), f.axis.to_array().map(s));
-    let (len, r0, k) = (s(f.len), s(f.r0), s(f.slope));
-    let dot = |p: &[V; 3], q: &[V; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
-    let o = [ld(&rays.o[0]), ld(&rays.o[1]), ld(&rays.o[2])];
-    let d = [ld(&rays.d[0]), ld(&rays.d[1]), ld(&rays.d[2])];
-    let w = [o[0] - base[0], o[1] - base[1], o[2] - base[2]];
-    let wa = dot(&w, &axis);
-    let da = dot(&d, &axis);
-    let wp = [0, 1, 2].map(|i| w[i] - axis[i] * wa);
-    let dp = [0, 1, 2].map(|i| d[i] - axis[i] * da);
+    let base = splat3::<V>(of_f64(f.base.to_array()));
+    let axis = splat3::<V>(of_f64(f.axis.to_array()));
+    let (len, r0, k) = (
+        V::splat(R::from_f64(f.len)),
+        V::splat(R::from_f64(f.r0)),
+        V::splat(R::from_f64(f.slope)),
+    );
+    let o = ld3::<V>(&rays.o, c);
+    let d = ld3::<V>(&rays.d, c);
+    let w = sub3(&o, &base);
+    let wa = dot3(&w, &axis);
+    let da = dot3(&d, &axis);
+    let wp = sub_scaled3(&w, &axis, wa);
+    let dp = sub_scaled3(&d, &axis, da);
     let rr = r0 + k * wa;
     let z = V::splat(R::ZERO);
-    let a = dot(&dp, &dp) - k * k * da * da;
-    let b = dot(&wp, &dp) - k * rr * da;
-    let cc = dot(&wp, &wp) - rr * rr;
+    let a = dot3(&dp, &dp) - k * k * da * da;
+    let b = dot3(&wp, &dp) - k * rr * da;
+    let cc = dot3(&wp, &wp) - rr * rr;
     // A linear equation where a = 0 (no root where b = 0 too).
     let flat = a.eq(z);
     let linear = -cc / (V::splat(R::TWO) * b);
@@ -81,16 +83,25 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     let root0 = V::select(flat, linear, qa);
     let root1 = V::select(flat, inf, qb);
     let none = flat.and(b.eq(z)).or(disc.lt(z).and_not(flat));
-    let (lo, hi) = (ld(&rays.t_min), ld(limit));
-    let on = |t: V| {
-        let h = wa + t * da;
-        t.gt(lo)
-            .and(t.lt(hi))
-            .and(h.ge(z))
-            .and(h.le(len))
-            .and((r0 + k * h).ge(z))
-    };
-    let (ok0, ok1) = (on(root0), on(root1));
-    V::select(ok0, root0, root1).store(&mut t_out[c..]);
+    let (lo, hi): (V, V) = (ld(&rays.t_min, c), ld(limit, c));
+    let (ok0, ok1) = (
+        on_surface(root0, lo, hi, wa, da, len, r0, k),
+        on_surface(root1, lo, hi, wa, da, len, r0, k),
+    );
+    V::select(ok0, root0, root1).store(&mut t_out[c..c + V::N]);
     ok0.or(ok1).and_not(none).bits() & lane_mask::<V>()
+}
+
+/// Whether a root `t` counts: in `(lo, hi)`, between the cone's ends, and
+/// on its real sheet (a non-negative radius).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn on_surface<V: Float>(t: V, lo: V, hi: V, wa: V, da: V, len: V, r0: V, k: V) -> V::Mask {
+    let z = V::splat(<V::Elem as crate::math::Real>::ZERO);
+    let h = wa + t * da;
+    t.gt(lo)
+        .and(t.lt(hi))
+        .and(h.ge(z))
+        .and(h.le(len))
+        .and((r0 + k * h).ge(z))
 }

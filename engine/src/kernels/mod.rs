@@ -10,12 +10,13 @@
 //! the instruction sets of [`crate::simd`], which is what lets the
 //! kernels replace the scalar tests without changing an image.
 //!
-//! - [`Triangle`]: the watertight triangle test (triangles, and the
+//! - [`Triangle`], the watertight triangle test (triangles, and the
 //!   triangles of patches and placed models);
-//! - [`SphereLanes`]: spheres;
-//! - [`PlaneLanes`] and [`Crossings`]: polygons of four or more vertices;
-//! - [`ConeLanes`]: cones and cylinders;
-//! - [`BoxLanes`]: the conservative box test of a traversal, and
+//! - [`SphereLanes`] for spheres;
+//! - [`PlaneLanes`] and [`Crossings`] for polygons of four or more
+//!   vertices;
+//! - [`ConeLanes`] for cones and cylinders;
+//! - [`BoxLanes`], the conservative box test of a traversal, and
 //!   [`MayHitBox`], the exact box pre-test of polygons and cones.
 //!
 //! Run a kernel with [`crate::simd::Isa::run`].
@@ -42,17 +43,77 @@ pub(crate) fn lane_mask<V: Float>() -> u64 {
     (1u64 << V::N) - 1
 }
 
-/// The vectors of lanes a kernel visits for the lanes `m`: the first lane
-/// of each vector holding one of them, and those lanes' bits (relative
-/// to it).
+/// Runs `$body` for each vector of lanes holding a lane of `$m`, with
+/// `$c` the vector's first lane and `$bits` those lanes (relative to
+/// `$c`).
+///
+/// A macro, not an iterator or a closure: the kernels are inlined into a
+/// function compiled for their instruction set, and a closure or an
+/// iterator adapter that the compiler left out of line would be compiled
+/// without it, its vector operations turned into calls. For the same
+/// reason the kernels use `#[inline(always)]` helpers and plain loops,
+/// never `array::map` or closures, around vector code.
+macro_rules! for_chunks {
+    ($V:ty, $m:expr, |$c:ident, $bits:ident| $body:block) => {{
+        let m: u64 = $m;
+        let end = (u64::BITS - m.leading_zeros()) as usize;
+        let lm = $crate::kernels::lane_mask::<$V>();
+        let mut $c = 0;
+        while $c < end {
+            let $bits = (m >> $c) & lm;
+            if $bits != 0 $body
+            $c += <$V as $crate::simd::Float>::N;
+        }
+    }};
+}
+pub(crate) use for_chunks;
+
+/// The lanes from `c` of a per-lane array.
 #[inline(always)]
-pub(crate) fn chunks<V: Float>(m: Lanes) -> impl Iterator<Item = (usize, u64)> {
-    let end = (u64::BITS - m.leading_zeros()) as usize;
-    let lm = lane_mask::<V>();
-    (0..end)
-        .step_by(V::N)
-        .map(move |c| (c, (m >> c) & lm))
-        .filter(|&(_, b)| b != 0)
+pub(crate) fn ld<V: Float>(a: &[V::Elem; LANES], c: usize) -> V {
+    V::load(&a[c..c + V::N])
+}
+
+/// A point's coordinates, each in every lane.
+#[inline(always)]
+pub(crate) fn splat3<V: Float>(p: [V::Elem; 3]) -> [V; 3] {
+    [V::splat(p[0]), V::splat(p[1]), V::splat(p[2])]
+}
+
+/// `p . q`, summed in the order of [`crate::math::V3::dot`].
+#[inline(always)]
+pub(crate) fn dot3<V: Float>(p: &[V; 3], q: &[V; 3]) -> V {
+    p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+}
+
+/// `p - q`.
+#[inline(always)]
+pub(crate) fn sub3<V: Float>(p: &[V; 3], q: &[V; 3]) -> [V; 3] {
+    [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
+}
+
+/// `p - q s`, as `V3`'s `p - q * s`.
+#[inline(always)]
+pub(crate) fn sub_scaled3<V: Float>(p: &[V; 3], q: &[V; 3], s: V) -> [V; 3] {
+    [p[0] - q[0] * s, p[1] - q[1] * s, p[2] - q[2] * s]
+}
+
+/// A group's coordinate arrays from lane `c`.
+#[inline(always)]
+pub(crate) fn ld3<V: Float>(a: &[[V::Elem; LANES]; 3], c: usize) -> [V; 3] {
+    [ld(&a[0], c), ld(&a[1], c), ld(&a[2], c)]
+}
+
+/// `f32` data in the precision of the lanes.
+#[inline(always)]
+pub(crate) fn of_f32<R: crate::math::Real>(p: [f32; 3]) -> [R; 3] {
+    [R::from_f32(p[0]), R::from_f32(p[1]), R::from_f32(p[2])]
+}
+
+/// `f64` data in the precision of the lanes.
+#[inline(always)]
+pub(crate) fn of_f64<R: crate::math::Real>(p: [f64; 3]) -> [R; 3] {
+    [R::from_f64(p[0]), R::from_f64(p[1]), R::from_f64(p[2])]
 }
 
 #[cfg(test)]

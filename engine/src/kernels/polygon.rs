@@ -11,7 +11,7 @@
 
 use super::boxes::may_hit_box;
 use super::rays::{LANES, Lanes, RayLanes};
-use super::{chunks, lane_mask};
+use super::{dot3, for_chunks, lane_mask, ld, ld3, of_f32, of_f64, splat3, sub3};
 use crate::scene::Aabb;
 use crate::shapes::PolygonPlane;
 use crate::simd::{Elem, Float, Job, Lanes as Simd, Mask};
@@ -49,13 +49,13 @@ impl<R: Elem> Job for PlaneLanes<'_, R> {
             pv,
         } = self;
         let mut out = 0;
-        for (c, bits) in chunks::<R::V<L>>(m) {
+        for_chunks!(R::V<L>, m, |c, bits| {
             let mut h = plane_chunk::<R, R::V<L>>(v, plane, rays, c, limit, t_out, pu, pv);
             if v.len() > 4 {
                 h &= may_hit_box::<R, R::V<L>>(bbox, rays, c, limit);
             }
             out |= (h & bits) << c;
-        }
+        });
         out
     }
 }
@@ -72,24 +72,22 @@ fn plane_chunk<R: Elem, V: Float<Elem = R>>(
     pu: &mut [R; LANES],
     pv: &mut [R; LANES],
 ) -> u64 {
-    let ld = |a: &[R; LANES]| V::load(&a[c..]);
-    let n = pl.n.map(|x| V::splat(R::from_f64(x)));
-    let o = [ld(&rays.o[0]), ld(&rays.o[1]), ld(&rays.o[2])];
-    let d = [ld(&rays.d[0]), ld(&rays.d[1]), ld(&rays.d[2])];
+    let n = splat3::<V>(of_f64(pl.n));
+    let o = ld3::<V>(&rays.o, c);
+    let d = ld3::<V>(&rays.d, c);
     let z = V::splat(R::ZERO);
-    let denom = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
-    let p0 = v[0].map(|x| V::splat(R::from_f32(x)));
-    let w = [p0[0] - o[0], p0[1] - o[1], p0[2] - o[2]];
-    let t = (n[0] * w[0] + n[1] * w[1] + n[2] * w[2]) / denom;
+    let denom = dot3(&n, &d);
+    let w = sub3(&splat3(of_f32(v[0])), &o);
+    let t = dot3(&n, &w) / denom;
     let ok = denom
         .eq(z)
         .not()
-        .and(t.gt(ld(&rays.t_min)))
-        .and(t.lt(ld(limit)));
+        .and(t.gt(ld(&rays.t_min, c)))
+        .and(t.lt(ld(limit, c)));
     let (iu, iv) = (pl.iu as usize, pl.iv as usize);
-    (o[iu] + d[iu] * t).store(&mut pu[c..]);
-    (o[iv] + d[iv] * t).store(&mut pv[c..]);
-    t.store(&mut t_out[c..]);
+    (o[iu] + d[iu] * t).store(&mut pu[c..c + V::N]);
+    (o[iv] + d[iv] * t).store(&mut pv[c..c + V::N]);
+    t.store(&mut t_out[c..c + V::N]);
     ok.bits() & lane_mask::<V>()
 }
 
@@ -110,10 +108,10 @@ impl<R: Elem> Job for Crossings<'_, R> {
     #[inline(always)]
     fn run<L: Simd>(self) -> Lanes {
         let mut out = 0;
-        for (c, bits) in chunks::<R::V<L>>(self.m) {
+        for_chunks!(R::V<L>, self.m, |c, bits| {
             let h = crossings::<R, R::V<L>>(self.v, self.plane, c, self.pu, self.pv);
             out |= (h & bits) << c;
-        }
+        });
         out
     }
 }
@@ -127,7 +125,7 @@ fn crossings<R: Elem, V: Float<Elem = R>>(
     pv: &[R; LANES],
 ) -> u64 {
     let (iu, iv) = (pl.iu as usize, pl.iv as usize);
-    let (pu, pv) = (V::load(&pu[c..]), V::load(&pv[c..]));
+    let (pu, pv) = (ld::<V>(pu, c), ld::<V>(pv, c));
     let mut inside = pu.lt(pu);
     let last = v[v.len() - 1];
     let (mut au, mut av) = (R::from_f32(last[iu]), R::from_f32(last[iv]));

@@ -33,6 +33,11 @@ pub struct RayLanes<R> {
     pub n: usize,
     pub o: [[R; LANES]; 3],
     pub d: [[R; LANES]; 3],
+    /// `1 / d`, except where `d` is zero: the largest finite number of
+    /// `d`'s sign there instead of an infinity, so that a box test never
+    /// computes 0 x inf (see [`super::BoxLanes`]). No test divides by a
+    /// zero component otherwise: the watertight test's `sz` is the
+    /// reciprocal of the largest.
     pub inv: [[R; LANES]; 3],
     /// The interval of distances that count: a hit at `t` counts when
     /// `t_min < t < t_max` (the kernels take the upper end per call).
@@ -142,7 +147,13 @@ impl<R: Real> RayLanes<R> {
         for a in 0..3 {
             self.o[a][i] = or[a];
             self.d[a][i] = dr[a];
-            self.inv[a][i] = ir[a];
+            self.inv[a][i] = if ir[a].is_finite() {
+                ir[a]
+            } else if ir[a] > R::ZERO {
+                R::MAX
+            } else {
+                -R::MAX
+            };
             self.o64[a][i] = o[a];
             self.d64[a][i] = d[a];
             self.inv64[a][i] = inv[a];

@@ -24,6 +24,8 @@ pub trait Real:
     const TWO: Self;
     const HALF: Self;
     const INFINITY: Self;
+    /// The largest finite value.
+    const MAX: Self;
     /// Machine epsilon of the type.
     const EPSILON: Self;
 
@@ -54,6 +56,7 @@ macro_rules! impl_real {
             const TWO: Self = 2.0;
             const HALF: Self = 0.5;
             const INFINITY: Self = <$t>::INFINITY;
+            const MAX: Self = <$t>::MAX;
             const EPSILON: Self = <$t>::EPSILON;
             #[inline(always)]
             fn from_f32(x: f32) -> Self {

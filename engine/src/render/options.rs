@@ -126,6 +126,10 @@ pub struct RenderOptions {
     /// Eye rays per pixel: 1 traces the pixel corners (the contract's
     /// sampling); a square from 4 up takes jittered samples.
     pub samples: u32,
+    /// The kernels' instruction set, when forced (`--simd`); else
+    /// `SRAY_SIMD`, else the widest the CPU has. Images and counts are the
+    /// same with every one.
+    pub simd: Option<crate::simd::Isa>,
 }
 
 impl Default for RenderOptions {
@@ -142,6 +146,7 @@ impl Default for RenderOptions {
             precision: Precision::Double,
             profile: false,
             samples: 1,
+            simd: None,
         }
     }
 }

@@ -241,6 +241,7 @@ macro_rules! vector_float {
      add: $add:ident, sub: $sub:ident, mul: $mul:ident, div: $div:ident,
      set1: $set1:ident, loadu: $loadu:ident, storeu: $storeu:ident, sqrt: $sqrt:ident,
      xor: $xor:ident, andnot: $andnot:ident, and: $and:ident, or: $or:ident,
+     min: $min:ident, max: $max:ident,
      lt: $lt:expr, le: $le:expr, gt: $gt:expr, ge: $ge:expr, eq: $eq:expr,
      select: $select:expr) => {
         #[derive(Clone, Copy)]
@@ -319,6 +320,19 @@ macro_rules! vector_float {
                 let f: fn($raw, $raw, $raw) -> $raw = $select;
                 $V(f(m.0, a.0, b.0))
             }
+            /// MINPS(a, b) is `a < b ? a : b`, NaN and signed zeros
+            /// included: exactly [`Float::min`].
+            #[inline(always)]
+            fn min(self, o: $V) -> $V {
+                // SAFETY: see the module's documentation.
+                $V(unsafe { $min(self.0, o.0) })
+            }
+            /// MAXPS(a, b) is `a > b ? a : b`: exactly [`Float::max`].
+            #[inline(always)]
+            fn max(self, o: $V) -> $V {
+                // SAFETY: see the module's documentation.
+                $V(unsafe { $max(self.0, o.0) })
+            }
         }
     };
 }
@@ -328,6 +342,7 @@ vector_float!(F32x4, M32x4, __m128, f32, 4,
     add: _mm_add_ps, sub: _mm_sub_ps, mul: _mm_mul_ps, div: _mm_div_ps,
     set1: _mm_set1_ps, loadu: _mm_loadu_ps, storeu: _mm_storeu_ps, sqrt: _mm_sqrt_ps,
     xor: _mm_xor_ps, andnot: _mm_andnot_ps, and: _mm_and_ps, or: _mm_or_ps,
+    min: _mm_min_ps, max: _mm_max_ps,
     lt: |a, b| unsafe { _mm_cmplt_ps(a, b) }, le: |a, b| unsafe { _mm_cmple_ps(a, b) },
     gt: |a, b| unsafe { _mm_cmpgt_ps(a, b) }, ge: |a, b| unsafe { _mm_cmpge_ps(a, b) },
     eq: |a, b| unsafe { _mm_cmpeq_ps(a, b) },
@@ -340,6 +355,7 @@ vector_float!(F64x2, M64x2, __m128d, f64, 2,
     add: _mm_add_pd, sub: _mm_sub_pd, mul: _mm_mul_pd, div: _mm_div_pd,
     set1: _mm_set1_pd, loadu: _mm_loadu_pd, storeu: _mm_storeu_pd, sqrt: _mm_sqrt_pd,
     xor: _mm_xor_pd, andnot: _mm_andnot_pd, and: _mm_and_pd, or: _mm_or_pd,
+    min: _mm_min_pd, max: _mm_max_pd,
     lt: |a, b| unsafe { _mm_cmplt_pd(a, b) }, le: |a, b| unsafe { _mm_cmple_pd(a, b) },
     gt: |a, b| unsafe { _mm_cmpgt_pd(a, b) }, ge: |a, b| unsafe { _mm_cmpge_pd(a, b) },
     eq: |a, b| unsafe { _mm_cmpeq_pd(a, b) },
@@ -351,6 +367,7 @@ vector_float!(F32x8, M32x8, __m256, f32, 8,
     set1: _mm256_set1_ps, loadu: _mm256_loadu_ps, storeu: _mm256_storeu_ps,
     sqrt: _mm256_sqrt_ps,
     xor: _mm256_xor_ps, andnot: _mm256_andnot_ps, and: _mm256_and_ps, or: _mm256_or_ps,
+    min: _mm256_min_ps, max: _mm256_max_ps,
     // SAFETY (each closure below): see the module's documentation.
     lt: |a, b| unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(a, b) },
     le: |a, b| unsafe { _mm256_cmp_ps::<_CMP_LE_OQ>(a, b) },
@@ -365,6 +382,7 @@ vector_float!(F64x4, M64x4, __m256d, f64, 4,
     set1: _mm256_set1_pd, loadu: _mm256_loadu_pd, storeu: _mm256_storeu_pd,
     sqrt: _mm256_sqrt_pd,
     xor: _mm256_xor_pd, andnot: _mm256_andnot_pd, and: _mm256_and_pd, or: _mm256_or_pd,
+    min: _mm256_min_pd, max: _mm256_max_pd,
     // SAFETY (each closure below): see the module's documentation.
     lt: |a, b| unsafe { _mm256_cmp_pd::<_CMP_LT_OQ>(a, b) },
     le: |a, b| unsafe { _mm256_cmp_pd::<_CMP_LE_OQ>(a, b) },
@@ -417,7 +435,8 @@ macro_rules! avx512_float {
     ($V:ident, $M:ident, $raw:ty, $T:ty, $N:literal, $suffix:ident,
      add: $add:ident, sub: $sub:ident, mul: $mul:ident, div: $div:ident,
      set1: $set1:ident, loadu: $loadu:ident, storeu: $storeu:ident, sqrt: $sqrt:ident,
-     abs: $abs:ident, cmp: $cmp:ident, blend: $blend:ident, neg: $neg:expr) => {
+     abs: $abs:ident, cmp: $cmp:ident, blend: $blend:ident, min: $min:ident, max: $max:ident,
+     neg: $neg:expr) => {
         #[derive(Clone, Copy)]
         pub struct $V($raw);
 
@@ -495,6 +514,18 @@ macro_rules! avx512_float {
                 // SAFETY: see the module's documentation.
                 $V(unsafe { $blend(m.0, b.0, a.0) })
             }
+            /// VMINPS(a, b) is `a < b ? a : b`: exactly [`Float::min`].
+            #[inline(always)]
+            fn min(self, o: $V) -> $V {
+                // SAFETY: see the module's documentation.
+                $V(unsafe { $min(self.0, o.0) })
+            }
+            /// VMAXPS(a, b) is `a > b ? a : b`: exactly [`Float::max`].
+            #[inline(always)]
+            fn max(self, o: $V) -> $V {
+                // SAFETY: see the module's documentation.
+                $V(unsafe { $max(self.0, o.0) })
+            }
         }
     };
 }
@@ -503,7 +534,7 @@ avx512_float!(F32x16, K16, __m512, f32, 16, ps,
     add: _mm512_add_ps, sub: _mm512_sub_ps, mul: _mm512_mul_ps, div: _mm512_div_ps,
     set1: _mm512_set1_ps, loadu: _mm512_loadu_ps, storeu: _mm512_storeu_ps,
     sqrt: _mm512_sqrt_ps, abs: _mm512_abs_ps, cmp: _mm512_cmp_ps_mask,
-    blend: _mm512_mask_blend_ps,
+    blend: _mm512_mask_blend_ps, min: _mm512_min_ps, max: _mm512_max_ps,
     // AVX-512F has no float xor: flip the sign bit as an integer.
     // SAFETY: see the module's documentation.
     neg: |a| unsafe {
@@ -518,7 +549,7 @@ avx512_float!(F64x8, K8, __m512d, f64, 8, pd,
     add: _mm512_add_pd, sub: _mm512_sub_pd, mul: _mm512_mul_pd, div: _mm512_div_pd,
     set1: _mm512_set1_pd, loadu: _mm512_loadu_pd, storeu: _mm512_storeu_pd,
     sqrt: _mm512_sqrt_pd, abs: _mm512_abs_pd, cmp: _mm512_cmp_pd_mask,
-    blend: _mm512_mask_blend_pd,
+    blend: _mm512_mask_blend_pd, min: _mm512_min_pd, max: _mm512_max_pd,
     // SAFETY: see the module's documentation.
     neg: |a| unsafe {
         _mm512_castsi512_pd(_mm512_xor_si512(

@@ -456,7 +456,10 @@ fn ties_between_instances_go_as_between_copies() {
     let colors: std::collections::HashSet<[u8; 3]> =
         a.chunks(3).map(|p| [p[0], p[1], p[2]]).collect();
     assert!(
-        colors.iter().all(|c| !(c[1] > 2 * c[0] && c[1] > 2 * c[2])),
+        colors
+            .iter()
+            .map(|c| c.map(u32::from))
+            .all(|c| !(c[1] > 2 * c[0] && c[1] > 2 * c[2])),
         "{colors:?}"
     );
     assert!(colors.iter().any(|c| c[2] > c[0]), "{colors:?}");

@@ -1,0 +1,444 @@
+//! A group of rays walking the grids together.
+//!
+//! The group descends each grid's occupancy [`Pyramid`] from its one top
+//! block: a block is entered with the lanes whose rays may meet its box
+//! before their best hit so far (one [`BoxLanes`] kernel over the group),
+//! its set children in front-to-back order, down to the voxels, whose
+//! objects (and crowded voxels' hierarchies) are tested with the kernels.
+//! Lanes drop out of a block as soon as their rays miss it or have found
+//! a nearer hit, so coherent rays share the walk and incoherent ones
+//! narrow it to their own; a group of one ray is a plain walk of the grid
+//! that skips empty space.
+//!
+//! Each ray finds exactly the hit it finds alone, whatever the group:
+//! every culling test is conservative (boxes grown by the scene's slack,
+//! far above any rounding), an object is tested once per walk (mailbox)
+//! against every lane that may meet its box, and the nearest hit wins,
+//! ties to the smaller input id, whatever the order of the tests.
+
+use super::lanes::{self, Found, Want};
+use super::nested::{Holds, MAX_PENDING, NESTED, high_first};
+use super::pyramid::BlockBounds;
+use super::trace::{NO_OBJECT, Scratch};
+use super::{Candidate, DfScene, ObjectGrid};
+use crate::hit::{Hit, PrimId};
+use crate::kernels::{BoxLanes, LANES, Lanes, RayLanes, each_lane, widen};
+use crate::math::Real;
+use crate::scene::Aabb;
+use crate::simd::{Elem, Job, Lanes as Simd};
+
+/// The nearest hit found so far by each lane (distance and primitive),
+/// and the bound a test must beat: just above the best distance, so that
+/// an exact tie is seen and goes to the smaller id.
+#[derive(Clone, Copy, Debug)]
+pub struct Hits<R> {
+    pub t: [f64; LANES],
+    pub prim: [PrimId; LANES],
+    pub upper: [R; LANES],
+}
+
+impl<R: Real> Hits<R> {
+    /// No hit yet; each lane's bound is its ray's `t_max`.
+    pub fn new(rays: &RayLanes<R>) -> Self {
+        Hits {
+            t: [f64::INFINITY; LANES],
+            prim: [PrimId::NONE; LANES],
+            upper: rays.t_max,
+        }
+    }
+
+    /// Lane `i`'s hit.
+    #[inline(always)]
+    pub fn hit(&self, i: usize) -> Hit {
+        Hit {
+            t: self.t[i],
+            prim: self.prim[i],
+        }
+    }
+
+    /// Offers lane `i` a hit at `t` on primitive `prim`; whether it won.
+    /// `ranks` gives each object's input id, by which ties go (empty: the
+    /// ids are the positions).
+    #[inline(always)]
+    pub fn offer(&mut self, i: usize, t: R, prim: PrimId, ranks: &[u32]) -> bool {
+        let t = t.to_f64();
+        let h = self.hit(i);
+        let wins = if ranks.is_empty() || t != h.t {
+            h.loses_to(t, prim)
+        } else {
+            // An exact tie in a database in spatial order (rare: looked
+            // up only then).
+            let rank = |p: PrimId| ranks[p.world_index() as usize];
+            h.loses_to_ranked(rank(h.prim), t, prim, rank(prim))
+        };
+        if wins {
+            self.t[i] = t;
+            self.prim[i] = prim;
+            self.upper[i] = R::from_f64(t).next_up();
+        }
+        wins
+    }
+}
+
+/// What a walk looks for, and what it does with a candidate's hits.
+trait Goal<R: Elem> {
+    /// The lanes still looking.
+    fn live(&self) -> Lanes;
+    /// Each lane's upper bound on the distance of a hit worth finding.
+    fn limit(&self) -> &[R; LANES];
+    const WANT: Want;
+    /// Takes the hits `hit` of candidate `c` (object `id`), found in `out`.
+    fn take(&mut self, s: &DfScene, c: &Candidate, id: u32, hit: Lanes, out: &Found<R>);
+}
+
+struct Nearest<'b, R> {
+    best: &'b mut Hits<R>,
+    all: Lanes,
+}
+
+impl<R: Elem> Goal<R> for Nearest<'_, R> {
+    #[inline(always)]
+    fn live(&self) -> Lanes {
+        self.all
+    }
+
+    #[inline(always)]
+    fn limit(&self) -> &[R; LANES] {
+        &self.best.upper
+    }
+
+    const WANT: Want = Want::Nearest;
+
+    #[inline(always)]
+    fn take(&mut self, s: &DfScene, c: &Candidate, id: u32, hit: Lanes, out: &Found<R>) {
+        let ranks = s.objects.ranks();
+        for i in each_lane(hit) {
+            self.best
+                .offer(i, out.t[i], lanes::prim_of(c, id, out, i), ranks);
+        }
+    }
+}
+
+struct Any<'r, R> {
+    t_max: &'r [R; LANES],
+    open: Lanes,
+    blocker: u32,
+}
+
+impl<R: Elem> Goal<R> for Any<'_, R> {
+    #[inline(always)]
+    fn live(&self) -> Lanes {
+        self.open
+    }
+
+    #[inline(always)]
+    fn limit(&self) -> &[R; LANES] {
+        self.t_max
+    }
+
+    const WANT: Want = Want::Any;
+
+    #[inline(always)]
+    fn take(&mut self, _: &DfScene, _: &Candidate, id: u32, hit: Lanes, _: &Found<R>) {
+        if hit != 0 {
+            self.open &= !hit;
+            self.blocker = id;
+        }
+    }
+}
+
+/// A walk, run with the lanes of the render's instruction set: the walk
+/// and the kernels it calls are compiled as one function for each.
+struct Walk<'a, 't, 's, R, G> {
+    s: &'a DfScene<'t>,
+    sc: &'s mut Scratch<R>,
+    rays: &'a RayLanes<R>,
+    goal: G,
+    tested: u32,
+}
+
+impl<R: Elem, G: Goal<R>> Job for Walk<'_, '_, '_, R, G> {
+    type Out = G;
+
+    #[inline(always)]
+    fn run<L: Simd>(mut self) -> G {
+        walk::<R, L, G>(self.s, self.sc, self.rays, &mut self.goal, self.tested);
+        self.goal
+    }
+}
+
+/// The nearest hits of the lanes `m` of `rays`, offered to `best`.
+pub fn nearest<R: Elem>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    rays: &RayLanes<R>,
+    m: Lanes,
+    best: &mut Hits<R>,
+) {
+    let isa = sc.isa;
+    isa.run(Walk {
+        s,
+        sc,
+        rays,
+        goal: Nearest { best, all: m },
+        tested: NO_OBJECT,
+    });
+}
+
+/// The lanes of `m` that something blocks before their `t_max`, and one
+/// object that blocks some (or `NO_OBJECT`). `tested` (an object already
+/// tried on these lanes, or `NO_OBJECT`) is not tested again.
+pub fn occluded<R: Elem>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    rays: &RayLanes<R>,
+    m: Lanes,
+    tested: u32,
+) -> (Lanes, u32) {
+    let isa = sc.isa;
+    let goal = isa.run(Walk {
+        s,
+        sc,
+        rays,
+        goal: Any {
+            t_max: &rays.t_max,
+            open: m,
+            blocker: NO_OBJECT,
+        },
+        tested,
+    });
+    (m & !goal.open, goal.blocker)
+}
+
+/// Walks every grid (the large objects' first: one ground polygon found
+/// early prunes the walk through the main grid).
+#[inline(always)]
+fn walk<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+    tested: u32,
+) {
+    sc.mailbox.begin();
+    if tested != NO_OBJECT {
+        sc.mailbox.untested(tested, goal.live());
+    }
+    for (i, g) in s.grids.iter().enumerate().rev() {
+        if goal.live() == 0 {
+            return;
+        }
+        if g.single_cell() {
+            // A one-voxel grid (a few large objects): no walk needed.
+            visit_voxel::<R, L, G>(s, sc, g, 0, goal.live(), rays, goal);
+        } else {
+            walk_grid::<R, L, G>(s, sc, g, &s.blocks[i], rays, goal);
+        }
+    }
+}
+
+/// A box grown by `pad` and rounded outward to `R`.
+#[inline(always)]
+fn grown<R: Real>(lo: [f64; 3], hi: [f64; 3], pad: f64) -> ([R; 3], [R; 3]) {
+    (
+        lo.map(|x| widen(x - pad, false)),
+        hi.map(|x| widen(x + pad, true)),
+    )
+}
+
+/// Most blocks a descent keeps pending: up to seven siblings per level of
+/// a grid's pyramid (a grid has at most 4096 voxels a side: 13 levels).
+const MAX_BLOCKS: usize = 7 * 13 + 1;
+
+/// The pyramid's descent through grid `g`, whose blocks' boxes are
+/// `blocks`.
+#[inline(always)]
+fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    g: &ObjectGrid,
+    blocks: &BlockBounds,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+) {
+    let spec = &g.spec;
+    let mut stack = [(0u8, [0u32; 3], 0 as Lanes); MAX_BLOCKS];
+    stack[0] = (g.pyramid.height() as u8, [0; 3], goal.live());
+    let mut sp = 1;
+    while sp > 0 {
+        sp -= 1;
+        let (level, c, lanes) = stack[sp];
+        let lanes = lanes & goal.live();
+        if lanes == 0 {
+            continue;
+        }
+        let l = level as usize;
+        let (lo, hi) = blocks.of::<R>(l, c);
+        let lanes = BoxLanes {
+            lo,
+            hi,
+            rays,
+            m: lanes,
+            limit: goal.limit(),
+        }
+        .run::<L>();
+        if lanes == 0 {
+            continue;
+        }
+        if l == 0 {
+            visit_voxel::<R, L, G>(s, sc, g, spec.index(c), lanes, rays, goal);
+            if goal.live() == 0 {
+                break;
+            }
+            continue;
+        }
+        // The set children, nearest last on the stack (popped first) for
+        // the first lane's direction.
+        let f = lanes.trailing_zeros() as usize;
+        let flip = (rays.d64[0][f] < 0.0) as usize
+            | ((rays.d64[1][f] < 0.0) as usize) << 1
+            | ((rays.d64[2][f] < 0.0) as usize) << 2;
+        let below = if l == 1 {
+            spec.res
+        } else {
+            g.pyramid.res(l - 1)
+        };
+        for k in (0..8).rev() {
+            let j = k ^ flip;
+            let child = [
+                c[0] * 2 + (j & 1) as u32,
+                c[1] * 2 + (j >> 1 & 1) as u32,
+                c[2] * 2 + (j >> 2 & 1) as u32,
+            ];
+            if child[0] >= below[0] || child[1] >= below[1] || child[2] >= below[2] {
+                continue;
+            }
+            let set = if l == 1 {
+                g.occupied(spec.index(child))
+            } else {
+                g.pyramid.occupied(l - 1, child)
+            };
+            if set {
+                stack[sp] = (level - 1, child, lanes);
+                sp += 1;
+            }
+        }
+    }
+}
+
+/// Tests the objects of voxel `index` of grid `g` against the lanes
+/// `lanes` that reach it and have not tested them yet; a crowded voxel's
+/// hierarchy (and an aggregate's below it) is descended with the lanes
+/// that meet each box. (Plain loops: a closure here might not be inlined
+/// into the function compiled for the instruction set, and the kernels
+/// with it.)
+#[inline(always)]
+fn visit_voxel<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    g: &ObjectGrid,
+    index: usize,
+    lanes: Lanes,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+) {
+    let f = lanes.trailing_zeros() as usize & (LANES - 1);
+    let hf = high_first(rays.d(f));
+    let h = g.hierarchies();
+    for &e in g.cell(index) {
+        if goal.live() == 0 {
+            return;
+        }
+        if e & NESTED == 0 {
+            entry::<R, L, G>(s, sc, e, lanes, rays, goal);
+            continue;
+        }
+        let mut pending = [(0u32, 0 as Lanes); MAX_PENDING];
+        pending[0] = (e & !NESTED, lanes);
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (n, lm) = pending[sp];
+            let lm = lm & goal.live();
+            if lm == 0 {
+                continue;
+            }
+            let (b, holds) = h.node(n, hf);
+            let (lo, hi) = box_of::<R>(b, s.slack);
+            let lm = BoxLanes {
+                lo,
+                hi,
+                rays,
+                m: lm,
+                limit: goal.limit(),
+            }
+            .run::<L>();
+            if lm == 0 {
+                continue;
+            }
+            match holds {
+                Holds::Children(near, far) => {
+                    pending[sp] = (far, lm);
+                    pending[sp + 1] = (near, lm);
+                    sp += 2;
+                }
+                Holds::Leaf(ids) => {
+                    for &id in ids {
+                        if id & NESTED != 0 {
+                            pending[sp] = (id & !NESTED, lm);
+                            sp += 1;
+                        } else {
+                            entry::<R, L, G>(s, sc, id, lm, rays, goal);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Object `id`, met by the lanes `lm`: tested against those that have not
+/// tested it yet.
+#[inline(always)]
+fn entry<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    id: u32,
+    lm: Lanes,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+) {
+    let m = sc.mailbox.untested(id, lm & goal.live());
+    if m != 0 {
+        test::<R, L, G>(s, sc, id, rays, m, goal);
+    }
+}
+
+/// Tests object `id` against the lanes `m`.
+#[inline(always)]
+fn test<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    id: u32,
+    rays: &RayLanes<R>,
+    m: Lanes,
+    goal: &mut G,
+) {
+    let c = s.candidate(id);
+    let hit = lanes::test::<R, L>(
+        s,
+        c,
+        rays,
+        m,
+        goal.limit(),
+        G::WANT,
+        &mut sc.found,
+        &mut sc.tests,
+    );
+    goal.take(s, &c, id, hit, &sc.found);
+}
+
+#[inline(always)]
+fn box_of<R: Real>(b: &Aabb, pad: f64) -> ([R; 3], [R; 3]) {
+    grown(b.min.map(f64::from), b.max.map(f64::from), pad)
+}
