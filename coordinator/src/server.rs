@@ -135,7 +135,7 @@ pub async fn serve_with(
             let _ = http_stop_rx.await;
         }))
     });
-    let mon = tokio::spawn(monitor(shared.clone()));
+    let mon = tokio::spawn(monitor::run(shared.clone()));
     crate::driver::resume_all(&shared).await;
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let server = builder

@@ -21,18 +21,25 @@
 //! scene (NFF, SPD) only knows its lights and materials once it has ended;
 //! readers fetch them at open and then read blocks strictly front to back.
 
+mod block;
+mod database;
 mod format;
+mod open;
 mod packed;
 mod read_ahead;
-mod reader;
+mod scan;
 mod spatial;
+mod tables;
+mod validate;
 mod writer;
 
+pub(crate) use block::decode_record;
+pub use block::{Block, BoxRef, ObjectRef};
+pub use database::Database;
 pub use format::RECORD_HEADER_WORDS;
 pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
 pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
-pub(crate) use reader::decode_record;
-pub use reader::{Block, BoxRef, Database, DbStats, ObjectRef, Scan};
+pub use scan::{DbStats, Scan};
 pub use spatial::SpatialSorter;
 pub use writer::{DbWriter, ModelRef, WRITE_BUFFER, WriteSummary};

@@ -6,7 +6,8 @@
 //! The blocks still come in file order, each once; the reader passes over
 //! the blocks `skip` names, as [`Scan::skip_block`] does.
 
-use super::reader::{Block, DbStats, Scan};
+use super::block::Block;
+use super::scan::{DbStats, Scan};
 use crate::error::Error;
 use std::sync::mpsc;
 

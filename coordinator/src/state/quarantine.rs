@@ -1,0 +1,58 @@
+//! Quarantine: a worker that fails too often, or is caught returning
+//! wrong output, gets no task for a while, by session and by name.
+
+use super::Shared;
+use super::inner::{Inner, Quarantine, drop_attempt, lose_pinned_to, requeue_if_idle};
+use crate::task::WorkerTag;
+use std::time::Instant;
+
+impl Shared {
+    /// Gives `worker` no task for `cfg.quarantine`; its live attempts are
+    /// dropped and their tasks queued again elsewhere.
+    pub fn quarantine(&self, worker: &WorkerTag, why: &str) {
+        let mut g = self.lock();
+        let until = Instant::now() + self.cfg.quarantine;
+        tracing::warn!(worker = %worker.name, why, seconds = self.cfg.quarantine.as_secs(), "worker quarantined");
+        g.quarantined
+            .insert(worker.session.clone(), Quarantine { until });
+        g.quarantined
+            .insert(worker.name.clone(), Quarantine { until });
+        let mine: Vec<(u64, u32)> = g
+            .tasks
+            .iter()
+            .flat_map(|(id, t)| {
+                t.live
+                    .iter()
+                    .filter(|(_, a)| a.worker.session == worker.session)
+                    .map(move |(a, _)| (*id, *a))
+            })
+            .collect();
+        for (id, a) in mine {
+            drop_attempt(&mut g, id, a);
+            if let Some(t) = g.tasks.get_mut(&id) {
+                t.excluded.insert(worker.session.clone());
+                t.excluded.insert(worker.name.clone());
+            }
+            requeue_if_idle(&mut g, id);
+        }
+        lose_pinned_to(
+            &mut g,
+            &worker.session,
+            "the worker holding its input is quarantined",
+        );
+        drop(g);
+        self.task_ready.notify_waiters();
+    }
+
+    /// Whether the worker is quarantined now.
+    pub fn is_quarantined(&self, worker: &WorkerTag) -> bool {
+        quarantined_now(&self.lock(), worker, Instant::now())
+    }
+}
+
+/// Whether `tag` (by session or by name) is quarantined at `now`.
+pub(super) fn quarantined_now(g: &Inner, tag: &WorkerTag, now: Instant) -> bool {
+    [&tag.session, &tag.name]
+        .iter()
+        .any(|k| g.quarantined.get(*k).is_some_and(|q| q.until > now))
+}

@@ -1,0 +1,214 @@
+//! A task's output as it arrives from its worker (or from the
+//! coordinator's own tracer), checked record by record before anything
+//! is kept: results in ray order for exactly the shard's rays,
+//! contributions to pixel corners of the image, spawned rays in key order
+//! within the keys the shard's rays can spawn.
+
+use crate::state::Shared;
+use crate::task::{TaskInput, TaskOutput};
+use sray_engine::bf::{Contribution, RayRec, ResultRec};
+use sray_engine::spill::RecordsWriter;
+use sray_proto::v1;
+use sray_proto::wire::{decode_chunk, records_per_chunk};
+
+/// Takes a task's output records, checking them as they come.
+pub(crate) struct Receiver<'a> {
+    shared: &'a Shared,
+    task: &'a v1::Task,
+    input: &'a TaskInput,
+    results: Option<RecordsWriter<ResultRec>>,
+    contributions: Option<RecordsWriter<Contribution>>,
+    rays: Option<RecordsWriter<RayRec>>,
+    n_results: u64,
+    hits: u64,
+    last_key: Option<u64>,
+    /// Frame slots the contributions so far add to, runs counted whole.
+    slots_added: u64,
+}
+
+impl<'a> Receiver<'a> {
+    pub(crate) fn new(shared: &'a Shared, task: &'a v1::Task, input: &'a TaskInput) -> Self {
+        Receiver {
+            shared,
+            task,
+            input,
+            results: None,
+            contributions: None,
+            rays: None,
+            n_results: 0,
+            hits: 0,
+            last_key: None,
+            slots_added: 0,
+        }
+    }
+
+    fn writer<T: bytemuck::Pod>(
+        slot: &mut Option<RecordsWriter<T>>,
+        shared: &Shared,
+        what: &'static str,
+    ) -> Result<(), String> {
+        if slot.is_none() {
+            *slot = Some(RecordsWriter::new(&shared.records, &shared.spill, what));
+        }
+        Ok(())
+    }
+
+    pub(crate) fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
+        if c.held.is_some() {
+            return Err("an output names held records".into());
+        }
+        let intersect = self.task.stage == v1::Stage::Intersect as i32;
+        let io = |e: sray_engine::Error| e.to_string();
+        match (v1::RecordKind::try_from(c.kind), intersect) {
+            (Ok(v1::RecordKind::Results), true) => {
+                let v = decode_chunk::<ResultRec>(&c.data, c.raw, records_per_chunk::<ResultRec>())
+                    .map_err(|e| e.to_string())?;
+                for r in &v {
+                    let want = self.task.first_ray + self.n_results;
+                    if r.ray != want {
+                        return Err(format!("result for ray {} where ray {want} was due", r.ray));
+                    }
+                    // An instance's hit names its record and a triangle
+                    // of a model (checked against the instance's own
+                    // model when it is shaded).
+                    let past_models = r
+                        .prim
+                        .instance_parts()
+                        .is_some_and(|(_, p)| u64::from(p) >= self.input.model_triangles);
+                    if !r.prim.is_none()
+                        && (r.prim.world_index() as u64 >= self.input.objects
+                            || past_models
+                            || !r.t.is_finite())
+                    {
+                        return Err(format!(
+                            "ray {}: no object {} at distance {}",
+                            r.ray, r.prim.0, r.t
+                        ));
+                    }
+                    self.hits += !r.prim.is_none() as u64;
+                    self.n_results += 1;
+                }
+                if self.n_results > self.task.ray_count {
+                    return Err("more results than rays".into());
+                }
+                Self::writer(&mut self.results, self.shared, "out-results")?;
+                self.results.as_mut().expect("made").push_vec(v).map_err(io)
+            }
+            (Ok(v1::RecordKind::Contributions), false) => {
+                let v = decode_chunk::<Contribution>(
+                    &c.data,
+                    c.raw,
+                    records_per_chunk::<Contribution>(),
+                )
+                .map_err(|e| e.to_string())?;
+                if let Some(bad) = v.iter().find(|x| x.end() > self.input.corners) {
+                    return Err(format!(
+                        "a contribution to pixel corners {}..{} of {}",
+                        bad.corner,
+                        bad.end(),
+                        self.input.corners
+                    ));
+                }
+                // Runs come only from a worker that keeps its records
+                // (nothing compares its contributions one by one), and a
+                // ray adds its colour to one slot at most: a shard's
+                // contributions cover no more slots than it has rays, so
+                // a few bytes can never ask for unbounded work here.
+                if !self.task.keep_output && v.iter().any(|x| x.run != 0) {
+                    return Err("a run of contributions from a task whose output is checked".into());
+                }
+                self.slots_added += v.iter().map(|x| x.run as u64 + 1).sum::<u64>();
+                if self.slots_added > self.task.ray_count {
+                    return Err(format!(
+                        "contributions to {} frame slots from a shard of {} rays",
+                        self.slots_added, self.task.ray_count
+                    ));
+                }
+                Self::writer(&mut self.contributions, self.shared, "out-contrib")?;
+                self.contributions
+                    .as_mut()
+                    .expect("made")
+                    .push_vec(v)
+                    .map_err(io)
+            }
+            (Ok(v1::RecordKind::Rays), false) => {
+                let v = decode_chunk::<RayRec>(&c.data, c.raw, records_per_chunk::<RayRec>())
+                    .map_err(|e| e.to_string())?;
+                let slots = sray_engine::bf::SPAWN_SLOTS;
+                let lo = self.task.first_ray * slots;
+                let hi = (self.task.first_ray + self.task.ray_count) * slots;
+                for r in &v {
+                    if r.key < lo || r.key >= hi || self.last_key.is_some_and(|k| r.key <= k) {
+                        return Err(format!("spawned ray key {} out of order or range", r.key));
+                    }
+                    if r.corner as u64 >= self.input.corners
+                        || !r.o.iter().chain(&r.d).all(|x| x.is_finite())
+                    {
+                        return Err(format!("spawned ray {} is malformed", r.key));
+                    }
+                    self.last_key = Some(r.key);
+                }
+                Self::writer(&mut self.rays, self.shared, "out-rays")?;
+                self.rays.as_mut().expect("made").push_vec(v).map_err(io)
+            }
+            _ => Err(format!(
+                "record kind {} does not belong in this stage's output",
+                c.kind
+            )),
+        }
+    }
+
+    pub(crate) fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
+        let intersect = self.task.stage == v1::Stage::Intersect as i32;
+        let mut kept_rays = 0;
+        let mut hits = self.hits;
+        if self.task.keep_output {
+            // Results or spawned rays stayed at the worker: their counts.
+            if self.results.is_some() || self.rays.is_some() {
+                return Err("records sent that were to be kept".into());
+            }
+            if intersect {
+                if summary.kept_records != self.task.ray_count {
+                    return Err(format!(
+                        "{} results kept for {} rays",
+                        summary.kept_records, self.task.ray_count
+                    ));
+                }
+                if summary.kept_hits > summary.kept_records {
+                    return Err("more hits than results".into());
+                }
+                hits = summary.kept_hits;
+            } else {
+                let slots = sray_engine::bf::SPAWN_SLOTS;
+                let lo = self.task.first_ray * slots;
+                let hi = (self.task.first_ray + self.task.ray_count) * slots;
+                let (a, b) = (summary.kept_first_key, summary.kept_last_key);
+                let n = summary.kept_records;
+                if n > 0 && (a < lo || b >= hi || a > b || n > b - a + 1) {
+                    return Err(format!("kept spawned rays' keys {a}..={b} out of range"));
+                }
+                kept_rays = n;
+            }
+        } else if intersect && self.n_results != self.task.ray_count {
+            return Err(format!(
+                "{} results for {} rays",
+                self.n_results, self.task.ray_count
+            ));
+        }
+        sray_engine::shapes::KindCounts::default()
+            .add_named(summary.tests_by_kind.iter().map(|(k, &n)| (k.as_str(), n)))?;
+        let err = |e: sray_engine::Error| e.to_string();
+        Ok(TaskOutput {
+            results: self.results.map(|w| w.finish()).transpose().map_err(err)?,
+            contributions: self
+                .contributions
+                .map(|w| w.finish())
+                .transpose()
+                .map_err(err)?,
+            rays: self.rays.map(|w| w.finish()).transpose().map_err(err)?,
+            hits,
+            kept_rays,
+            summary,
+        })
+    }
+}

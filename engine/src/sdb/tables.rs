@@ -1,0 +1,158 @@
+//! The tables at the end of a database: the view, background, lights and
+//! materials, the size and density summaries, and the models' places.
+
+use super::database::ModelEntry;
+use super::format::*;
+use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
+use crate::scene::{
+    Aabb, DENSITY_CELLS, DensitySummary, Light, Material, SIZE_CLASSES, SceneHeader, SizeClass,
+    SizeSummary, View,
+};
+
+/// What the tables hold, decoded.
+pub(super) type Tables = (
+    SceneHeader,
+    SizeSummary,
+    Option<DensitySummary>,
+    Vec<ModelEntry>,
+);
+
+/// The tables: the scene's header, the size summary, (`density`: from
+/// version 3 on) the density summary, and (`with_models`) the models.
+pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Option<Tables> {
+    let mut d = Dec { buf, pos: 0 };
+    let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
+    let from = v3(&mut d)?;
+    let at = v3(&mut d)?;
+    let up = v3(&mut d)?;
+    let view = View {
+        from,
+        at,
+        up,
+        angle: d.f64()?,
+        hither: d.f64()?,
+        resolution: [d.u32()?, d.u32()?],
+    };
+    let background = [d.f32()?, d.f32()?, d.f32()?];
+    let nl = d.u32()? as usize;
+    if nl > MAX_LIGHTS || nl * 40 > d.remaining() {
+        return None;
+    }
+    let mut lights = Vec::with_capacity(nl);
+    for _ in 0..nl {
+        let position = v3(&mut d)?;
+        let has = d.u32()?;
+        let c = [d.f32()?, d.f32()?, d.f32()?];
+        lights.push(Light {
+            position,
+            color: (has != 0).then_some(c),
+        });
+    }
+    let nm = d.u32()? as usize;
+    if nm > MAX_MATERIALS || nm * 32 > d.remaining() {
+        return None;
+    }
+    let mut materials = Vec::with_capacity(nm);
+    for _ in 0..nm {
+        let mut m = [0f32; 8];
+        for x in &mut m {
+            *x = d.f32()?;
+        }
+        materials.push(Material {
+            color: [m[0], m[1], m[2]],
+            kd: m[3],
+            ks: m[4],
+            shine: m[5],
+            t: m[6],
+            ior: m[7],
+        });
+    }
+    let mut sizes = SizeSummary::default();
+    let nc = d.u32()? as usize;
+    if nc > SIZE_CLASSES || nc * 36 > d.remaining() || (!density && nc * 36 != d.remaining()) {
+        return None;
+    }
+    for _ in 0..nc {
+        let i = d.u32()? as usize;
+        let count = d.u64()?;
+        let mut b = [0f32; 6];
+        for x in &mut b {
+            *x = d.f32()?;
+        }
+        let c = sizes.classes.get_mut(i)?;
+        c.count = count;
+        c.bounds = Aabb::from_array(b);
+    }
+    let density = if density {
+        let level = d.u32()? as i32;
+        let origin = [d.u64()? as i64, d.u64()? as i64, d.u64()? as i64];
+        // Cell coordinates stay exact in an f64 (see the writer).
+        if origin.iter().any(|o| o.unsigned_abs() > 1 << 52) {
+            return None;
+        }
+        let n = d.u32()? as usize;
+        if n > MAX_DENSITY_ENTRIES
+            || n * 40 > d.remaining()
+            || (!with_models && n * 40 != d.remaining())
+        {
+            return None;
+        }
+        let mut entries = Vec::with_capacity(n);
+        for _ in 0..n {
+            let cell = d.u32()?;
+            let class = d.u32()?;
+            let count = d.u64()?;
+            let mut b = [0f32; 6];
+            for x in &mut b {
+                *x = d.f32()?;
+            }
+            if cell >= (DENSITY_CELLS * DENSITY_CELLS * DENSITY_CELLS) as u32
+                || class >= SIZE_CLASSES as u32
+            {
+                return None;
+            }
+            let bounds = Aabb::from_array(b);
+            entries.push(((cell, class as u8), SizeClass { count, bounds }));
+        }
+        // No more objects than the size summary counts (the writer leaves
+        // out only objects with empty boxes).
+        let total = entries
+            .iter()
+            .try_fold(0u64, |a, e| a.checked_add(e.1.count))?;
+        if total > sizes.total() {
+            return None;
+        }
+        // Level i32::MIN: the writer kept no summary.
+        (level != i32::MIN && (-1100..=1100).contains(&level))
+            .then(|| DensitySummary::from_parts(level, origin, entries))
+    } else {
+        None
+    };
+    let mut models = Vec::new();
+    if with_models {
+        let n = d.u32()? as usize;
+        if n > MAX_MODELS || n * 32 != d.remaining() {
+            return None;
+        }
+        for _ in 0..n {
+            let offset = d.u64()?;
+            let bytes = d.u64()?;
+            let pad = d.f64()?;
+            if d.u64()? != 0 {
+                return None;
+            }
+            models.push(ModelEntry { offset, bytes, pad });
+        }
+    }
+    Some((
+        SceneHeader {
+            view,
+            background,
+            lights,
+            materials,
+        },
+        sizes,
+        density,
+        models,
+    ))
+}
