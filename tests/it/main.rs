@@ -36,3 +36,4 @@ mod cluster_trust;
 mod cluster_wire;
 mod deploy;
 mod df_paging;
+mod docs_commands;

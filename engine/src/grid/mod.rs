@@ -18,7 +18,7 @@ use crate::scene::Aabb;
 use serde::Serialize;
 
 /// Voxels per object of the automatic grid resolution (measured with
-/// callgrind over the seven SPD scenes; see BENCHMARKS.md).
+/// callgrind over the seven SPD scenes; see CHANGELOG.md, 2026-11-24).
 pub const DEFAULT_DENSITY: f64 = 4.0;
 
 /// Most voxels any grid may have, in either tracer: voxel indices are

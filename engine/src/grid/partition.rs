@@ -9,7 +9,7 @@
 //! decided from the database's size summary alone, so no scan is needed.
 //! (Grouping by size more finely, e.g. the sphereflake's big spheres apart
 //! from its tiny ones, was measured and cost more in extra grid walks than
-//! it saved; see BENCHMARKS.md.)
+//! it saved; see CHANGELOG.md, 2026-11-24.)
 
 use super::GridSpec;
 use crate::scene::{Aabb, DensitySummary, Lattice, SIZE_CLASSES, SizeSummary, size_class};

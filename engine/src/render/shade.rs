@@ -1,6 +1,6 @@
-//! Local shading and the rays a hit spawns (SCENES.md, "the rendering
-//! contract"): one function for every tracer, so every tracer computes the
-//! same colours from the same hits.
+//! Local shading and the rays a hit spawns, as `docs/rendering-contract.md`
+//! ("Shading a hit") states them: one function for every tracer, so every
+//! tracer computes the same colours from the same hits.
 
 use crate::intersect::Surface;
 use crate::math::Vec3;

@@ -1,5 +1,5 @@
-//! The rendering contract (shared/SCENES.md) on scenes simple enough to
-//! trace by hand, and the invariances every count must have.
+//! The rendering contract (docs/rendering-contract.md) on scenes simple
+//! enough to trace by hand, and the invariances every count must have.
 
 use sray_engine::df;
 use sray_engine::nff::read_nff_from;

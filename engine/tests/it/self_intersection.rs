@@ -6,8 +6,8 @@
 //! against every object, so that no grid can hide or cause anything.
 //!
 //! The figures are printed (`cargo test --release -p sray-engine --test it
-//! self_intersection:: -- --nocapture`) and quoted in the README's
-//! Stability section.
+//! self_intersection:: -- --nocapture`) and quoted in
+//! docs/stability.md ("Self-intersection").
 
 use crate::common;
 
