@@ -1,3 +1,6 @@
+//! The one error type of the engine, naming the file, scene or option it
+//! is about.
+
 use std::path::{Path, PathBuf};
 
 /// Every failure the engine reports. Each names what it is about: the file

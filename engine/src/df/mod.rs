@@ -5,6 +5,7 @@
 
 mod lanes;
 mod mailbox;
+pub mod models;
 mod nested;
 mod object_grid;
 mod polygon;
@@ -22,13 +23,13 @@ use crate::hit::PrimId;
 use crate::intersect::RayQ;
 use crate::intersect::{Surface, triangle};
 use crate::math::{Real, Vec3};
-use crate::models::{Models, Placement};
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
 use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
 use crate::shapes::{KindCounts, Patch, Polygon, Prepared, Shape, ShapeKind};
+use models::{Models, Placement};
 use polygon::EdgeBins;
 use std::time::Instant;
 

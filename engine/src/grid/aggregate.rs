@@ -22,7 +22,7 @@ use crate::sdb::{Block, BoxRef};
 use crate::shapes::ShapeKind;
 
 /// Objects in a group.
-pub const SIZE: usize = 64;
+pub const SIZE: usize = crate::sdb::AGGREGATE_SIZE;
 
 /// Object-voxel pairs per voxel of a group's box at which the group is an
 /// aggregate: a ray stored in one of those voxels would test that many

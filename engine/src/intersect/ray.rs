@@ -76,7 +76,7 @@ impl<R: Real> RayQ<R> {
     /// rejects a box the ray touches: the interval is widened by a few ulps
     /// of the distances involved.
     #[inline(always)]
-    pub fn may_hit_box(&self, b: &crate::scene::Aabb, t_min: R, t_max: R) -> bool {
+    pub fn may_hit_box(&self, b: &crate::math::Aabb, t_min: R, t_max: R) -> bool {
         let (mut t0, mut t1) = (t_min, t_max);
         for i in 0..3 {
             let (lo, hi) = (R::from_f32(b.min[i]), R::from_f32(b.max[i]));

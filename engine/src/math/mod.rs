@@ -9,9 +9,12 @@
 //! written out in the same order as glam's. The object database itself
 //! always stores `f32`.
 
+mod aabb;
 mod real;
 mod vec3;
 
+pub use aabb::Aabb;
+pub(crate) use aabb::{f32_down, f32_up};
 pub use real::Real;
 pub use vec3::V3;
 

@@ -3,16 +3,17 @@
 //! scene readers, the SPD generators) stream into. The objects themselves
 //! are [`crate::shapes`].
 
-pub(crate) mod aabb;
 pub(crate) mod density;
 pub mod recorder;
 pub mod setup;
 mod sink;
 mod sizes;
 
-pub use aabb::Aabb;
+/// Bounding boxes live with the arithmetic ([`crate::math::Aabb`]);
+/// re-exported here, where scenes are described.
+pub use crate::math::Aabb;
 pub use density::{CELLS as DENSITY_CELLS, DensitySummary, Lattice};
-pub use sink::SceneSink;
+pub use sink::{ModelRef, SceneSink};
 pub use sizes::{SIZE_CLASSES, SizeClass, SizeSummary, size_class};
 
 use serde::Serialize;

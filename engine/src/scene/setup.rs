@@ -459,7 +459,7 @@ impl SceneSink for SetupSink<'_> {
         Ok(())
     }
 
-    fn end_model(&mut self) -> Result<crate::sdb::ModelRef, Error> {
+    fn end_model(&mut self) -> Result<super::ModelRef, Error> {
         let r = self.inner.end_model()?;
         self.material_sent = self.world_material_sent;
         Ok(r)

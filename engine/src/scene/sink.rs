@@ -1,8 +1,15 @@
 use super::{Light, Material, MeshFacts, View};
 use crate::Error;
-use crate::sdb::ModelRef;
 use crate::shapes::Shape;
 use glam::DAffine3;
+
+/// A model of the scene, once written: what its instances refer to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ModelRef {
+    pub index: u32,
+    pub bbox: crate::math::Aabb,
+    pub triangles: u64,
+}
 
 /// Receives a scene as a stream, in file order: the scene readers and the
 /// SPD generators produce into it; the object-database writer, the NFF

@@ -44,6 +44,9 @@ pub const FLAG_COUNTS: u32 = 2;
 pub const HEADER_BYTES: usize = 256;
 pub const BLOCK_MAGIC: [u8; 4] = *b"SBLK";
 pub const BLOCK_HEADER_BYTES: usize = 32;
+/// Objects per aggregate ([`crate::grid::aggregate`]): blocks are cut
+/// at multiples of it, so that no aggregate spans two blocks.
+pub const AGGREGATE_SIZE: usize = 64;
 /// Blocks are closed once they hold this many bytes of records: small
 /// enough that a reader's buffers fit a tight memory budget, large enough
 /// to read at the disk's sequential speed.

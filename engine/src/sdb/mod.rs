@@ -33,13 +33,16 @@ mod tables;
 mod validate;
 mod writer;
 
+pub use crate::scene::ModelRef;
 pub(crate) use block::decode_record;
 pub use block::{Block, BoxRef, ObjectRef};
 pub use database::Database;
 pub use format::RECORD_HEADER_WORDS;
-pub use format::{BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS};
+pub use format::{
+    AGGREGATE_SIZE, BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS,
+};
 pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
 pub use read_ahead::{read_ahead_bytes, scan_blocks};
 pub use scan::{DbStats, Scan};
 pub use spatial::SpatialSorter;
-pub use writer::{DbWriter, ModelRef, WRITE_BUFFER, WriteSummary};
+pub use writer::{DbWriter, WRITE_BUFFER, WriteSummary};

@@ -5,9 +5,9 @@ use super::format::*;
 use super::packed::{PackCounts, Packer};
 use super::spatial::SpatialSorter;
 use crate::error::{Error, IoContext};
-use crate::grid::aggregate;
 use crate::scene::{
-    Aabb, DensitySummary, Light, Material, MeshFacts, SceneHeader, SceneSink, SizeSummary, View,
+    Aabb, DensitySummary, Light, Material, MeshFacts, ModelRef, SceneHeader, SceneSink,
+    SizeSummary, View,
 };
 use crate::shapes::{KindCounts, Shape};
 use std::collections::HashMap;
@@ -97,14 +97,6 @@ struct ModelPart {
     /// far, in the model's units, the rounding of a placed vertex may
     /// move it.
     spread: f64,
-}
-
-/// A model of the scene, once written: what its instances refer to.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ModelRef {
-    pub index: u32,
-    pub bbox: Aabb,
-    pub triangles: u64,
 }
 
 /// The output buffer of [`DbWriter::create`].
@@ -297,13 +289,13 @@ impl DbWriter {
     /// Adds a record to the block being filled, as object `id` of the
     /// input, in a database in spatial order: the block is closed first if
     /// the record would take it past its target and the record begins a
-    /// group of [`aggregate::SIZE`] objects (so that no aggregate is cut,
+    /// group of [`AGGREGATE_SIZE`] objects (so that no aggregate is cut,
     /// and a pass that passes over a block passes over whole aggregates),
     /// or if it would take it an eighth past its target all the same.
     fn place(&mut self, id: u32, record: &[u32]) -> Result<(), Error> {
         let bytes = (self.block.len() + record.len()) * 4;
         let group_starts =
-            (self.block_first + self.block_objects as u64).is_multiple_of(aggregate::SIZE as u64);
+            (self.block_first + self.block_objects as u64).is_multiple_of(AGGREGATE_SIZE as u64);
         if self.block_objects > 0
             && ((bytes > BLOCK_TARGET && group_starts) || bytes > BLOCK_TARGET + BLOCK_TARGET / 8)
         {

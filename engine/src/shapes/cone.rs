@@ -3,8 +3,8 @@
 use super::{GeometryMap, Kind, push_points};
 use crate::intersect::{RayQ, Surface};
 use crate::math::{Real, V3};
-use crate::scene::Aabb;
-use crate::scene::aabb::{f32_down, f32_up};
+use crate::math::Aabb;
+use crate::math::{f32_down, f32_up};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cone {

@@ -10,8 +10,8 @@
 use super::{GeometryMap, Kind};
 use crate::intersect::{RayQ, Surface};
 use crate::math::Real;
-use crate::scene::Aabb;
-use crate::scene::aabb::{f32_down, f32_up};
+use crate::math::Aabb;
+use crate::math::{f32_down, f32_up};
 use glam::{DAffine3, DVec3};
 
 /// Record words: the model's index, its box (6), the transform's twelve

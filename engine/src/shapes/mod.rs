@@ -24,8 +24,8 @@ pub use counts::KindCounts;
 pub use owned::OwnedShape;
 
 use crate::intersect::{RayQ, Surface};
+use crate::math::Aabb;
 use crate::math::Real;
-use crate::scene::Aabb;
 use std::fmt::Debug;
 
 /// Largest vertex count accepted for a polygon or patch. Real scenes stay

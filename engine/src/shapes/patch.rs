@@ -5,7 +5,7 @@
 use super::{GeometryMap, Kind, check_vertex_count, push_points};
 use crate::intersect::{RayQ, Surface, triangle};
 use crate::math::{Real, Vec3, Vec3Ext};
-use crate::scene::Aabb;
+use crate::math::Aabb;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Patch<'a> {

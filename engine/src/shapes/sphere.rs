@@ -3,8 +3,8 @@
 use super::{GeometryMap, Kind};
 use crate::intersect::{RayQ, Surface};
 use crate::math::{Real, V3, Vec3, Vec3Ext};
-use crate::scene::Aabb;
-use crate::scene::aabb::{f32_down, f32_up};
+use crate::math::Aabb;
+use crate::math::{f32_down, f32_up};
 
 /// A sphere. A zero radius is never hit; a negative one (NFF's
 /// "inside-visible") is refused by validation.

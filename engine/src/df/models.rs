@@ -22,7 +22,7 @@
 //! walk's early exit (the nearest hit lies before the voxel's far side)
 //! cannot pass over a nearer one.
 
-use crate::df::{Boxes, Entry, NESTED, ObjectGrid, high_first, ray_meets};
+use super::{Boxes, Entry, NESTED, ObjectGrid, high_first, ray_meets};
 use crate::error::Error;
 use crate::grid::{DEFAULT_DENSITY, Dda, MAX_CELLS, choose_resolution};
 use crate::intersect::{RayQ, Surface, triangle};
