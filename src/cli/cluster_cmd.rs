@@ -44,8 +44,9 @@ pub struct CoordinatorArgs {
     /// The certificate's private key (PEM)
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
-    /// Default rays per shard
-    #[arg(long, default_value_t = 1 << 16)]
+    /// Rays per shard for jobs that do not say (0: sized for the cluster,
+    /// from the round's rays, the workers connected and the database's size)
+    #[arg(long, default_value_t = 0)]
     pub shard_rays: u64,
     /// Heartbeat interval asked of workers, milliseconds
     #[arg(long, default_value_t = 1000)]
@@ -195,6 +196,18 @@ async fn stop_signal() {
     }
 }
 
+/// A file-size limit (`ulimit -f`) reached is an error to report (a full
+/// disk's, naming the file), not a signal that kills the process without a
+/// word: SIGXFSZ is ignored, so that the write fails with EFBIG instead.
+fn file_size_limit_is_an_error() {
+    // SAFETY: signal(2) with SIG_IGN installs no handler of ours (no code
+    // runs on the signal), and SIGXFSZ is a valid signal number; it is
+    // called before any thread of ours is started.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -204,6 +217,7 @@ pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 
 pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
     init_logs();
+    file_size_limit_is_an_error();
     if a.heartbeat_ms == 0 || a.heartbeat_ms > 60_000 {
         anyhow::bail!("--heartbeat-ms must be 1 to 60000");
     }
@@ -217,7 +231,11 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         heartbeat: Duration::from_millis(a.heartbeat_ms),
         worker_timeout: seconds(a.worker_timeout, "--worker-timeout")?,
         worker_wait: seconds(a.worker_wait, "--worker-wait")?,
-        shard_rays: a.shard_rays.clamp(256, 1 << 24),
+        shard_rays: if a.shard_rays == 0 {
+            0
+        } else {
+            a.shard_rays.clamp(256, 1 << 24)
+        },
         data_dir: a.data_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
         verify_fraction: if a.records_at_workers {
@@ -302,6 +320,7 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
 
 pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
     init_logs();
+    file_size_limit_is_an_error();
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
     }

@@ -31,6 +31,7 @@ mod cli_render;
 mod cli_scene;
 mod cli_spatial;
 mod cluster;
+mod cluster_faults;
 mod cluster_observe;
 mod cluster_trust;
 mod cluster_wire;
