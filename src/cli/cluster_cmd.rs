@@ -129,6 +129,12 @@ pub struct WorkerArgs {
     /// Bytes of scenes kept in the cache; least recently used are removed past it
     #[arg(long, default_value = "20GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub cache_max: u64,
+    /// A directory shared with the coordinator or other workers that holds
+    /// databases as HASH.sdb (e.g. a read-only mount of the coordinator's
+    /// --data-dir): each chunk is read from there and checked against the
+    /// scene hash before the coordinator is asked for it (repeatable)
+    #[arg(long)]
+    pub scene_dir: Vec<PathBuf>,
     /// Where spilled rays go (default: the system's temp dir)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
@@ -341,6 +347,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
             .unwrap_or_else(sray_engine::sys::default_memory_budget),
         cache_dir: a.cache_dir.clone(),
         cache_max: a.cache_max,
+        scene_dirs: a.scene_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
         raw_records: a.raw_records,
     };

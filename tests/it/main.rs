@@ -33,6 +33,7 @@ mod cli_spatial;
 mod cluster;
 mod cluster_faults;
 mod cluster_observe;
+mod cluster_scale;
 mod cluster_trust;
 mod cluster_wire;
 mod deploy;

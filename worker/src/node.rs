@@ -31,6 +31,10 @@ pub struct WorkerConfig {
     pub cache_dir: PathBuf,
     /// Bytes of scenes kept in the cache; least recently used go first.
     pub cache_max: u64,
+    /// Directories shared with others that hold databases as `HASH.sdb`
+    /// (a mount of the coordinator's data directory): chunks are read
+    /// from there, verified, before the coordinator is asked.
+    pub scene_dirs: Vec<PathBuf>,
     /// Where spilled rays go (default: the system's temp dir).
     pub tmp_dir: Option<PathBuf>,
     /// Send records as they lie in memory, not encoded (a coordinator on
@@ -47,7 +51,11 @@ pub async fn run(
 ) -> anyhow::Result<()> {
     let client = cfg.target.connect_lazy().map_err(anyhow::Error::msg)?;
     let cfg_memory = cfg.memory;
-    let cache = Arc::new(SceneCache::new(&cfg.cache_dir, cfg.cache_max)?);
+    let cache = Arc::new(SceneCache::with_shared(
+        &cfg.cache_dir,
+        cfg.cache_max,
+        cfg.scene_dirs.clone(),
+    )?);
     // This worker's spill directory (a killed predecessor's are removed).
     let tmp = TmpDir::claim(cfg.tmp_dir.as_deref())?;
     let now = Now::default();
