@@ -39,3 +39,4 @@ mod cluster_wire;
 mod deploy;
 mod df_paging;
 mod docs_commands;
+mod simd_widths;
