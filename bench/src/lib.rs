@@ -9,9 +9,11 @@ mod chart;
 mod compressed;
 mod exec;
 mod fig3;
+mod load;
 mod povray;
 mod report;
 mod scaling;
+mod sim;
 mod table1;
 mod table2;
 
@@ -39,9 +41,14 @@ pub enum Experiment {
     Accuracy,
     /// The cluster: embedded against 1 and 2 local workers, traffic per ray
     Scaling,
+    /// The coordinator under 100 and 1,000 simulated workers: CPU and memory
+    /// per ray, task and worker, latencies (only when named: not in the default set)
+    Load,
 }
 
 impl Experiment {
+    /// What `sray bench` runs when no experiment is named (the load
+    /// harness is left out: it is about the coordinator, not the paper).
     const ALL: [Experiment; 7] = [
         Experiment::Povray,
         Experiment::Table1,
@@ -175,6 +182,7 @@ fn plan(e: Experiment, ctx: &Ctx) -> Plan {
         Experiment::Compressed => compressed::plan(ctx),
         Experiment::Accuracy => accuracy::plan(ctx),
         Experiment::Scaling => scaling::plan(ctx),
+        Experiment::Load => load::plan(ctx),
     }
 }
 
@@ -187,6 +195,7 @@ fn run_one(e: Experiment, ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         Experiment::Compressed => compressed::run(ctx, r),
         Experiment::Accuracy => accuracy::run(ctx, r),
         Experiment::Scaling => scaling::run(ctx, r),
+        Experiment::Load => load::run(ctx, r),
     }
 }
 

@@ -45,7 +45,8 @@ pub struct Config {
     /// A job with work to do and no worker that may do it for this long
     /// fails.
     pub worker_wait: Duration,
-    /// Rays per shard, unless a job asks otherwise.
+    /// Rays per shard, unless a job asks otherwise; 0: sized for the
+    /// cluster (the round's rays, the workers, the database's size).
     pub shard_rays: u64,
     /// Failures of one task (on distinct workers) that fail its job.
     pub max_attempts: u32,
@@ -64,7 +65,11 @@ pub struct Config {
     pub deadline_min: Duration,
     /// ... and, while no sibling has finished, after this long.
     pub task_timeout: Duration,
-    /// Failures within this time that quarantine a worker, and how long.
+    /// A worker that lacked room (disk) for a task is given that task
+    /// again only after this long.
+    pub room_retry: Duration,
+    /// Failures (and timeouts) within this time that quarantine a worker,
+    /// and how long.
     pub quarantine_after: u32,
     pub quarantine: Duration,
     /// How long a finished (or failed) job stays fetchable.
@@ -105,7 +110,7 @@ impl Default for Config {
             heartbeat: Duration::from_millis(1000),
             worker_timeout: Duration::from_secs(5),
             worker_wait: Duration::from_secs(60),
-            shard_rays: 1 << 16,
+            shard_rays: 0,
             max_attempts: 3,
             data_dir: PathBuf::from("sray-data"),
             tmp_dir: None,
@@ -114,6 +119,7 @@ impl Default for Config {
             deadline_factor: 4.0,
             deadline_min: Duration::from_secs(30),
             task_timeout: Duration::from_secs(900),
+            room_retry: Duration::from_secs(10),
             quarantine_after: 3,
             quarantine: Duration::from_secs(600),
             job_retention: Duration::from_secs(3600),

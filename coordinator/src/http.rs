@@ -2,8 +2,9 @@
 //! operators (off by default).
 //!
 //! - `GET /healthz`: 200 `ok` while serving, 503 once stopping;
-//! - `GET /metrics`: Prometheus metrics (OpenMetrics text), every name
-//!   prefixed `sray_`;
+//! - `GET /metrics`: Prometheus metrics, every name prefixed `sray_`: in
+//!   the classic text format (0.0.4), or OpenMetrics text when the
+//!   scraper's `Accept` header asks for it;
 //! - `GET /api/status`: what `sray status --json` prints;
 //! - `GET /jobs/{id}/preview.png`: a job's image as far as it is done (the
 //!   last finished round's frame, or the finished image);
@@ -284,9 +285,18 @@ pub fn metrics_text(shared: &Shared) -> Result<String, std::fmt::Error> {
     Ok(out)
 }
 
-async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
+/// OpenMetrics text to a scraper whose `Accept` header names it (as
+/// Prometheus's own does), the classic text format (0.0.4) to every other:
+/// a classic parser reads a counter's `# TYPE` by the name of its samples,
+/// which OpenMetrics gives without the `_total` they carry.
+async fn metrics(State(shared): State<Arc<Shared>>, headers: axum::http::HeaderMap) -> Response {
+    let openmetrics = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .any(|v| v.contains("application/openmetrics-text"));
     match metrics_text(&shared) {
-        Ok(text) => (
+        Ok(text) if openmetrics => (
             [(
                 header::CONTENT_TYPE,
                 "application/openmetrics-text; version=1.0.0; charset=utf-8",
@@ -294,6 +304,62 @@ async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
             text,
         )
             .into_response(),
+        Ok(text) => (
+            [(
+                header::CONTENT_TYPE,
+                "text/plain; version=0.0.4; charset=utf-8",
+            )],
+            classic_text(&text),
+        )
+            .into_response(),
         Err(e) => (StatusCode::INTERNAL_SERVER_ERROR, format!("{e}\n")).into_response(),
+    }
+}
+
+/// OpenMetrics text as the classic Prometheus text format: a counter
+/// family's `# HELP` and `# TYPE` name its samples (`NAME_total`), as a
+/// classic parser needs to type them, and there is no `# EOF`.
+pub fn classic_text(openmetrics: &str) -> String {
+    // The counter families, by the name their `# TYPE` gives.
+    let counters: std::collections::HashSet<&str> = openmetrics
+        .lines()
+        .filter_map(|l| l.strip_prefix("# TYPE ")?.strip_suffix(" counter"))
+        .collect();
+    let mut out = String::with_capacity(openmetrics.len() + 16 * counters.len());
+    for line in openmetrics.lines() {
+        if line == "# EOF" {
+            continue;
+        }
+        let meta = ["# HELP ", "# TYPE ", "# UNIT "]
+            .into_iter()
+            .find_map(|p| Some((p, line.strip_prefix(p)?)));
+        match meta {
+            Some(("# UNIT ", _)) => continue,
+            Some((p, rest)) => {
+                let (name, tail) = rest.split_once(' ').unwrap_or((rest, ""));
+                if counters.contains(name) && !name.ends_with("_total") {
+                    out.push_str(&format!("{p}{name}_total {tail}"));
+                } else {
+                    out.push_str(line);
+                }
+            }
+            None => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn classic_text_types_counters_by_their_samples_names() {
+        let om = "# HELP sray_rays Rays.\n# TYPE sray_rays counter\nsray_rays_total{stage=\"shade\"} 3\n\
+                  # HELP sray_queue_depth Tasks.\n# TYPE sray_queue_depth gauge\nsray_queue_depth 1\n# EOF\n";
+        assert_eq!(
+            super::classic_text(om),
+            "# HELP sray_rays_total Rays.\n# TYPE sray_rays_total counter\nsray_rays_total{stage=\"shade\"} 3\n\
+             # HELP sray_queue_depth Tasks.\n# TYPE sray_queue_depth gauge\nsray_queue_depth 1\n"
+        );
     }
 }

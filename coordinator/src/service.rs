@@ -9,7 +9,7 @@ use crate::driver;
 use crate::jobs::{JobEntry, JobRefusal, JobState};
 use crate::state::{Refusal, Shared};
 use crate::task_input;
-use crate::task_output::Receiver;
+use crate::task_output::{OutputError, Receiver};
 use sray_proto::auth::{Role, require};
 use sray_proto::v1::{self, coordinator_server::Coordinator, task_output::Part};
 use sray_proto::wire::SCENE_CHUNK_BYTES;
@@ -48,6 +48,23 @@ fn internal(e: impl std::fmt::Display) -> Status {
 }
 
 impl Service {
+    /// An output not taken: a bad one fails the attempt (the worker's
+    /// fault); one the coordinator could not keep (its own disk) ends it
+    /// without blame, and the task waits a moment.
+    fn refuse_output(&self, tref: &v1::TaskRef, e: OutputError) -> Status {
+        match e {
+            OutputError::Bad(e) => {
+                self.shared
+                    .fail(tref, format!("bad output: {e}"), v1::FailureKind::Task);
+                Status::invalid_argument(e)
+            }
+            OutputError::Local(e) => {
+                self.shared.local_fault(tref, &e);
+                Status::unavailable(format!("the coordinator cannot keep the output: {e}"))
+            }
+        }
+    }
+
     fn job(&self, r: &v1::JobRef, method: &str) -> Result<Arc<JobEntry>, Status> {
         match self.shared.jobs.get(&r.job_id, &r.job_secret) {
             Ok(e) => Ok(e),
@@ -211,17 +228,13 @@ impl Coordinator for Service {
                         .from_workers
                         .fetch_add(prost::Message::encoded_len(&c) as u64, Ordering::Relaxed);
                     if let Err(e) = rx.take(c) {
-                        self.shared.fail(&tref, format!("bad output: {e}"));
-                        return Err(Status::invalid_argument(e));
+                        return Err(self.refuse_output(&tref, e));
                     }
                 }
                 Some(Part::Summary(s)) => {
                     let out = match rx.finish(s) {
                         Ok(o) => o,
-                        Err(e) => {
-                            self.shared.fail(&tref, format!("bad output: {e}"));
-                            return Err(Status::invalid_argument(e));
-                        }
+                        Err(e) => return Err(self.refuse_output(&tref, e)),
                     };
                     let accepted = self.shared.complete(&tref, out);
                     tracing::debug!(
@@ -245,7 +258,18 @@ impl Coordinator for Service {
         let r = req.into_inner();
         if let Some(t) = r.task {
             let error: String = r.error.chars().take(2000).collect();
-            self.shared.fail(&t, error);
+            let kind = v1::FailureKind::try_from(r.kind).unwrap_or(v1::FailureKind::Task);
+            self.shared.fail(&t, error, kind);
+        }
+        Ok(Response::new(v1::Empty {}))
+    }
+
+    async fn leave(&self, req: Request<v1::LeaveRequest>) -> Result<Response<v1::Empty>, Status> {
+        require(&req, Role::Worker, "Leave")?;
+        let session = req.into_inner().session;
+        let name = self.shared.worker_name(&session);
+        if self.shared.leave(&session) {
+            tracing::info!(worker = %name, "worker left: its tasks go to others");
         }
         Ok(Response::new(v1::Empty {}))
     }

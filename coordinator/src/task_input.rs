@@ -29,8 +29,19 @@ pub(crate) fn send(
             .fetch_add(bytes, Ordering::Relaxed);
         tx.blocking_send(Ok(c)).is_ok()
     };
+    // The coordinator's own files failed it: no fault of the worker's.
     let fail = |e: sray_engine::Error| {
-        let _ = tx.blocking_send(Err(Status::internal(e.to_string())));
+        let msg = e.to_string();
+        let r = v1::TaskRef {
+            task_id: task.task_id,
+            attempt: task.attempt,
+            session: session.to_string(),
+            held: Vec::new(),
+        };
+        shared.local_fault(&r, &msg);
+        let _ = tx.blocking_send(Err(Status::unavailable(format!(
+            "the coordinator cannot read the task's input: {msg}"
+        ))));
     };
     // What the worker holds of a task's output, if the output taken
     // was this worker's.

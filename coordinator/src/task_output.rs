@@ -42,23 +42,42 @@ impl<'a> Receiver<'a> {
         }
     }
 
-    fn writer<T: bytemuck::Pod>(
-        slot: &mut Option<RecordsWriter<T>>,
-        shared: &Shared,
-        what: &'static str,
-    ) -> Result<(), String> {
-        if slot.is_none() {
-            *slot = Some(RecordsWriter::new(&shared.records, &shared.spill, what));
+    /// Takes a chunk of the output: checked (a fault of the worker's if it
+    /// fails), then kept (the coordinator's own, if that fails).
+    pub(crate) fn take(&mut self, c: v1::RecordChunk) -> Result<(), OutputError> {
+        let recs = self.check(c).map_err(OutputError::Bad)?;
+        let local = |e: sray_engine::Error| OutputError::Local(e.to_string());
+        match recs {
+            Checked::Results(v) => self
+                .results
+                .get_or_insert_with(|| {
+                    RecordsWriter::new(&self.shared.records, &self.shared.spill, "out-results")
+                })
+                .push_vec(v)
+                .map_err(local),
+            Checked::Contributions(v) => self
+                .contributions
+                .get_or_insert_with(|| {
+                    RecordsWriter::new(&self.shared.records, &self.shared.spill, "out-contrib")
+                })
+                .push_vec(v)
+                .map_err(local),
+            Checked::Rays(v) => self
+                .rays
+                .get_or_insert_with(|| {
+                    RecordsWriter::new(&self.shared.records, &self.shared.spill, "out-rays")
+                })
+                .push_vec(v)
+                .map_err(local),
         }
-        Ok(())
     }
 
-    pub(crate) fn take(&mut self, c: v1::RecordChunk) -> Result<(), String> {
+    /// A chunk of the output, decoded and checked.
+    fn check(&mut self, c: v1::RecordChunk) -> Result<Checked, String> {
         if c.held.is_some() {
             return Err("an output names held records".into());
         }
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
-        let io = |e: sray_engine::Error| e.to_string();
         match (v1::RecordKind::try_from(c.kind), intersect) {
             (Ok(v1::RecordKind::Results), true) => {
                 let v = decode_chunk::<ResultRec>(&c.data, c.raw, records_per_chunk::<ResultRec>())
@@ -91,8 +110,7 @@ impl<'a> Receiver<'a> {
                 if self.n_results > self.task.ray_count {
                     return Err("more results than rays".into());
                 }
-                Self::writer(&mut self.results, self.shared, "out-results")?;
-                self.results.as_mut().expect("made").push_vec(v).map_err(io)
+                Ok(Checked::Results(v))
             }
             (Ok(v1::RecordKind::Contributions), false) => {
                 let v = decode_chunk::<Contribution>(
@@ -124,12 +142,7 @@ impl<'a> Receiver<'a> {
                         self.slots_added, self.task.ray_count
                     ));
                 }
-                Self::writer(&mut self.contributions, self.shared, "out-contrib")?;
-                self.contributions
-                    .as_mut()
-                    .expect("made")
-                    .push_vec(v)
-                    .map_err(io)
+                Ok(Checked::Contributions(v))
             }
             (Ok(v1::RecordKind::Rays), false) => {
                 let v = decode_chunk::<RayRec>(&c.data, c.raw, records_per_chunk::<RayRec>())
@@ -148,8 +161,7 @@ impl<'a> Receiver<'a> {
                     }
                     self.last_key = Some(r.key);
                 }
-                Self::writer(&mut self.rays, self.shared, "out-rays")?;
-                self.rays.as_mut().expect("made").push_vec(v).map_err(io)
+                Ok(Checked::Rays(v))
             }
             _ => Err(format!(
                 "record kind {} does not belong in this stage's output",
@@ -158,10 +170,41 @@ impl<'a> Receiver<'a> {
         }
     }
 
-    pub(crate) fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, String> {
+    /// The output, once its summary came: checked, then its records kept.
+    pub(crate) fn finish(self, summary: v1::TaskSummary) -> Result<TaskOutput, OutputError> {
+        self.check_summary(&summary).map_err(OutputError::Bad)?;
+        let local = |e: sray_engine::Error| OutputError::Local(e.to_string());
+        let (kept_rays, hits) = self.kept_counts(&summary);
+        Ok(TaskOutput {
+            results: self
+                .results
+                .map(|w| w.finish())
+                .transpose()
+                .map_err(local)?,
+            contributions: self
+                .contributions
+                .map(|w| w.finish())
+                .transpose()
+                .map_err(local)?,
+            rays: self.rays.map(|w| w.finish()).transpose().map_err(local)?,
+            hits,
+            kept_rays,
+            summary,
+        })
+    }
+
+    /// Spawned rays kept at the worker, and the hits of the results.
+    fn kept_counts(&self, summary: &v1::TaskSummary) -> (u64, u64) {
         let intersect = self.task.stage == v1::Stage::Intersect as i32;
-        let mut kept_rays = 0;
-        let mut hits = self.hits;
+        match (self.task.keep_output, intersect) {
+            (true, true) => (0, summary.kept_hits),
+            (true, false) => (summary.kept_records, self.hits),
+            (false, _) => (0, self.hits),
+        }
+    }
+
+    fn check_summary(&self, summary: &v1::TaskSummary) -> Result<(), String> {
+        let intersect = self.task.stage == v1::Stage::Intersect as i32;
         if self.task.keep_output {
             // Results or spawned rays stayed at the worker: their counts.
             if self.results.is_some() || self.rays.is_some() {
@@ -177,7 +220,6 @@ impl<'a> Receiver<'a> {
                 if summary.kept_hits > summary.kept_records {
                     return Err("more hits than results".into());
                 }
-                hits = summary.kept_hits;
             } else {
                 let slots = sray_engine::bf::SPAWN_SLOTS;
                 let lo = self.task.first_ray * slots;
@@ -187,7 +229,6 @@ impl<'a> Receiver<'a> {
                 if n > 0 && (a < lo || b >= hi || a > b || n > b - a + 1) {
                     return Err(format!("kept spawned rays' keys {a}..={b} out of range"));
                 }
-                kept_rays = n;
             }
         } else if intersect && self.n_results != self.task.ray_count {
             return Err(format!(
@@ -197,18 +238,32 @@ impl<'a> Receiver<'a> {
         }
         sray_engine::shapes::KindCounts::default()
             .add_named(summary.tests_by_kind.iter().map(|(k, &n)| (k.as_str(), n)))?;
-        let err = |e: sray_engine::Error| e.to_string();
-        Ok(TaskOutput {
-            results: self.results.map(|w| w.finish()).transpose().map_err(err)?,
-            contributions: self
-                .contributions
-                .map(|w| w.finish())
-                .transpose()
-                .map_err(err)?,
-            rays: self.rays.map(|w| w.finish()).transpose().map_err(err)?,
-            hits,
-            kept_rays,
-            summary,
-        })
+        Ok(())
     }
 }
+
+/// A chunk of output records, checked.
+enum Checked {
+    Results(Vec<ResultRec>),
+    Contributions(Vec<Contribution>),
+    Rays(Vec<RayRec>),
+}
+
+/// Why an output was not taken: the worker's fault (it is bad), or the
+/// coordinator's own (it could not keep it: its disk).
+#[derive(Debug)]
+pub enum OutputError {
+    Bad(String),
+    Local(String),
+}
+
+impl std::fmt::Display for OutputError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            OutputError::Bad(e) => f.write_str(e),
+            OutputError::Local(e) => write!(f, "the coordinator cannot keep the output: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for OutputError {}

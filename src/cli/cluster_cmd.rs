@@ -44,8 +44,9 @@ pub struct CoordinatorArgs {
     /// The certificate's private key (PEM)
     #[arg(long, requires = "tls_cert")]
     pub tls_key: Option<PathBuf>,
-    /// Default rays per shard
-    #[arg(long, default_value_t = 1 << 16)]
+    /// Rays per shard for jobs that do not say (0: sized for the cluster,
+    /// from the round's rays, the workers connected and the database's size)
+    #[arg(long, default_value_t = 0)]
     pub shard_rays: u64,
     /// Heartbeat interval asked of workers, milliseconds
     #[arg(long, default_value_t = 1000)]
@@ -128,6 +129,12 @@ pub struct WorkerArgs {
     /// Bytes of scenes kept in the cache; least recently used are removed past it
     #[arg(long, default_value = "20GiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub cache_max: u64,
+    /// A directory shared with the coordinator or other workers that holds
+    /// databases as HASH.sdb (e.g. a read-only mount of the coordinator's
+    /// --data-dir): each chunk is read from there and checked against the
+    /// scene hash before the coordinator is asked for it (repeatable)
+    #[arg(long)]
+    pub scene_dir: Vec<PathBuf>,
     /// Where spilled rays go (default: the system's temp dir)
     #[arg(long)]
     pub tmp_dir: Option<PathBuf>,
@@ -195,6 +202,18 @@ async fn stop_signal() {
     }
 }
 
+/// A file-size limit (`ulimit -f`) reached is an error to report (a full
+/// disk's, naming the file), not a signal that kills the process without a
+/// word: SIGXFSZ is ignored, so that the write fails with EFBIG instead.
+fn file_size_limit_is_an_error() {
+    // SAFETY: signal(2) with SIG_IGN installs no handler of ours (no code
+    // runs on the signal), and SIGXFSZ is a valid signal number; it is
+    // called before any thread of ours is started.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
 pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -204,6 +223,7 @@ pub(crate) fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
 
 pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
     init_logs();
+    file_size_limit_is_an_error();
     if a.heartbeat_ms == 0 || a.heartbeat_ms > 60_000 {
         anyhow::bail!("--heartbeat-ms must be 1 to 60000");
     }
@@ -217,7 +237,11 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         heartbeat: Duration::from_millis(a.heartbeat_ms),
         worker_timeout: seconds(a.worker_timeout, "--worker-timeout")?,
         worker_wait: seconds(a.worker_wait, "--worker-wait")?,
-        shard_rays: a.shard_rays.clamp(256, 1 << 24),
+        shard_rays: if a.shard_rays == 0 {
+            0
+        } else {
+            a.shard_rays.clamp(256, 1 << 24)
+        },
         data_dir: a.data_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
         verify_fraction: if a.records_at_workers {
@@ -302,6 +326,7 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
 
 pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
     init_logs();
+    file_size_limit_is_an_error();
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
     }
@@ -322,6 +347,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
             .unwrap_or_else(sray_engine::sys::default_memory_budget),
         cache_dir: a.cache_dir.clone(),
         cache_max: a.cache_max,
+        scene_dirs: a.scene_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
         raw_records: a.raw_records,
     };

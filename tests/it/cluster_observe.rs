@@ -264,7 +264,7 @@ fn status_json_healthz_metrics_and_preview() {
     assert!(metric(&m, "sray_wire_bytes_total{direction=\"to_workers\"}") > 0.0);
     assert_eq!(metric(&m, "sray_verification_mismatches_total"), 0.0);
     assert_eq!(metric(&m, "sray_queue_depth"), 0.0);
-    assert!(m.contains("# TYPE sray_rays counter"), "{m}");
+    assert!(m.contains("# TYPE sray_rays_total counter"), "{m}");
 
     // The preview of a finished job is its image.
     let (code, png) = get(&http, &format!("/jobs/{job}/preview.png"));

@@ -555,6 +555,7 @@ fn a_task_that_failed_on_a_worker_goes_elsewhere() {
                     .fail_task(v1::FailTaskRequest {
                         task: Some(tref(&session, &t)),
                         error: "bad RAM".into(),
+                        ..Default::default()
                     })
                     .await;
             }

@@ -2,6 +2,13 @@
 //! in chunks, stored under their content hash, verified chunk by chunk
 //! (BLAKE3) whenever a job starts, and repaired by fetching again only the
 //! chunks that do not match.
+//!
+//! A worker may also be given directories it shares with others (a
+//! mount of the coordinator's data directory, or any directory holding
+//! databases as `HASH.sdb`): each chunk is read from there first, checked
+//! against its hash, and fetched from the coordinator only when missing
+//! or damaged there, so that a hundred workers cost the coordinator no
+//! scene bytes at all.
 
 use anyhow::{Context, bail};
 use sray_proto::net::Client;
@@ -19,12 +26,16 @@ const MAX_CHUNK: u32 = 16 << 20;
 
 pub struct SceneCache {
     dir: PathBuf,
+    /// Shared directories read before the coordinator is asked.
+    shared: Vec<PathBuf>,
     /// Bytes of scenes kept; least recently used are removed past it.
     max: u64,
     /// Chunks fetched since start, and how many of those replaced a
     /// corrupt or missing chunk of an existing copy.
     pub chunks_fetched: AtomicU64,
     pub chunks_repaired: AtomicU64,
+    /// Chunks read (and verified) from a shared directory instead.
+    pub chunks_shared: AtomicU64,
 }
 
 /// A scene hash is 64 lowercase hex digits: it names a file in the cache
@@ -49,13 +60,21 @@ struct Manifest {
 
 impl SceneCache {
     pub fn new(dir: &Path, max: u64) -> anyhow::Result<SceneCache> {
+        SceneCache::with_shared(dir, max, Vec::new())
+    }
+
+    /// A cache that reads chunks from `shared` directories (databases
+    /// named `HASH.sdb`) before it asks the coordinator.
+    pub fn with_shared(dir: &Path, max: u64, shared: Vec<PathBuf>) -> anyhow::Result<SceneCache> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the cache directory {}", dir.display()))?;
         Ok(SceneCache {
             dir: dir.to_path_buf(),
+            shared,
             max,
             chunks_fetched: AtomicU64::new(0),
             chunks_repaired: AtomicU64::new(0),
+            chunks_shared: AtomicU64::new(0),
         })
     }
 
@@ -116,6 +135,7 @@ impl SceneCache {
         } else {
             (0..manifest.hashes.len()).collect()
         };
+        let shared0 = self.chunks_shared.load(Ordering::Relaxed);
         for &i in &bad {
             self.fetch_chunk(client, hash, &manifest, i, &work).await?;
             if existing {
@@ -123,6 +143,14 @@ impl SceneCache {
             }
         }
         if !bad.is_empty() {
+            let shared = self.chunks_shared.load(Ordering::Relaxed) - shared0;
+            tracing::info!(
+                scene = hash,
+                chunks = bad.len(),
+                from_shared = shared,
+                from_coordinator = bad.len() as u64 - shared,
+                "scene fetched"
+            );
             let still = verify(&work, &manifest).await?;
             if !still.is_empty() {
                 bail!(
@@ -198,6 +226,21 @@ impl SceneCache {
         path: &Path,
     ) -> anyhow::Result<()> {
         let want_len = (m.size - i as u64 * m.chunk).min(m.chunk) as usize;
+        let write = |data: &[u8]| -> anyhow::Result<()> {
+            let f = OpenOptions::new()
+                .write(true)
+                .open(path)
+                .with_context(|| path.display().to_string())?;
+            f.write_all_at(data, i as u64 * m.chunk)
+                .with_context(|| path.display().to_string())
+        };
+        for dir in &self.shared {
+            if let Some(data) = shared_chunk(&dir.join(format!("{hash}.sdb")), m, i, want_len) {
+                write(&data)?;
+                self.chunks_shared.fetch_add(1, Ordering::Relaxed);
+                return Ok(());
+            }
+        }
         for attempt in 1..=FETCH_TRIES {
             let data = client
                 .scene_chunk(v1::SceneChunkRequest {
@@ -210,12 +253,7 @@ impl SceneCache {
                 .data;
             self.chunks_fetched.fetch_add(1, Ordering::Relaxed);
             if data.len() == want_len && *blake3::hash(&data).as_bytes() == m.hashes[i] {
-                let f = OpenOptions::new()
-                    .write(true)
-                    .open(path)
-                    .with_context(|| path.display().to_string())?;
-                f.write_all_at(&data, i as u64 * m.chunk)
-                    .with_context(|| path.display().to_string())?;
+                write(&data)?;
                 return Ok(());
             }
             tracing::warn!(
@@ -227,6 +265,15 @@ impl SceneCache {
         }
         bail!("scene {hash}: chunk {i} failed its checksum {FETCH_TRIES} times")
     }
+}
+
+/// Chunk `i` of the database at `path` (a shared directory's), if it is
+/// there whole and matches its hash.
+fn shared_chunk(path: &Path, m: &Manifest, i: usize, len: usize) -> Option<Vec<u8>> {
+    let f = File::open(path).ok()?;
+    let mut buf = vec![0u8; len];
+    f.read_exact_at(&mut buf, i as u64 * m.chunk).ok()?;
+    (*blake3::hash(&buf).as_bytes() == m.hashes[i]).then_some(buf)
 }
 
 fn check_manifest(m: &v1::SceneManifestReply) -> anyhow::Result<Manifest> {

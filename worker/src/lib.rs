@@ -16,5 +16,6 @@ mod kept;
 pub mod node;
 mod output;
 pub mod params;
+mod tmp;
 
 pub use node::{WorkerConfig, run};

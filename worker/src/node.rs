@@ -5,6 +5,7 @@
 use crate::cache::SceneCache;
 use crate::exec::{Executor, Input, JobSetup, KEPT_MEMORY_PART, Work};
 use crate::params::from_proto;
+use crate::tmp::TmpDir;
 use anyhow::Context;
 use sray_engine::bf::BfOptions;
 use sray_engine::spill::MemoryShare;
@@ -30,6 +31,10 @@ pub struct WorkerConfig {
     pub cache_dir: PathBuf,
     /// Bytes of scenes kept in the cache; least recently used go first.
     pub cache_max: u64,
+    /// Directories shared with others that hold databases as `HASH.sdb`
+    /// (a mount of the coordinator's data directory): chunks are read
+    /// from there, verified, before the coordinator is asked.
+    pub scene_dirs: Vec<PathBuf>,
     /// Where spilled rays go (default: the system's temp dir).
     pub tmp_dir: Option<PathBuf>,
     /// Send records as they lie in memory, not encoded (a coordinator on
@@ -46,22 +51,84 @@ pub async fn run(
 ) -> anyhow::Result<()> {
     let client = cfg.target.connect_lazy().map_err(anyhow::Error::msg)?;
     let cfg_memory = cfg.memory;
-    let cache = Arc::new(SceneCache::new(&cfg.cache_dir, cfg.cache_max)?);
+    let cache = Arc::new(SceneCache::with_shared(
+        &cfg.cache_dir,
+        cfg.cache_max,
+        cfg.scene_dirs.clone(),
+    )?);
+    // This worker's spill directory (a killed predecessor's are removed).
+    let tmp = TmpDir::claim(cfg.tmp_dir.as_deref())?;
+    let now = Now::default();
     let mut node = Node {
         cfg,
-        client,
+        client: client.clone(),
         cache,
         execs: Vec::new(),
         running: Arc::new(AtomicU64::new(0)),
         jobs_running: JobsRunning::default(),
         kept_memory: MemoryShare::new(cfg_memory / KEPT_MEMORY_PART),
+        spill: tmp.path().to_path_buf(),
+        now: now.clone(),
     };
-    tokio::select! {
+    let r = tokio::select! {
         r = node.serve() => r,
         _ = shutdown => {
-            tracing::info!("worker stopping");
+            tracing::info!("worker stopping: its task goes back to the coordinator");
+            leave(client, &now).await;
             Ok(())
         }
+    };
+    // The executors end once their task does (a tracer cannot be stopped
+    // midway): they are given a few seconds, then the process goes on
+    // to exit (a spill file left is removed by the next worker here).
+    let ended = tokio::task::spawn_blocking(move || drop(node));
+    let _ = tokio::time::timeout(Duration::from_secs(5), ended).await;
+    drop(tmp);
+    r
+}
+
+/// The session and the task of a worker now, for leaving when it stops.
+#[derive(Clone, Default)]
+struct Now(Arc<std::sync::Mutex<(Option<String>, Option<v1::TaskRef>)>>);
+
+impl Now {
+    fn set_session(&self, s: Option<String>) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).0 = s;
+    }
+    fn set_task(&self, t: Option<v1::TaskRef>) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).1 = t;
+    }
+    fn get(&self) -> (Option<String>, Option<v1::TaskRef>) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+}
+
+/// Hands the task at hand back and leaves the cluster, so that the
+/// coordinator gives its work to others now rather than once its
+/// heartbeats stop (each call given at most two seconds).
+async fn leave(mut client: Client, now: &Now) {
+    let (session, task) = now.get();
+    let wait = Duration::from_secs(2);
+    if let Some(t) = task {
+        let req = v1::FailTaskRequest {
+            task: Some(t),
+            error: "the worker is stopping".into(),
+            kind: v1::FailureKind::HandedBack as i32,
+        };
+        let _ = tokio::time::timeout(wait, client.fail_task(req)).await;
+    }
+    if let Some(session) = session {
+        let _ = tokio::time::timeout(wait, client.leave(v1::LeaveRequest { session })).await;
+    }
+}
+
+/// What a task's failure costs this worker: nothing when it lacked room
+/// (a full disk or file-size limit), which freeing space cures.
+fn failure_kind(error: &str) -> v1::FailureKind {
+    if sray_engine::spill::is_no_room(error) {
+        v1::FailureKind::NoRoom
+    } else {
+        v1::FailureKind::Task
     }
 }
 
@@ -81,6 +148,10 @@ struct Node {
     /// The part of `--memory` that the executors' kept and received
     /// records may hold in memory (the tracers get the rest).
     kept_memory: MemoryShare,
+    /// This worker's spill directory.
+    spill: PathBuf,
+    /// The session and task at hand (for leaving).
+    now: Now,
 }
 
 /// Setups whose executors (grids, kept records) a worker keeps at once.
@@ -93,6 +164,7 @@ impl Node {
     async fn serve(&mut self) -> anyhow::Result<()> {
         loop {
             let (session, beat) = self.register().await?;
+            self.now.set_session(Some(session.clone()));
             let lost = Arc::new(AtomicBool::new(false));
             let hb = tokio::spawn(heartbeat(
                 self.client.clone(),
@@ -189,7 +261,9 @@ impl Node {
             held: Vec::new(),
         };
         self.running.store(task.task_id, Ordering::Relaxed);
+        self.now.set_task(Some(tref.clone()));
         let r = self.try_task(&tref, task).await;
+        self.now.set_task(None);
         self.running.store(0, Ordering::Relaxed);
         if let Err(e) = r {
             let msg = format!("{e:#}");
@@ -198,6 +272,7 @@ impl Node {
                 .client
                 .fail_task(v1::FailTaskRequest {
                     task: Some(tref.clone()),
+                    kind: failure_kind(&msg) as i32,
                     error: msg,
                 })
                 .await;
@@ -272,7 +347,7 @@ impl Node {
                         models: Default::default(),
                         memory: self.cfg.memory - self.kept_memory.cap(),
                         store,
-                        spill_dir: self.cfg.tmp_dir.clone(),
+                        spill_dir: Some(self.spill.clone()),
                     },
                     keep: true,
                     kept_memory: self.kept_memory.clone(),
@@ -346,6 +421,7 @@ impl Node {
                     .client
                     .fail_task(v1::FailTaskRequest {
                         task: Some(tref.clone()),
+                        kind: failure_kind(&e) as i32,
                         error: e.clone(),
                     })
                     .await;

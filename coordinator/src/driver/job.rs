@@ -96,6 +96,7 @@ impl Job {
         }
         let (opts, store) =
             sray_worker::params::from_proto(&params, 0).map_err(anyhow::Error::msg)?;
+        // 0 (the job's and the coordinator's): sized for the cluster.
         let shard_rays = match spec.shard_rays {
             0 => shared.cfg.shard_rays,
             n if SHARD_RAYS.contains(&n) => n,
@@ -154,7 +155,7 @@ impl Job {
             opts,
             store,
             shard_rays,
-            auto_shard: spec.shard_rays == 0,
+            auto_shard: shard_rays == 0,
             format,
             grids,
         })

@@ -3,7 +3,7 @@
 //! checkpointed; then the image and the statistics.
 
 use super::job::Job;
-use super::shards::{cut, shard_size};
+use super::shards::{Fleet, cut, shard_size};
 use super::stages::{RecordsLost, Stage};
 use super::stats::{Totals, job_stats, passes_of, stat_of};
 use super::verify::Arbiter;
@@ -50,8 +50,6 @@ pub(super) async fn drive(
         rays = r.rays.map(|f| Arc::new(Records::File(f)));
     }
     let mut arbiter = Arbiter::new(shared, job);
-    // The checkpoint being written.
-    let mut checkpointing: Option<tokio::task::JoinHandle<anyhow::Result<Record>>> = None;
     // Which workers hold the round's rays (none after a restart).
     let mut segments: Arc<Vec<Segment>> = Arc::default();
     // (Checkpoints and verification need the records here.)
@@ -85,14 +83,13 @@ pub(super) async fn drive(
             }
         };
     }
-    // The rounds, in a block of their own: however they end (an error,
-    // a cancellation), the checkpoint being written is waited for before
-    // the job's outcome is journaled, so that it cannot overwrite it.
+    // The rounds, in a block of their own.
     let rounds: anyhow::Result<Frame> = async {
         let mut frame = frame;
         while n > 0 {
             tot.rays_per_round.push(n);
-            let per = shard_size(job, n, shared.worker_count(), keep);
+            let (workers, min_memory) = shared.fleet();
+            let per = shard_size(job, n, Fleet { workers, min_memory }, keep);
             // The eye rays are made by the workers; later rounds' rays are
             // at the coordinator, or only at the workers that spawned them.
             let eye = rays.is_none() && segments.is_empty();
@@ -226,13 +223,13 @@ pub(super) async fn drive(
             tot.shade_seconds += ts.elapsed().as_secs_f64();
             round += 1;
 
-            // Checkpoint: a restart resumes here. It is written while the
-            // next round runs (its rays are shared, its frame copied): a
-            // restart before it is complete resumes from the one before, and
-            // checkpoints are written one at a time, in order.
-            if let Some(h) = checkpointing.take() {
-                *rec = h.await??;
-            }
+            // Checkpoint: a restart resumes here. It is written before the
+            // next round starts, so that a restart resumes from the last
+            // round that finished (written during the next round, a kill
+            // before it was complete cost a round). A checkpoint that
+            // cannot be written (the coordinator's own disk) is said in
+            // the job's log, and the job goes on: a restart would resume
+            // from an earlier one.
             let done = round - 1;
             if shared.cfg.checkpoints {
                 let e = entry.clone();
@@ -240,11 +237,25 @@ pub(super) async fn drive(
                 let slots = frame.slots.clone();
                 let rays2 = rays.clone();
                 let totals = serde_json::to_value(&tot)?;
-                checkpointing = Some(tokio::task::spawn_blocking(move || {
-                    jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)?;
-                    tracing::info!(job = %e.id, round = done, "checkpoint written");
-                    Ok(r2)
-                }));
+                let t_ck = Instant::now();
+                let written = tokio::task::spawn_blocking(move || {
+                    jobs::checkpoint(&e, &mut r2, round, &slots, rays2.as_deref(), totals)
+                        .map(|()| r2)
+                })
+                .await?;
+                match written {
+                    Ok(r2) => {
+                        *rec = r2;
+                        tot.checkpoint_seconds += t_ck.elapsed().as_secs_f64();
+                        tracing::info!(job = %entry.id, round = done, seconds = t_ck.elapsed().as_secs_f64(), "checkpoint written");
+                    }
+                    Err(err) => {
+                        tracing::error!(job = %entry.id, round = done, error = %format!("{err:#}"), "checkpoint not written");
+                        entry.log(format!(
+                            "the coordinator could not write the checkpoint of round {done}: {err:#}; the job goes on (a restart would resume from an earlier round)"
+                        ));
+                    }
+                }
             }
             tracing::info!(
                 job = %entry.id,
@@ -257,15 +268,8 @@ pub(super) async fn drive(
         Ok(frame)
     }
     .await;
-    let last = match checkpointing.take() {
-        Some(h) => Some(h.await),
-        None => None,
-    };
     let frame = rounds?;
     shared.traced.send_modify(|n| *n += 1);
-    if let Some(r) = last {
-        *rec = r??;
-    }
     drop(arbiter);
 
     // The image, then the statistics.

@@ -42,23 +42,65 @@ pub(super) fn cut(
     }
 }
 
-/// Rays per shard in a round of `n` rays on `workers` workers: the job's
-/// size, except when the job left it to the coordinator and one worker
-/// does the work. No shard then waits for another worker, and fewer,
-/// larger shards make fewer passes over the database (one local worker,
-/// balls4 512x512: 1.34 s in shards of 65,536 rays, 1.18 s in two shards
-/// per round). Where records travel, two per round keep the
-/// coordinator's handling of one beside the worker's tracing of the
-/// other; where the worker keeps them (`keep`), there is nothing to
-/// overlap and the round is one shard (one local worker, balls4: 0.75 s
-/// against 0.81 s in two shards per round, medians of 5; each shard's
-/// passes end with a few that hold few rays).
-pub(super) fn shard_size(job: &Job, n: u64, workers: usize, keep: bool) -> u64 {
-    if job.auto_shard && workers == 1 {
-        auto_shard_size(job.shard_rays, n, keep)
-    } else {
+/// What the coordinator knows of its workers when it cuts a round.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Fleet {
+    pub(super) workers: usize,
+    /// The smallest `--memory` among them.
+    pub(super) min_memory: u64,
+}
+
+/// Rays per shard in a round of `n` rays: the job's size, or (the job left
+/// it to the coordinator) one for the cluster there is (see
+/// [`cluster_shard_size`]). One worker alone gets the round in one or two
+/// shards: no shard then waits for another worker, and fewer, larger
+/// shards make fewer passes over the database (one local worker, balls4
+/// 512x512: 1.34 s in shards of 65,536 rays, 1.18 s in two shards per
+/// round). Where records travel, two per round keep the coordinator's
+/// handling of one beside the worker's tracing of the other; where the
+/// worker keeps them (`keep`), there is nothing to overlap and the round
+/// is one shard (one local worker, balls4: 0.75 s against 0.81 s in two
+/// shards per round, medians of 5; each shard's passes end with a few
+/// that hold few rays).
+pub(super) fn shard_size(job: &Job, n: u64, fleet: Fleet, keep: bool) -> u64 {
+    if !job.auto_shard {
         job.shard_rays
+    } else if fleet.workers <= 1 {
+        auto_shard_size(ONE_WORKER_LEAST, n, keep)
+    } else {
+        cluster_shard_size(n, fleet, job.scene.size)
     }
+}
+
+/// The fewest rays of a shard of the coordinator's sizing for one worker.
+const ONE_WORKER_LEAST: u64 = 1 << 16;
+
+/// The fewest rays of any shard of the coordinator's sizing.
+const CLUSTER_LEAST: u64 = 4096;
+
+/// Database bytes a shard's rays pay for: a shard of `s` rays costs about
+/// `p·D/B` seconds of scans (p ≈ 5 passes, B ≈ 2 GB/s) and `s·c` of
+/// tracing (c ≈ 1.3 µs a ray on one core), so below D/400 rays its scans
+/// cost more than its tracing (the model in docs/cluster.md).
+const DB_BYTES_PER_SHARD_RAY: u64 = 400;
+
+/// Bytes of a worker's `--memory` a ray of its shard takes in its
+/// passes (the ray, its registrations and result): beyond its memory /
+/// this, a shard's rays wait on disk and make more passes.
+const WORKER_BYTES_PER_RAY: u64 = 256;
+
+/// [`shard_size`] for several workers: about two shards per worker (every
+/// worker busy, and room to even out stragglers), but no smaller than the
+/// database makes worth a scan (so that more workers never multiply the
+/// scans beyond need) and no larger than the smallest worker holds in a
+/// pass (three quarters of its memory are its tracer's).
+pub(super) fn cluster_shard_size(n: u64, fleet: Fleet, db_bytes: u64) -> u64 {
+    let target = n.div_ceil(2 * fleet.workers.max(1) as u64);
+    let floor = CLUSTER_LEAST.max(db_bytes / DB_BYTES_PER_SHARD_RAY);
+    let cap = AUTO_SHARD_MAX
+        .min(fleet.min_memory / 4 * 3 / WORKER_BYTES_PER_RAY)
+        .max(CLUSTER_LEAST);
+    target.max(floor).min(cap)
 }
 
 /// [`shard_size`] for one worker: at least `least` rays, and the round in
@@ -106,7 +148,7 @@ const AUTO_SHARD_MAX: u64 = 1 << 20;
 
 #[cfg(test)]
 mod tests {
-    use super::{AUTO_SHARD_MAX, Segment, auto_shard_size, held_shards};
+    use super::{AUTO_SHARD_MAX, Fleet, Segment, auto_shard_size, cluster_shard_size, held_shards};
 
     #[test]
     fn one_worker_keeping_its_records_takes_a_round_in_one_shard() {
@@ -118,6 +160,27 @@ mod tests {
         assert_eq!(auto_shard_size(65_536, 5 << 20, true), AUTO_SHARD_MAX);
         // Never below the job's size.
         assert_eq!(auto_shard_size(65_536, 1_000, true), 65_536);
+    }
+
+    #[test]
+    fn shards_are_sized_for_the_cluster() {
+        let fleet = |workers| Fleet {
+            workers,
+            min_memory: 1 << 30,
+        };
+        // A small database: two shards per worker.
+        assert_eq!(cluster_shard_size(263_169, fleet(2), 1 << 20), 65_793);
+        assert_eq!(cluster_shard_size(263_169, fleet(16), 1 << 20), 8_225);
+        // Never below what a scan of the database is worth ...
+        assert_eq!(cluster_shard_size(263_169, fleet(100), 1 << 20), 4_096);
+        assert_eq!(cluster_shard_size(263_169, fleet(16), 100 << 20), 262_144);
+        // ... nor above what the smallest worker holds in a pass.
+        let small = Fleet {
+            workers: 16,
+            min_memory: 64 << 20,
+        };
+        assert_eq!(cluster_shard_size(263_169, small, 100 << 20), 196_608);
+        assert_eq!(cluster_shard_size(16 << 20, fleet(4), 0), AUTO_SHARD_MAX);
     }
 
     #[test]

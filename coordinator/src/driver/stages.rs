@@ -13,7 +13,7 @@ use anyhow::bail;
 use sray_proto::v1;
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use tokio::sync::mpsc;
 
 /// A task's input was only at a worker that is gone (records at the
@@ -168,7 +168,7 @@ impl Stage<'_> {
             .collect();
         let mut st: Vec<ShardState> = (0..total).map(|_| ShardState::default()).collect();
         let verify = cfg.verify_fraction > 0.0;
-        let mut stuck_since: Option<Instant> = None;
+        let mut local_said = false;
         let progress = |st: &[ShardState]| v1::JobProgress {
             round: self.round,
             stage: self.stage as i32,
@@ -342,9 +342,7 @@ impl Stage<'_> {
                         }
                     }
                     // Work that no worker may take.
-                    let stranded = shared.stranded(&guard.ids);
-                    let mut main_stranded = None;
-                    for (id, errors) in stranded {
+                    for (id, blocked, why) in shared.stranded(&guard.ids) {
                         match kinds.get(&id) {
                             Some(&Kind::Verify(i)) => {
                                 if let Some((vid, s, k)) = st[i].verify && vid == id {
@@ -353,15 +351,7 @@ impl Stage<'_> {
                                     self.trace_locally(arbiter, i, (s, k), Purpose::Verify, &local_tx);
                                 }
                             }
-                            Some(Kind::Main(_)) => main_stranded = Some(errors),
-                            None => {}
-                        }
-                    }
-                    match main_stranded {
-                        None => stuck_since = None,
-                        Some(errors) => {
-                            let since = *stuck_since.get_or_insert_with(Instant::now);
-                            if since.elapsed() > cfg.worker_wait {
+                            Some(Kind::Main(_)) if blocked > cfg.worker_wait => {
                                 if workers == 0 {
                                     bail!(
                                         "no worker has been connected for {} s: start workers with `sray worker --coordinator URL`",
@@ -369,10 +359,27 @@ impl Stage<'_> {
                                     );
                                 }
                                 bail!(
-                                    "no connected worker may run a {} task of round {} for {} s (it failed on, or was quarantined from, all of them): {errors}",
-                                    self.name(), self.round, cfg.worker_wait.as_secs()
+                                    "no worker could run a task of round {} ({}) for {} s: {why}",
+                                    self.round, self.name(), cfg.worker_wait.as_secs()
                                 );
                             }
+                            _ => {}
+                        }
+                    }
+                    // The coordinator's own faults (its disk): said once in
+                    // the job's log; the job fails if they last.
+                    for (_, since, why) in shared.local_faults(&guard.ids) {
+                        if !local_said {
+                            local_said = true;
+                            self.entry.log(format!(
+                                "the coordinator cannot keep this job's records ({why}): its tasks wait until it can; no worker is blamed"
+                            ));
+                        }
+                        if since.elapsed() > cfg.worker_wait {
+                            bail!(
+                                "the coordinator could not keep this job's records for {} s: {why}",
+                                cfg.worker_wait.as_secs()
+                            );
                         }
                     }
                 }

@@ -51,6 +51,9 @@ pub(super) struct Totals {
     /// a worker).
     #[serde(default)]
     pub(super) restarts: u32,
+    /// Seconds spent writing checkpoints (between rounds).
+    #[serde(default)]
+    pub(super) checkpoint_seconds: f64,
 }
 
 impl Totals {
@@ -121,6 +124,7 @@ pub(super) fn job_stats(
         "job_restarts": tot.restarts,
         "backup_tasks": backups.max(tot.backups),
         "worker_seconds": tot.worker_seconds,
+        "checkpoint_seconds": tot.checkpoint_seconds,
         "grid_builds": tot.grid_builds,
         "bytes_to_workers": d[0],
         "bytes_from_workers": d[1],

@@ -157,7 +157,7 @@ async fn trace_here(
     let mut summary = None;
     while let Some(m) = out_rx.recv().await {
         match m.part {
-            Some(v1::task_output::Part::Records(c)) => rx.take(c).map_err(anyhow::Error::msg)?,
+            Some(v1::task_output::Part::Records(c)) => rx.take(c)?,
             Some(v1::task_output::Part::Summary(s)) => summary = Some(s),
             _ => {}
         }
@@ -166,8 +166,7 @@ async fn trace_here(
         .await
         .map_err(|_| anyhow::anyhow!("the coordinator's tracer stopped"))?
         .map_err(anyhow::Error::msg)?;
-    rx.finish(summary.context("no summary")?)
-        .map_err(anyhow::Error::msg)
+    Ok(rx.finish(summary.context("no summary")?)?)
 }
 
 /// Whether `sample` (rays `s .. s + k`) agrees bit for bit with what

@@ -43,6 +43,18 @@ pub struct TaskEntry {
     pub(super) prefer: Option<String>,
     /// Only `prefer` may run it (see [`crate::task::Held::pinned`]).
     pub(super) pinned: bool,
+    /// Workers (by session) that lacked room for it, when, and what they
+    /// said: it goes back to one only once `room_retry` has passed.
+    pub(super) no_room: HashMap<String, (Instant, String)>,
+    /// Not to be given out before then (the coordinator's own fault made
+    /// it wait).
+    pub(super) not_before: Option<Instant>,
+    /// The coordinator could not keep its input or output (its own disk):
+    /// since when, and why. Cleared when the task is done.
+    pub(super) local_fault: Option<(Instant, String)>,
+    /// Since when no worker may take it (all failed it, lacked room for
+    /// it, or are quarantined); cleared when a worker that may takes it.
+    pub(super) blocked_since: Option<Instant>,
 }
 
 impl TaskEntry {
@@ -50,6 +62,17 @@ impl TaskEntry {
         self.excluded.contains(&w.session)
             || self.excluded.contains(&w.name)
             || (self.pinned && self.prefer.as_deref() != Some(w.session.as_str()))
+    }
+
+    /// Why the worker `w` may not take this task at `now`, if it may not
+    /// (quarantine aside): it failed it, or lacked room for it lately.
+    pub(super) fn refuses(&self, w: &WorkerTag, now: Instant, room_retry: Duration) -> bool {
+        self.excludes(w)
+            || self
+                .no_room
+                .get(&w.session)
+                .is_some_and(|(at, _)| now.duration_since(*at) < room_retry)
+            || self.not_before.is_some_and(|t| now < t)
     }
 }
 
@@ -94,10 +117,23 @@ pub struct Worker {
     pub memory: u64,
     pub(super) last_beat: Instant,
     pub(super) running: HashSet<(u64, u32)>,
+    /// Attempts of this worker that ran past their deadline and have not
+    /// ended: while there is one, the worker is given no other task.
+    pub(super) overdue: HashSet<(u64, u32)>,
+}
+
+impl Worker {
+    /// Whether it may be given a task now: a worker runs one task at a
+    /// time, and one whose task timed out gets no other until that one
+    /// ends.
+    pub(super) fn free(&self) -> bool {
+        self.running.is_empty() && self.overdue.is_empty()
+    }
 }
 
 pub(super) struct Quarantine {
     pub(super) until: Instant,
+    pub(super) why: String,
 }
 
 #[derive(Default)]
@@ -110,6 +146,8 @@ pub(super) struct Inner {
     pub(super) queue: VecDeque<u64>,
     pub(super) tasks: HashMap<u64, TaskEntry>,
     pub(super) requeued: HashMap<String, u64>,
+    /// When each job was last given a task (fair turns between jobs).
+    pub(super) last_given: HashMap<String, Instant>,
     pub(super) backups: HashMap<String, u64>,
     pub(super) workers_ever: u64,
     /// Tasks queued again (worker lost, failed, output redone), ever.

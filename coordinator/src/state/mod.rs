@@ -146,7 +146,15 @@ fn spill_dir(cfg: &Config) -> anyhow::Result<(SpillDir, PathBuf)> {
     })?;
     let canon = std::fs::canonicalize(&cfg.data_dir)?;
     let tag = &blake3::hash(canon.as_os_str().as_encoded_bytes()).to_hex()[..16];
-    let base = cfg.tmp_dir.clone().unwrap_or_else(|| cfg.data_dir.clone());
+    // Absolute, so that a message about a spill file names it whole.
+    let base = match &cfg.tmp_dir {
+        Some(t) => {
+            std::fs::create_dir_all(t)
+                .with_context(|| format!("cannot create the directory {}", t.display()))?;
+            std::fs::canonicalize(t)?
+        }
+        None => canon.clone(),
+    };
     let dir = base.join(format!("sray-coordinator-{tag}"));
     if dir.exists() {
         let n = std::fs::read_dir(&dir).map_or(0, |r| r.count());

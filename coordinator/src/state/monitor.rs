@@ -15,6 +15,7 @@ pub async fn run(shared: Arc<Shared>) {
     loop {
         tick.tick().await;
         shared.reap();
+        shared.wake_delayed();
         if last_expiry.elapsed() >= Duration::from_secs(1) {
             last_expiry = Instant::now();
             let sh = shared.clone();

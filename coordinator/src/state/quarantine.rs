@@ -2,8 +2,9 @@
 //! wrong output, gets no task for a while, by session and by name.
 
 use super::Shared;
-use super::inner::{Inner, Quarantine, drop_attempt, lose_pinned_to, requeue_if_idle};
+use super::inner::{Quarantine, drop_attempt, lose_pinned_to, requeue_if_idle};
 use crate::task::WorkerTag;
+use std::collections::HashMap;
 use std::time::Instant;
 
 impl Shared {
@@ -13,10 +14,15 @@ impl Shared {
         let mut g = self.lock();
         let until = Instant::now() + self.cfg.quarantine;
         tracing::warn!(worker = %worker.name, why, seconds = self.cfg.quarantine.as_secs(), "worker quarantined");
-        g.quarantined
-            .insert(worker.session.clone(), Quarantine { until });
-        g.quarantined
-            .insert(worker.name.clone(), Quarantine { until });
+        for k in [&worker.session, &worker.name] {
+            g.quarantined.insert(
+                k.clone(),
+                Quarantine {
+                    until,
+                    why: why.to_string(),
+                },
+            );
+        }
         let mine: Vec<(u64, u32)> = g
             .tasks
             .iter()
@@ -46,13 +52,17 @@ impl Shared {
 
     /// Whether the worker is quarantined now.
     pub fn is_quarantined(&self, worker: &WorkerTag) -> bool {
-        quarantined_now(&self.lock(), worker, Instant::now())
+        quarantined_now(&self.lock().quarantined, worker, Instant::now())
     }
 }
 
 /// Whether `tag` (by session or by name) is quarantined at `now`.
-pub(super) fn quarantined_now(g: &Inner, tag: &WorkerTag, now: Instant) -> bool {
+pub(super) fn quarantined_now(
+    quarantined: &HashMap<String, Quarantine>,
+    tag: &WorkerTag,
+    now: Instant,
+) -> bool {
     [&tag.session, &tag.name]
         .iter()
-        .any(|k| g.quarantined.get(*k).is_some_and(|q| q.until > now))
+        .any(|k| quarantined.get(*k).is_some_and(|q| q.until > now))
 }

@@ -1,7 +1,7 @@
 //! The task queue: tasks in (a stage's shards, their samples), the next
 //! one out to a worker that asks, and a running task's input.
 
-use super::inner::{Attempt, TaskEntry, TaskState, live_attempt, lose};
+use super::inner::{Attempt, Inner, TaskEntry, TaskState, live_attempt, lose};
 use super::quarantine::quarantined_now;
 use super::{Refusal, Shared};
 use crate::task::{TaskEvent, TaskInput, WorkerTag};
@@ -59,6 +59,10 @@ impl Shared {
                     queued_at: Instant::now(),
                     prefer,
                     pinned,
+                    no_room: HashMap::new(),
+                    not_before: None,
+                    local_fault: None,
+                    blocked_since: None,
                 },
             );
             g.queue.push_back(id);
@@ -94,6 +98,7 @@ impl Shared {
         let mut g = self.lock();
         g.requeued.remove(job);
         g.backups.remove(job);
+        g.last_given.remove(job);
     }
 
     /// Tasks queued again (after a worker loss or failure), and backup
@@ -147,55 +152,11 @@ impl Shared {
                     session: session.to_string(),
                     name: w.name.clone(),
                 };
-                if !quarantined_now(&g, &tag, now) {
-                    let g = &mut *g;
-                    // The first task this worker may run, unless a later
-                    // one's input is held here.
-                    let mut first = None;
-                    let mut mine = None;
-                    g.queue.retain(|id| {
-                        let Some(t) = g.tasks.get(id) else {
-                            return false;
-                        };
-                        if t.state == TaskState::Done {
-                            return false;
-                        }
-                        if mine.is_none()
-                            && !t.excludes(&tag)
-                            && !t.live.values().any(|a| a.worker.session == tag.session)
-                        {
-                            first.get_or_insert(*id);
-                            if t.prefer.as_deref() == Some(session) {
-                                mine = Some(*id);
-                            }
-                        }
-                        true
-                    });
-                    let pick = mine.or(first);
-                    if let Some(id) = pick
-                        && let Some(i) = g.queue.iter().position(|&x| x == id)
-                    {
-                        g.queue.remove(i);
-                    }
-                    if let Some(id) = pick {
-                        let t = g.tasks.get_mut(&id).expect("picked");
-                        let attempt = t.next_attempt;
-                        t.next_attempt += 1;
-                        t.state = TaskState::Running;
-                        t.live.insert(
-                            attempt,
-                            Attempt {
-                                worker: tag.clone(),
-                                since: now,
-                            },
-                        );
-                        let mut task = t.task.clone();
-                        task.attempt = attempt;
-                        if let Some(w) = g.workers.get_mut(session) {
-                            w.running.insert((id, attempt));
-                        }
-                        return Ok(Some(task));
-                    }
+                if w.free()
+                    && !quarantined_now(&g.quarantined, &tag, now)
+                    && let Some(task) = self.pick(&mut g, &tag, now)
+                {
+                    return Ok(Some(task));
                 }
             }
             tokio::select! {
@@ -207,6 +168,91 @@ impl Shared {
                 _ = self.stop.notified() => return Err(Refusal::Stopping),
             }
         }
+    }
+
+    /// Gives the worker `tag` a task, if one it may take is queued: from
+    /// the job with the fewest attempts running (so that a small job is
+    /// not held to the pace of a large one), its first task, unless a
+    /// later one's input is held here.
+    fn pick(&self, g: &mut Inner, tag: &WorkerTag, now: Instant) -> Option<v1::Task> {
+        let room_retry = self.cfg.room_retry;
+        // Per job with a task this worker may take: its first such task,
+        // and the first whose input is here (by order of first appearance).
+        let mut jobs: Vec<(&str, u64, Option<u64>)> = Vec::new();
+        let tasks = &g.tasks;
+        g.queue.retain(|id| {
+            let Some(t) = tasks.get(id) else {
+                return false;
+            };
+            if t.state == TaskState::Done {
+                return false;
+            }
+            if t.refuses(tag, now, room_retry)
+                || t.live.values().any(|a| a.worker.session == tag.session)
+            {
+                return true;
+            }
+            let mine = t.prefer.as_deref() == Some(tag.session.as_str());
+            match jobs.iter_mut().find(|j| j.0 == t.task.job_id) {
+                Some(j) => {
+                    if mine && j.2.is_none() {
+                        j.2 = Some(*id);
+                    }
+                }
+                None => jobs.push((&t.task.job_id, *id, mine.then_some(*id))),
+            }
+            true
+        });
+        if jobs.is_empty() {
+            return None;
+        }
+        // Attempts running, by job.
+        let mut running: HashMap<&str, usize> = HashMap::new();
+        if jobs.len() > 1 {
+            for w in g.workers.values() {
+                for (id, _) in &w.running {
+                    if let Some(t) = tasks.get(id) {
+                        *running.entry(&t.task.job_id).or_default() += 1;
+                    }
+                }
+            }
+        }
+        // Fewest attempts running; of those, the one served longest ago.
+        let (job, first, mine) = *jobs
+            .iter()
+            .min_by_key(|j| {
+                (
+                    running.get(j.0).copied().unwrap_or(0),
+                    g.last_given.get(j.0).copied(),
+                )
+            })
+            .expect("not empty");
+        let id = mine.unwrap_or(first);
+        let job = job.to_string();
+        g.last_given.insert(job, now);
+        if let Some(i) = g.queue.iter().position(|&x| x == id) {
+            g.queue.remove(i);
+        }
+        let t = g.tasks.get_mut(&id).expect("picked");
+        let attempt = t.next_attempt;
+        t.next_attempt += 1;
+        t.state = TaskState::Running;
+        if !t.no_room.contains_key(&tag.session) {
+            t.blocked_since = None;
+        }
+        t.live.insert(
+            attempt,
+            Attempt {
+                worker: tag.clone(),
+                since: now,
+            },
+        );
+        let mut task = t.task.clone();
+        task.attempt = attempt;
+        if let Some(w) = g.workers.get_mut(&tag.session) {
+            w.running.insert((id, attempt));
+        }
+        Some(task)
     }
 
     /// The input of a task the worker is running.

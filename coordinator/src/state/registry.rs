@@ -38,6 +38,7 @@ impl Shared {
                 memory,
                 last_beat: Instant::now(),
                 running: HashSet::new(),
+                overdue: HashSet::new(),
             },
         );
         (session, id)
@@ -55,7 +56,7 @@ impl Shared {
                     session: session.clone(),
                     name: w.name.clone(),
                 };
-                let quarantined = quarantined_now(&g, &tag, now);
+                let quarantined = quarantined_now(&g.quarantined, &tag, now);
                 let mut tasks: Vec<String> = w
                     .running
                     .iter()
@@ -117,6 +118,14 @@ impl Shared {
         self.lock().workers.len()
     }
 
+    /// Workers registered, and the smallest `--memory` among them (0:
+    /// none).
+    pub fn fleet(&self) -> (usize, u64) {
+        let g = self.lock();
+        let min = g.workers.values().map(|w| w.memory).min().unwrap_or(0);
+        (g.workers.len(), min)
+    }
+
     /// Workers that may take a task that excludes `excluded` (sessions
     /// or names), not counting quarantined ones.
     pub fn eligible_workers(&self, excluded: &[WorkerTag]) -> usize {
@@ -129,7 +138,7 @@ impl Shared {
                     session: (*s).clone(),
                     name: w.name.clone(),
                 };
-                !quarantined_now(&g, &tag, now)
+                !quarantined_now(&g.quarantined, &tag, now)
                     && !excluded
                         .iter()
                         .any(|e| e.session == tag.session || e.name == tag.name)
@@ -139,31 +148,45 @@ impl Shared {
 
     /// Declares silent workers dead and queues their tasks again.
     pub fn reap(&self) {
-        let mut g = self.lock();
         let now = Instant::now();
-        let dead: Vec<String> = g
-            .workers
-            .iter()
-            .filter(|(_, w)| now.duration_since(w.last_beat) > self.cfg.worker_timeout)
-            .map(|(s, _)| s.clone())
-            .collect();
-        g.quarantined.retain(|_, q| q.until > now);
-        if dead.is_empty() {
-            return;
-        }
+        let dead: Vec<String> = {
+            let mut g = self.lock();
+            g.quarantined.retain(|_, q| q.until > now);
+            g.workers
+                .iter()
+                .filter(|(_, w)| now.duration_since(w.last_beat) > self.cfg.worker_timeout)
+                .map(|(s, _)| s.clone())
+                .collect()
+        };
         for s in dead {
-            let w = g.workers.remove(&s).expect("listed above");
-            tracing::warn!(name = %w.name, "worker missed its heartbeats: declared dead");
-            for (id, a) in w.running {
-                if let Some(t) = g.tasks.get_mut(&id) {
-                    t.live.remove(&a);
-                }
-                requeue_if_idle(&mut g, id);
-            }
-            lose_pinned_to(&mut g, &s, "the worker holding its input is gone");
+            self.forget_worker(&s, "worker missed its heartbeats: declared dead");
         }
+    }
+
+    /// The worker `session` leaves (it is stopping): its tasks go to others
+    /// now. False if it was not known.
+    pub fn leave(&self, session: &str) -> bool {
+        self.forget_worker(session, "worker left")
+    }
+
+    /// Forgets a worker: its running tasks are queued again, the tasks
+    /// pinned to it lost.
+    fn forget_worker(&self, session: &str, why: &str) -> bool {
+        let mut g = self.lock();
+        let Some(w) = g.workers.remove(session) else {
+            return false;
+        };
+        tracing::warn!(name = %w.name, "{why}");
+        for (id, a) in w.running {
+            if let Some(t) = g.tasks.get_mut(&id) {
+                t.live.remove(&a);
+            }
+            requeue_if_idle(&mut g, id);
+        }
+        lose_pinned_to(&mut g, session, "the worker holding its input is gone");
         drop(g);
         self.task_ready.notify_waiters();
+        true
     }
 }
 

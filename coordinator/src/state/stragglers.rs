@@ -28,6 +28,7 @@ impl Shared {
         let now = Instant::now();
         let mut backed = Vec::new();
         let mut stuck = Vec::new();
+        let mut late = Vec::new();
         for id in ids {
             let Some(t) = g.tasks.get_mut(id) else {
                 continue;
@@ -50,6 +51,13 @@ impl Shared {
             if ran > deadline {
                 t.backup = true;
                 let job = t.task.job_id.clone();
+                // The workers whose attempts ran past the deadline get no
+                // other task until these end.
+                for (a, at) in &t.live {
+                    if now.duration_since(at.since) > deadline {
+                        late.push((at.worker.clone(), (*id, *a)));
+                    }
+                }
                 *g.backups.entry(job).or_default() += 1;
                 g.queue.push_front(*id);
                 backed.push((*id, ran));
@@ -58,7 +66,16 @@ impl Shared {
         for id in stuck {
             lose(&mut g, id, "it ran past --task-timeout where its input is");
         }
+        for (w, a) in &late {
+            if let Some(wk) = g.workers.get_mut(&w.session) {
+                wk.overdue.insert(*a);
+            }
+        }
         drop(g);
+        for (w, _) in &late {
+            tracing::warn!(worker = %w.name, "a task timed out on the worker: it gets no other task until that one ends");
+            self.count_fault(w, "task timeouts");
+        }
         if !backed.is_empty() {
             self.task_ready.notify_waiters();
         }
@@ -79,25 +96,65 @@ impl Shared {
             .collect()
     }
 
-    /// Queued tasks among `ids` that no registered worker may take.
-    pub fn stranded(&self, ids: &[u64]) -> Vec<(u64, String)> {
-        let g = self.lock();
+    /// Queued tasks among `ids` that no registered worker may take (all
+    /// failed them, lack room for them or are quarantined): how long each
+    /// has been so, and why, worker by worker. A worker that lacked room
+    /// is retried after `room_retry`, but the task counts as blocked until
+    /// a worker that never lacked room for it takes it.
+    pub fn stranded(&self, ids: &[u64]) -> Vec<(u64, Duration, String)> {
+        let mut g = self.lock();
         let now = Instant::now();
-        ids.iter()
-            .filter_map(|id| {
-                let t = g.tasks.get(id)?;
-                if t.state != TaskState::Queued {
-                    return None;
+        let g = &mut *g;
+        let mut out = Vec::new();
+        for id in ids {
+            let Some(t) = g.tasks.get_mut(id) else {
+                continue;
+            };
+            if t.state != TaskState::Queued {
+                continue;
+            }
+            let mut reasons = Vec::new();
+            let mut open = false;
+            for (s, w) in &g.workers {
+                let tag = WorkerTag {
+                    session: s.clone(),
+                    name: w.name.clone(),
+                };
+                if quarantined_now(&g.quarantined, &tag, now) {
+                    let why = [&tag.session, &tag.name]
+                        .iter()
+                        .find_map(|k| g.quarantined.get(*k))
+                        .map_or("", |q| q.why.as_str());
+                    reasons.push(format!("{}: quarantined ({why})", w.name));
+                } else if t.excludes(&tag) {
+                    let failed = t
+                        .failures
+                        .iter()
+                        .rev()
+                        .find(|f| f.strip_prefix(&w.name).is_some_and(|r| r.starts_with(": ")));
+                    reasons.push(match failed {
+                        Some(f) => f.clone(),
+                        None => format!("{}: may not run it", w.name),
+                    });
+                } else if let Some((_, why)) = t.no_room.get(s) {
+                    // Retried after `room_retry`, but blocked still.
+                    reasons.push(why.clone());
+                } else {
+                    open = true;
                 }
-                let any = g.workers.iter().any(|(s, w)| {
-                    let tag = WorkerTag {
-                        session: s.clone(),
-                        name: w.name.clone(),
-                    };
-                    !t.excludes(&tag) && !quarantined_now(&g, &tag, now)
-                });
-                (!any).then(|| (*id, t.failures.join("; ")))
-            })
-            .collect()
+            }
+            if open {
+                t.blocked_since = None;
+                continue;
+            }
+            let since = *t.blocked_since.get_or_insert(now);
+            if reasons.is_empty() {
+                reasons.push("no worker is connected".into());
+            }
+            reasons.sort();
+            reasons.dedup();
+            out.push((*id, now.duration_since(since), reasons.join("; ")));
+        }
+        out
     }
 }

@@ -76,12 +76,29 @@ impl SpillDir {
     }
 }
 
+const NO_SPACE: &str = "no space left on the spill device";
+const FILE_SIZE_LIMIT: &str = "the file-size limit (ulimit -f) stops the spill file";
+const QUOTA: &str = "the disk quota of the spill device is used up";
+
+/// Whether an error's message says that a disk (or a file-size limit or
+/// quota) is full: the process lacks room, which freeing space cures,
+/// rather than failing. Reads the messages of [`spill_error`] and those of
+/// the system's errors (ENOSPC, EFBIG, EDQUOT) as Rust words them.
+pub fn is_no_room(message: &str) -> bool {
+    [NO_SPACE, FILE_SIZE_LIMIT, QUOTA]
+        .iter()
+        .any(|m| message.contains(m))
+        || [libc::ENOSPC, libc::EFBIG, libc::EDQUOT]
+            .iter()
+            .any(|n| message.contains(&format!("(os error {n})")))
+}
+
 /// A full spill disk is the commonest failure here; say so plainly.
 pub(crate) fn spill_error(path: &Path, e: std::io::Error) -> Error {
     let full = match e.raw_os_error() {
-        Some(libc::ENOSPC) => "no space left on the spill device",
-        Some(libc::EFBIG) => "the file-size limit (ulimit -f) stops the spill file",
-        Some(libc::EDQUOT) => "the disk quota of the spill device is used up",
+        Some(libc::ENOSPC) => NO_SPACE,
+        Some(libc::EFBIG) => FILE_SIZE_LIMIT,
+        Some(libc::EDQUOT) => QUOTA,
         _ => return Error::io(path, e),
     };
     Error::Io {
