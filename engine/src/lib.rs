@@ -36,6 +36,7 @@ pub mod source;
 pub mod spd;
 pub mod spill;
 pub mod sys;
+pub mod texture;
 pub mod units;
 
 pub use error::Error;
