@@ -335,7 +335,7 @@ fn models_stored(models: &Option<(Vec<ModelInfo>, u64)>) -> u64 {
 struct Counter {
     counts: KindCounts,
     lights: u64,
-    materials: HashSet<[u32; 8]>,
+    materials: HashSet<[u32; 14]>,
     statements: u64,
     any_material: bool,
     bbox: Aabb,

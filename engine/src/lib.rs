@@ -81,6 +81,7 @@ pub mod source;
 pub mod spd;
 pub mod spill;
 pub mod sys;
+pub mod texture;
 pub mod units;
 
 pub use df::models;

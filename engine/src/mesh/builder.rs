@@ -35,6 +35,7 @@ pub const NO_MATERIAL: u32 = u32::MAX;
 /// The material of faces that a file gives none: light grey, purely
 /// diffuse (NFF `f 0.8 0.8 0.8 1 0 0 0 1`).
 pub const NEUTRAL: Material = Material {
+    pbr: None,
     color: [0.8, 0.8, 0.8],
     kd: 1.0,
     ks: 0.0,
@@ -711,7 +712,7 @@ impl Bounds {
 /// Turns faces into objects, by the polygon policy.
 struct Emitter {
     materials: Vec<Material>,
-    last: Option<[u32; 8]>,
+    last: Option<[u32; 14]>,
     summary: MeshSummary,
     pos: Vec<[f32; 3]>,
     nrm: Vec<[f32; 3]>,
@@ -729,6 +730,7 @@ impl Emitter {
     fn material(&self, f: &FaceRec) -> Material {
         if f.flags & FACE_COLOR != 0 {
             return Material {
+                pbr: None,
                 color: quantize(f.color),
                 ..NEUTRAL
             };
@@ -743,6 +745,7 @@ impl Emitter {
             }
             let n = self.corners.len() as f32;
             return Material {
+                pbr: None,
                 color: quantize(s.map(|x| x / n)),
                 ..NEUTRAL
             };

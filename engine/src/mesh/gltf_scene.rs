@@ -18,18 +18,19 @@
 //!   image's longer side, so the angle is widened by the camera's aspect
 //!   ratio when it is wider than tall. No camera: the default view of a
 //!   mesh ([`crate::scene::setup`]).
-//! - **Lights** (`KHR_lights_punctual`): a point light at its node's
-//!   position, in its colour (NFF lights have no intensity or falloff:
-//!   `intensity` is ignored). A spot light is taken as a point light and a
-//!   directional one as a point light far along its reverse direction;
-//!   each says so once. No light: the default lights of a mesh.
-//! - **Materials** (metallic-roughness): base colour -> colour; metallic
-//!   and roughness -> specular reflection, which is a mirror in NFF, so a
-//!   rough metal is mostly diffuse (`Ks = metallic * (1 - roughness)`,
-//!   `Kd = 1 - Ks`); roughness -> Phong exponent `2 / a^2 - 2` with
-//!   `a = roughness^2` (at least 1); `KHR_materials_transmission` ->
-//!   transmission, which takes its share from the diffuse; `KHR_materials_ior` -> index of
-//!   refraction (1.5 by default). Textures are ignored, with one warning.
+//! - **Lights** (`KHR_lights_punctual`): point, spot and directional
+//!   lights as glTF means them: intensity (candela, lux), inverse-square
+//!   falloff, `range` and the spot cones ([`crate::render::shade`]).
+//! - **Materials** (metallic-roughness): base colour, metallic and
+//!   roughness drive glTF's BRDF (Lambert + GGX, Appendix B) for direct
+//!   light; for the rays a hit spawns they map to NFF's terms: specular
+//!   reflection is a mirror in NFF, so a rough metal is mostly diffuse
+//!   (`Ks = metallic * (1 - roughness)`, `Kd = 1 - Ks`), with Phong
+//!   exponent `2 / a^2 - 2`, `a = roughness^2` (at least 1), kept for an
+//!   NFF output; `KHR_materials_transmission` -> transmission, which
+//!   takes its share from the diffuse; `KHR_materials_ior` -> index of
+//!   refraction (1.5 by default). The emissive factor is stored but not
+//!   yet added to the image. Textures are ignored, with one warning.
 //!   A primitive without a material is the meshes' neutral grey.
 //!
 //! The file is read within the memory budget ([`super::gltf_data`]): the
@@ -47,7 +48,7 @@ use crate::error::Error;
 use crate::models::{place_normal, place_point};
 use crate::progress::Progress;
 use crate::scene::setup::{DEFAULT_BACKGROUND, default_lights};
-use crate::scene::{Light, Material, MeshFacts, SceneSink, View};
+use crate::scene::{Light, LightKind, Material, MeshFacts, Pbr, Photometric, SceneSink, View};
 use crate::shapes::{Patch, Polygon, Shape};
 use glam::{DAffine3, DMat4, DVec3};
 use gltf::accessor::Dimensions;
@@ -881,6 +882,11 @@ fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
         shine: (2.0 / (a * a) - 2.0).clamp(1.0, 10_000.0),
         t,
         ior: m.ior().unwrap_or(1.5),
+        pbr: Some(Pbr {
+            metallic,
+            roughness,
+            emissive: m.emissive_factor(),
+        }),
     }
 }
 
@@ -934,30 +940,53 @@ fn punctual_lights(placed: &[Placed<'_>], bounds: &Bounds, warnings: &mut Warnin
             continue;
         };
         let at = p.world.transform_point3(DVec3::ZERO);
-        let position = match l.kind() {
-            Kind::Point => at,
-            Kind::Spot { .. } => {
-                warnings.add("spot lights are taken as point lights", || {
-                    format!("light {}", l.index())
-                });
-                at
+        let dir = p
+            .world
+            .transform_vector3(DVec3::NEG_Z)
+            .try_normalize()
+            .unwrap_or(DVec3::NEG_Y);
+        let (kind, position, inner_cone, outer_cone) = match l.kind() {
+            Kind::Point => (LightKind::Point, at, 0.0, 0.0),
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let outer = outer_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2);
+                (
+                    LightKind::Spot,
+                    at,
+                    inner_cone_angle.clamp(0.0, outer),
+                    outer,
+                )
             }
-            Kind::Directional => {
-                warnings.add(
-                    "directional lights are taken as point lights far along their reverse direction",
-                    || format!("light {}", l.index()),
-                );
-                let dir = p
-                    .world
-                    .transform_vector3(DVec3::NEG_Z)
-                    .try_normalize()
-                    .unwrap_or(DVec3::NEG_Y);
-                centre - dir * 100.0 * size
-            }
+            // Placed far along its reverse direction for whatever wants
+            // a position (an NFF output); shading uses its direction.
+            Kind::Directional => (
+                LightKind::Directional,
+                centre - dir * 100.0 * size,
+                0.0,
+                0.0,
+            ),
         };
+        let mut intensity = l.intensity();
+        if !(intensity.is_finite() && intensity >= 0.0) {
+            warnings.add(
+                "a light's intensity is not a finite non-negative number (1 is used)",
+                || format!("light {}", l.index()),
+            );
+            intensity = 1.0;
+        }
         out.push(Light {
             position: position.to_array(),
             color: Some(l.color()),
+            photometric: Some(Photometric {
+                kind,
+                intensity,
+                range: l.range().filter(|r| r.is_finite() && *r > 0.0),
+                inner_cone,
+                outer_cone,
+                direction: dir.to_array(),
+            }),
         });
     }
     out

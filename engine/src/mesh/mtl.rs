@@ -49,6 +49,7 @@ impl Partial {
             _ => 0.0,
         };
         Material {
+            pbr: None,
             color: self.kd.unwrap_or(NEUTRAL.color),
             kd: 1.0,
             ks: ks.clamp(0.0, 1.0),
@@ -187,6 +188,7 @@ newmtl bare\n";
         assert_eq!(
             m[0].1,
             Material {
+                pbr: None,
                 color: [1.0, 0.0, 0.0],
                 kd: 1.0,
                 ks: 0.0,
@@ -202,6 +204,7 @@ newmtl bare\n";
         assert_eq!(
             m[4].1,
             Material {
+                pbr: None,
                 ior: 1.0,
                 ..NEUTRAL
             }

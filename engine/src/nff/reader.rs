@@ -258,6 +258,7 @@ impl<R: BufRead> Parser<R> {
                     }
                 };
                 sink.light(&Light {
+                    photometric: None,
                     position: [nums[0], nums[1], nums[2]],
                     color,
                 })
@@ -266,6 +267,7 @@ impl<R: BufRead> Parser<R> {
                 let n = numbers::<_, 8>(&self.lines, toks, "material 'f'")?;
                 let s = |i: usize| single(&self.lines, n[i]);
                 sink.material(&Material {
+                    pbr: None,
                     color: [s(0)?, s(1)?, s(2)?],
                     kd: s(3)?,
                     ks: s(4)?,

@@ -4,12 +4,22 @@
 
 use crate::intersect::Surface;
 use crate::math::Vec3;
-use crate::scene::{Material, SceneHeader};
+use crate::scene::{LightKind, Material, Pbr, Photometric, SceneHeader};
+
+/// A light as shading sees it: its position in the geometry's frame, its
+/// colour (resolved, see [`crate::scene::Light::resolved_color`]) and,
+/// for a glTF light, its photometry.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadeLight {
+    pub position: Vec3,
+    pub color: [f32; 3],
+    pub photometric: Option<Photometric>,
+}
 
 /// What shading needs to know about the scene.
 #[derive(Clone, Debug)]
 pub struct ShadeScene {
-    pub lights: Vec<(Vec3, [f32; 3])>,
+    pub lights: Vec<ShadeLight>,
     pub background: [f32; 3],
     pub max_depth: u8,
     /// Secondary and shadow rays ignore hits closer than this.
@@ -23,7 +33,11 @@ impl ShadeScene {
             lights: h
                 .lights
                 .iter()
-                .map(|l| (Vec3::from_array(l.position), l.resolved_color(n)))
+                .map(|l| ShadeLight {
+                    position: Vec3::from_array(l.position),
+                    color: l.resolved_color(n),
+                    photometric: l.photometric,
+                })
                 .collect(),
             background: h.background,
             max_depth,
@@ -85,8 +99,15 @@ pub fn shade(
     let n = if s.ns.dot(d) > 0.0 { -s.ns } else { s.ns };
     let dn = d.dot(n);
     let mirror = (d - n * (2.0 * dn)).try_normalize();
-    for (i, (pos, color)) in sc.lights.iter().enumerate() {
-        let to = *pos - s.p;
+    for (i, light) in sc.lights.iter().enumerate() {
+        if light.photometric.is_some() || m.pbr.is_some() {
+            if let Some(spawn) = gltf_light(light, i as u32, d, n, s.p, weight, m) {
+                emit(spawn);
+            }
+            continue;
+        }
+        let color = &light.color;
+        let to = light.position - s.p;
         let dist = to.length();
         if !(dist > 0.0) {
             continue;
@@ -154,4 +175,131 @@ pub fn shade(
             weight: weight * m.ks,
         });
     }
+}
+
+/// What a light brings to a hit at `p` when glTF's model applies (the
+/// light or the material is glTF's; NFF scenes never get here): the
+/// shadow ray toward the light, or `None` where the surface faces away
+/// from it or the light gives nothing there (beyond its range, outside
+/// its cone), so that no shadow ray is spent on it.
+///
+/// - A `KHR_lights_punctual` light gives illuminance `intensity * colour`
+///   (candela over the squared distance for point and spot lights, lux
+///   for directional ones) times the range window `clamp(1 - (d/range)^4,
+///   0, 1)` and, for a spot light, the cone's smooth falloff (both as the
+///   extension's specification writes them). An NFF light (no
+///   photometry) gives `pi * colour`, so that a white Lambert surface
+///   looks as it does under NFF's model.
+/// - A glTF material reflects it by the metallic-roughness BRDF of the
+///   glTF specification's Appendix B (Lambert diffuse plus GGX specular,
+///   Smith height-correlated visibility, Schlick Fresnel); an NFF
+///   material under a glTF light keeps NFF's terms.
+fn gltf_light(
+    light: &ShadeLight,
+    index: u32,
+    d: Vec3,
+    n: Vec3,
+    p: Vec3,
+    weight: f32,
+    m: &Material,
+) -> Option<Spawn> {
+    let (l, dist, scale) = match light.photometric {
+        None => {
+            let to = light.position - p;
+            let dist = to.length();
+            (to * (1.0 / dist), dist, std::f64::consts::PI)
+        }
+        Some(ph) => match ph.kind {
+            LightKind::Directional => {
+                let l = -Vec3::from_array(ph.direction);
+                (l, f64::INFINITY, ph.intensity as f64)
+            }
+            LightKind::Point | LightKind::Spot => {
+                let to = light.position - p;
+                let dist = to.length();
+                let l = to * (1.0 / dist);
+                let mut e = ph.intensity as f64 / (dist * dist);
+                if let Some(range) = ph.range {
+                    let r = dist / range as f64;
+                    e *= (1.0 - r * r * r * r).clamp(0.0, 1.0);
+                }
+                if ph.kind == LightKind::Spot {
+                    e *= spot_falloff(&ph, l);
+                }
+                (l, dist, e)
+            }
+        },
+    };
+    if !(dist > 0.0) || !(scale > 0.0) || !scale.is_finite() {
+        return None;
+    }
+    let ndotl = n.dot(l);
+    if !(ndotl > 0.0) {
+        return None;
+    }
+    let f = match &m.pbr {
+        Some(pbr) => brdf(pbr, m.color, n, -d, l, ndotl),
+        None => {
+            // NFF's terms, with the light's illuminance as its colour.
+            let r = d - n * (2.0 * d.dot(n));
+            let rl = r.try_normalize().map_or(0.0, |r| r.dot(l));
+            let spec = if m.ks > 0.0 && rl > 0.0 {
+                rl.powf(m.shine as f64)
+            } else {
+                0.0
+            };
+            let s = 1.0 / ndotl;
+            m.color
+                .map(|c| (m.kd as f64 * c as f64 + m.ks as f64 * spec * s) as f32)
+        }
+    };
+    let k = (scale * ndotl) as f32;
+    let mut color = [0f32; 3];
+    for c in 0..3 {
+        color[c] = light.color[c] * k * f[c] * weight;
+    }
+    Some(Spawn::Shadow {
+        light: index,
+        dir: l,
+        dist,
+        color,
+    })
+}
+
+/// The spot cone's falloff toward unit direction `l` (from the hit to the
+/// light), as `KHR_lights_punctual` defines it: 1 inside the inner cone,
+/// 0 outside the outer, a squared linear ramp in the cosine between.
+fn spot_falloff(ph: &Photometric, l: Vec3) -> f64 {
+    let cd = Vec3::from_array(ph.direction).dot(-l);
+    let (ci, co) = ((ph.inner_cone as f64).cos(), (ph.outer_cone as f64).cos());
+    let scale = 1.0 / (ci - co).max(1e-3);
+    let a = ((cd - co) * scale).clamp(0.0, 1.0);
+    a * a
+}
+
+/// glTF's metallic-roughness BRDF (specification, Appendix B) for base
+/// colour `base`, unit normal `n` facing the viewer, unit directions `v`
+/// toward the viewer and `l` toward the light, `ndotl = n.l > 0`.
+pub fn brdf(pbr: &Pbr, base: [f32; 3], n: Vec3, v: Vec3, l: Vec3, ndotl: f64) -> [f32; 3] {
+    use std::f64::consts::PI;
+    let metallic = pbr.metallic.clamp(0.0, 1.0) as f64;
+    let alpha = (pbr.roughness.clamp(0.0, 1.0) as f64).powi(2).max(1e-3);
+    let a2 = alpha * alpha;
+    let ndotv = n.dot(v).max(1e-6);
+    let h = (l + v).try_normalize().unwrap_or(n);
+    let ndoth = n.dot(h).max(0.0);
+    let vdoth = v.dot(h).clamp(0.0, 1.0);
+    let dd = ndoth * ndoth * (a2 - 1.0) + 1.0;
+    let distribution = a2 / (PI * dd * dd);
+    let vis = 1.0
+        / ((ndotl + (a2 + (1.0 - a2) * ndotl * ndotl).sqrt())
+            * (ndotv + (a2 + (1.0 - a2) * ndotv * ndotv).sqrt()));
+    let schlick = (1.0 - vdoth).powi(5);
+    base.map(|c| {
+        let c = c as f64;
+        let f0 = 0.04 * (1.0 - metallic) + c * metallic;
+        let fresnel = f0 + (1.0 - f0) * schlick;
+        let diffuse = (1.0 - fresnel) * c * (1.0 - metallic) / PI;
+        (diffuse + fresnel * distribution * vis) as f32
+    })
 }

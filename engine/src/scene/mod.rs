@@ -33,6 +33,10 @@ pub struct View {
 
 /// An NFF `f` statement: colour, diffuse, specular (reflection and
 /// highlight), Phong exponent, transmission and index of refraction.
+///
+/// A glTF material also carries its metallic-roughness parameters
+/// ([`Pbr`]): direct light then follows glTF's BRDF instead of NFF's
+/// Phong terms, while reflection and refraction rays keep the NFF fields.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Material {
     pub color: [f32; 3],
@@ -41,6 +45,30 @@ pub struct Material {
     pub shine: f32,
     pub t: f32,
     pub ior: f32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pbr: Option<Pbr>,
+}
+
+/// glTF 2.0's metallic-roughness material (Appendix B of the
+/// specification): `color` of the [`Material`] is the base colour.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Pbr {
+    pub metallic: f32,
+    pub roughness: f32,
+    /// Emissive colour times `KHR_materials_emissive_strength`.
+    pub emissive: [f32; 3],
+}
+
+impl Pbr {
+    fn key(&self) -> [u32; 5] {
+        [
+            self.metallic.to_bits(),
+            self.roughness.to_bits(),
+            self.emissive[0].to_bits(),
+            self.emissive[1].to_bits(),
+            self.emissive[2].to_bits(),
+        ]
+    }
 }
 
 impl Material {
@@ -53,10 +81,12 @@ impl Material {
         shine: 0.0,
         t: 0.0,
         ior: 1.0,
+        pbr: None,
     };
 
     /// Bit pattern used to deduplicate materials exactly.
-    pub fn key(&self) -> [u32; 8] {
+    pub fn key(&self) -> [u32; 14] {
+        let pbr = self.pbr.map_or([0; 5], |p| p.key());
         [
             self.color[0].to_bits(),
             self.color[1].to_bits(),
@@ -66,16 +96,52 @@ impl Material {
             self.shine.to_bits(),
             self.t.to_bits(),
             self.ior.to_bits(),
+            self.pbr.is_some() as u32,
+            pbr[0],
+            pbr[1],
+            pbr[2],
+            pbr[3],
+            pbr[4],
         ]
     }
 }
 
 /// A positional point light. `color` is `None` when the scene did not give
 /// one; see [`Light::resolved_color`].
+///
+/// A glTF light (`KHR_lights_punctual`) also carries its photometry
+/// ([`Photometric`]): its intensity, inverse-square falloff, range and,
+/// for a spot light, its cone. NFF lights have none.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Light {
     pub position: [f64; 3],
     pub color: Option<[f32; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub photometric: Option<Photometric>,
+}
+
+/// The kinds of `KHR_lights_punctual` light.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    Point = 0,
+    Spot = 1,
+    Directional = 2,
+}
+
+/// A `KHR_lights_punctual` light's photometry, in world coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Photometric {
+    pub kind: LightKind,
+    /// Candela (point, spot) or lux (directional).
+    pub intensity: f32,
+    /// Distance where the light reaches zero; `None`: infinite.
+    pub range: Option<f32>,
+    /// Spot cone angles in radians (`0 <= inner < outer <= pi/2`).
+    pub inner_cone: f32,
+    pub outer_cone: f32,
+    /// Unit direction the light points along (spot, directional).
+    pub direction: [f64; 3],
 }
 
 impl Light {

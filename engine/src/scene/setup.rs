@@ -140,6 +140,7 @@ pub fn parse_light(s: &str) -> Result<Light, String> {
     }
     let x = numbers(s, "--light", n)?;
     Ok(Light {
+        photometric: None,
         position: [x[0], x[1], x[2]],
         color: (n == 6).then(|| [x[3] as f32, x[4] as f32, x[5] as f32]),
     })
@@ -155,6 +156,7 @@ pub fn parse_material(s: &str) -> Result<Material, String> {
         ));
     }
     Ok(Material {
+        pbr: None,
         color: [f(0), f(1), f(2)],
         kd: f(3),
         ks: f(4),
@@ -328,10 +330,12 @@ pub fn default_lights(bounds: (V, V), view: &View) -> [Light; 2] {
     let place = |d: V| add(centre, scale(unit(d).unwrap_or(back), 4.0 * r));
     [
         Light {
+            photometric: None,
             position: place(add(add(back, scale(upv, 1.0)), scale(right, -0.8))),
             color: Some(KEY_LIGHT),
         },
         Light {
+            photometric: None,
             position: place(add(add(back, scale(right, 0.9)), scale(upv, -0.15))),
             color: Some(FILL_LIGHT),
         },

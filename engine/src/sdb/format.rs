@@ -34,6 +34,17 @@ pub const VERSION_MODELS: u32 = 5;
 /// in the spatial order, so that a file in input order stays readable by
 /// an sray of version 4 or 5.
 pub const VERSION_IDS: u32 = 6;
+/// Version 7: a version 4, 5 or 6 layout (the header's `layout` word says
+/// whether blocks store input ids, [`LAYOUT_IDS`]; models as in version
+/// 6) whose tables carry, between the density summary and the models'
+/// table, the scene's appearance: glTF materials and lights
+/// ([`super::tables`]). Written only when a scene has them, so that every
+/// NFF, SPD or untextured mesh database stays as it was, byte for byte.
+pub const VERSION_APPEARANCE: u32 = 7;
+/// The newest version read.
+pub const VERSION_NEWEST: u32 = VERSION_APPEARANCE;
+/// Header `layout` bit (version 7): blocks store input ids (as version 6).
+pub const LAYOUT_IDS: u32 = 1;
 /// Limit on the models of one database.
 pub const MAX_MODELS: usize = 1 << 20;
 /// Header flag: `vertices` is the size of a mesh's vertex table.
@@ -119,7 +130,8 @@ pub struct RawHeader {
     /// The largest block's records, expanded: what a reader's buffers
     /// hold (a stored block is never larger).
     pub block_raw_max: u32,
-    pub reserved0: u32,
+    /// Version 7: [`LAYOUT_IDS`]; zero before (a reserved word).
+    pub layout: u32,
     pub object_count: u64,
     /// Objects per kind, by kind code ([`crate::shapes::ShapeKind`]);
     /// room for [`MAX_KINDS`] kinds (files written when there were four

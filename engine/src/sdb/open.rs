@@ -146,11 +146,11 @@ fn read_header(f: &mut File, at: &At) -> Result<RawHeader, Error> {
         ));
     }
     let h: RawHeader = bytemuck::pod_read_unaligned(&hb);
-    if !(VERSION..=VERSION_IDS).contains(&h.version) {
+    if !(VERSION..=VERSION_NEWEST).contains(&h.version) {
         return Err(at.err(
             "header",
             format!(
-                "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_IDS}); regenerate it with `sray convert` or `sray gen`",
+                "database version {} is not supported (this sray reads versions {VERSION} to {VERSION_NEWEST}); regenerate it with `sray convert` or `sray gen`",
                 h.version
             ),
         ));
@@ -173,7 +173,10 @@ fn check_header(h: &RawHeader, file_bytes: u64, at: &At) -> Result<Layout, Error
         return Err(at.err("header", "unsupported header or block size".into()));
     }
     let models_bytes = join64(h.models_bytes[0], h.models_bytes[1]);
-    if h.version < VERSION_MODELS && models_bytes != 0 {
+    if (h.version < VERSION_MODELS && models_bytes != 0)
+        || (h.version < VERSION_APPEARANCE && h.layout != 0)
+        || h.layout & !LAYOUT_IDS != 0
+    {
         return Err(at.err("header", "reserved words are not zero".into()));
     }
     // Version 5 always has models; version 6 when it says it has.
@@ -226,8 +229,13 @@ fn read_tables(f: &mut File, h: &RawHeader, layout: &Layout, at: &At) -> Result<
     if VERIFY_CHECKSUMS && crc32fast::hash(&tables) != h.tables_crc {
         return Err(at.err("tables", "checksum mismatch: the tables are corrupt".into()));
     }
-    decode_tables(&tables, h.version >= VERSION_DENSITY, layout.has_models)
-        .ok_or_else(|| at.err("tables", "malformed tables".into()))
+    decode_tables(
+        &tables,
+        h.version >= VERSION_DENSITY,
+        h.version >= VERSION_APPEARANCE,
+        layout.has_models,
+    )
+    .ok_or_else(|| at.err("tables", "malformed tables".into()))
 }
 
 /// Checks that the models lie after the tables, in order, and fill the
@@ -282,7 +290,8 @@ fn check_storage(h: &RawHeader, file_bytes: u64, at: &At) -> Result<Storage, Err
     // unknown kind there, so a lying count is an error, not a misread).
     // Version 6 blocks always go through the packed path: their ids
     // come first.
-    let ids = h.version >= VERSION_IDS;
+    let ids =
+        h.version == VERSION_IDS || (h.version >= VERSION_APPEARANCE && h.layout & LAYOUT_IDS != 0);
     let runs = h.version >= VERSION_PACKED && (run_counts.runs > 0 || ids);
     let decoded_bytes = if runs {
         join64(h.decoded_bytes[0], h.decoded_bytes[1])

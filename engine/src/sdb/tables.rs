@@ -5,8 +5,8 @@ use super::database::ModelEntry;
 use super::format::*;
 use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
 use crate::scene::{
-    Aabb, DENSITY_CELLS, DensitySummary, Light, Material, SIZE_CLASSES, SceneHeader, SizeClass,
-    SizeSummary, View,
+    Aabb, DENSITY_CELLS, DensitySummary, Light, LightKind, Material, Pbr, Photometric,
+    SIZE_CLASSES, SceneHeader, SizeClass, SizeSummary, View,
 };
 
 /// What the tables hold, decoded.
@@ -18,8 +18,14 @@ pub(super) type Tables = (
 );
 
 /// The tables: the scene's header, the size summary, (`density`: from
-/// version 3 on) the density summary, and (`with_models`) the models.
-pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Option<Tables> {
+/// version 3 on) the density summary, (`appearance`: version 7) the glTF
+/// materials and lights, and (`with_models`) the models.
+pub(super) fn decode_tables(
+    buf: &[u8],
+    density: bool,
+    appearance: bool,
+    with_models: bool,
+) -> Option<Tables> {
     let mut d = Dec { buf, pos: 0 };
     let v3 = |d: &mut Dec| -> Option<[f64; 3]> { Some([d.f64()?, d.f64()?, d.f64()?]) };
     let from = v3(&mut d)?;
@@ -44,6 +50,7 @@ pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Opt
         let has = d.u32()?;
         let c = [d.f32()?, d.f32()?, d.f32()?];
         lights.push(Light {
+            photometric: None,
             position,
             color: (has != 0).then_some(c),
         });
@@ -59,6 +66,7 @@ pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Opt
             *x = d.f32()?;
         }
         materials.push(Material {
+            pbr: None,
             color: [m[0], m[1], m[2]],
             kd: m[3],
             ks: m[4],
@@ -93,7 +101,7 @@ pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Opt
         let n = d.u32()? as usize;
         if n > MAX_DENSITY_ENTRIES
             || n * 40 > d.remaining()
-            || (!with_models && n * 40 != d.remaining())
+            || (!with_models && !appearance && n * 40 != d.remaining())
         {
             return None;
         }
@@ -128,6 +136,12 @@ pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Opt
     } else {
         None
     };
+    if appearance {
+        decode_appearance(&mut d, &mut lights, &mut materials)?;
+        if !with_models && d.remaining() != 0 {
+            return None;
+        }
+    }
     let mut models = Vec::new();
     if with_models {
         let n = d.u32()? as usize;
@@ -155,4 +169,119 @@ pub(super) fn decode_tables(buf: &[u8], density: bool, with_models: bool) -> Opt
         density,
         models,
     ))
+}
+
+/// Bytes of one material's and one light's entry in the appearance table.
+const PBR_ENTRY: usize = 4 * 6;
+const LIGHT_ENTRY: usize = 4 * 6 + 8 * 3;
+
+/// The appearance table (version 7): the glTF materials' metallic-roughness
+/// parameters and the glTF lights' photometry, each entry naming the
+/// material or light it belongs to, in increasing order. `None` when
+/// the scene has neither (the table is then not written at all).
+pub(super) fn encode_appearance(lights: &[Light], materials: &[Material]) -> Option<Vec<u8>> {
+    let pbr: Vec<(usize, &Pbr)> = materials
+        .iter()
+        .enumerate()
+        .filter_map(|(i, m)| m.pbr.as_ref().map(|p| (i, p)))
+        .collect();
+    let photo: Vec<(usize, &Photometric)> = lights
+        .iter()
+        .enumerate()
+        .filter_map(|(i, l)| l.photometric.as_ref().map(|p| (i, p)))
+        .collect();
+    if pbr.is_empty() && photo.is_empty() {
+        return None;
+    }
+    let mut e = Enc::default();
+    e.u32(pbr.len() as u32);
+    for (i, p) in pbr {
+        e.u32(i as u32);
+        for x in [
+            p.metallic,
+            p.roughness,
+            p.emissive[0],
+            p.emissive[1],
+            p.emissive[2],
+        ] {
+            e.f32(x);
+        }
+    }
+    e.u32(photo.len() as u32);
+    for (i, p) in photo {
+        e.u32(i as u32);
+        e.u32(p.kind as u32);
+        e.f32(p.intensity);
+        e.f32(p.range.unwrap_or(0.0));
+        e.f32(p.inner_cone);
+        e.f32(p.outer_cone);
+        for x in p.direction {
+            e.f64(x);
+        }
+    }
+    Some(e.0)
+}
+
+/// Reads the appearance table into the materials and lights it names.
+fn decode_appearance(
+    d: &mut Dec<'_>,
+    lights: &mut [Light],
+    materials: &mut [Material],
+) -> Option<()> {
+    let finite = |x: f32| x.is_finite().then_some(x);
+    let n = d.u32()? as usize;
+    if n > materials.len() || n * PBR_ENTRY > d.remaining() {
+        return None;
+    }
+    let mut last = None;
+    for _ in 0..n {
+        let i = d.u32()? as usize;
+        if last.is_some_and(|l| i <= l) {
+            return None;
+        }
+        last = Some(i);
+        let metallic = finite(d.f32()?)?;
+        let roughness = finite(d.f32()?)?;
+        let emissive = [finite(d.f32()?)?, finite(d.f32()?)?, finite(d.f32()?)?];
+        materials.get_mut(i)?.pbr = Some(Pbr {
+            metallic,
+            roughness,
+            emissive,
+        });
+    }
+    let n = d.u32()? as usize;
+    if n > lights.len() || n * LIGHT_ENTRY > d.remaining() {
+        return None;
+    }
+    let mut last = None;
+    for _ in 0..n {
+        let i = d.u32()? as usize;
+        if last.is_some_and(|l| i <= l) {
+            return None;
+        }
+        last = Some(i);
+        let kind = match d.u32()? {
+            0 => LightKind::Point,
+            1 => LightKind::Spot,
+            2 => LightKind::Directional,
+            _ => return None,
+        };
+        let intensity = finite(d.f32()?)?;
+        let range = finite(d.f32()?)?;
+        let inner_cone = finite(d.f32()?)?;
+        let outer_cone = finite(d.f32()?)?;
+        let direction = [d.f64()?, d.f64()?, d.f64()?];
+        if !direction.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        lights.get_mut(i)?.photometric = Some(Photometric {
+            kind,
+            intensity,
+            range: (range > 0.0).then_some(range),
+            inner_cone,
+            outer_cone,
+            direction,
+        });
+    }
+    Some(())
 }

@@ -60,7 +60,7 @@ pub struct DbWriter {
     background: [f32; 3],
     lights: Vec<Light>,
     materials: Vec<Material>,
-    material_index: HashMap<[u32; 8], u32>,
+    material_index: HashMap<[u32; 14], u32>,
     current_material: Option<u32>,
     material_statements: u64,
     origin: [f64; 3],
@@ -397,6 +397,12 @@ impl DbWriter {
         }
         self.flush_block()?;
         let mut tables = self.tables();
+        // The appearance (version 7), before the models' table: only a
+        // scene with glTF materials or lights has it.
+        let appearance = super::tables::encode_appearance(&self.lights, &self.materials);
+        if let Some(a) = &appearance {
+            tables.extend_from_slice(a);
+        }
         let tables_offset = self.offset;
         // The models' table closes the tables (version 5): where each
         // model's database lies, relative to the start of this file.
@@ -443,7 +449,9 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: if self.ids {
+            version: if appearance.is_some() {
+                VERSION_APPEARANCE
+            } else if self.ids {
                 VERSION_IDS
             } else if !self.models.is_empty() {
                 VERSION_MODELS
@@ -462,7 +470,11 @@ impl DbWriter {
                 Compression::Zstd(l) => l,
             },
             block_raw_max: self.largest_block as u32,
-            reserved0: 0,
+            layout: if appearance.is_some() && self.ids {
+                LAYOUT_IDS
+            } else {
+                0
+            },
             object_count: self.objects,
             counts: {
                 let mut counts = [0; MAX_KINDS];

@@ -82,6 +82,7 @@ impl<'a> Out<'a> {
     /// A light as the SPD writes it to NFF: position only.
     pub fn light(&mut self, p: [f64; 3]) -> Result<(), Error> {
         self.sink.light(&Light {
+            photometric: None,
             position: r64(p),
             color: None,
         })
@@ -111,6 +112,7 @@ impl<'a> Out<'a> {
             0.5f64.ln() / rad.cos().ln()
         };
         self.sink.material(&Material {
+            pbr: None,
             color: r3(c),
             kd: r32(kd),
             ks: r32(ks),

@@ -111,6 +111,7 @@ fn header(w: &mut dyn SceneSink) {
     w.background([0.1, 0.1, 0.2]).unwrap();
     for position in [[FAR + 3.0, 6.0, 4.0], [FAR - 2.0, 4.0, 1.0]] {
         w.light(&Light {
+            photometric: None,
             position,
             color: None,
         })
@@ -120,6 +121,7 @@ fn header(w: &mut dyn SceneSink) {
 
 const MATERIALS: [Material; 2] = [
     Material {
+        pbr: None,
         color: [0.8, 0.5, 0.3],
         kd: 0.7,
         ks: 0.3,
@@ -128,6 +130,7 @@ const MATERIALS: [Material; 2] = [
         ior: 1.0,
     },
     Material {
+        pbr: None,
         color: [0.3, 0.6, 0.9],
         kd: 0.5,
         ks: 0.2,
@@ -408,6 +411,7 @@ fn ties_between_instances_go_as_between_copies() {
         })
         .unwrap();
         w.light(&Light {
+            photometric: None,
             position: [1.5, 5.0, 0.5],
             color: None,
         })
@@ -424,6 +428,7 @@ fn ties_between_instances_go_as_between_copies() {
             }
         }
         w.material(&Material {
+            pbr: None,
             color: [0.1, 0.9, 0.1],
             ..MATERIALS[0]
         })

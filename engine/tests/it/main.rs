@@ -20,6 +20,7 @@ mod crowded_voxels;
 mod database;
 mod df_memory;
 mod edge_cases;
+mod gltf_lighting;
 mod gltf_scenes;
 mod instances;
 mod invariance;
