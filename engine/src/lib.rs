@@ -47,6 +47,8 @@
 //! **6. Pixels come out.**
 //! - [`render`]: what both tracers share: camera, shading, frame buffer,
 //!   options and statistics;
+//! - [`texture`]: image textures (PNG, JPEG) decoded and sampled as glTF
+//!   means them (wrap modes, nearest and bilinear filters, transforms);
 //! - [`job`]: one render start to finish: resolve the scene, pick the
 //!   tracer by size against the memory budget, trace, write the image;
 //! - [`fsutil`]: output written atomically; [`progress`]: progress of long
