@@ -5,7 +5,7 @@ use crate::bf::{self, BfOptions, Shading, StoreNumber};
 use crate::df;
 use crate::error::{Error, IoContext};
 use crate::mesh::MeshOptions;
-use crate::progress::Progress;
+use crate::progress::{Progress, RenderRounds};
 use crate::render::{Frame, Mode, RenderOptions, RenderStats};
 use crate::scene::setup::{Setup, SetupSink};
 use crate::sdb::{Compression, Database, DbWriter};
@@ -312,6 +312,12 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
     let progress = stages.stage("rendering");
     let (frame, mut stats) = match mode {
         Mode::Bf => {
+            // One count of rays for the whole render, not one per round.
+            let rounds = RenderRounds::new(
+                &*progress,
+                req.options.max_depth,
+                scene.db.scene().lights.len(),
+            );
             let out = bf::render(
                 &scene.db,
                 &req.options,
@@ -322,8 +328,9 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
                     shading: req.shading,
                     models: req.models,
                 },
-                &*progress,
+                &rounds,
             )?;
+            rounds.finish();
             (out.frame, out.stats)
         }
         _ => {
