@@ -334,13 +334,26 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
             (out.frame, out.stats)
         }
         _ => {
-            // A scene larger than the budget, forced depth-first: its big
-            // arrays go to file-backed memory, which pages as RayShade's
-            // heap did through swap, instead of exceeding the budget.
+            // A scene larger than the budget, forced depth-first: in the
+            // paging experiment's binary (`sray-paged`, which installs the
+            // file-backed allocator), its big arrays go to file-backed
+            // memory, which pages as RayShade's heap did through swap,
+            // instead of exceeding the budget. Elsewhere they stay in
+            // ordinary memory, and the user is told.
             let need = df::estimate_bytes(&scene.db);
             let paged = need > memory && {
                 let dir = req.tmp_dir.clone().unwrap_or_else(std::env::temp_dir);
-                crate::paging::enable(&dir).at(&dir)?
+                let on = crate::paging::enable(&dir).at(&dir)?;
+                if !on {
+                    progress.warn(&format!(
+                        "the depth-first tracer needs about {} for this scene, more than the \
+                         budget of {}: it renders in memory all the same (sray-paged, the paging \
+                         experiment's binary, would page to a file)",
+                        fmt_bytes(need),
+                        fmt_bytes(memory)
+                    ));
+                }
+                on
             };
             let out = df::render(&scene.db, &req.options, &*progress)?;
             let mut stats = out.stats;
