@@ -132,7 +132,9 @@ fn on_terminal(dir: &Path, args: &[&str]) -> Option<String> {
     let o = match o {
         Ok(o) => o,
         Err(e) => {
-            eprintln!("skipped: cannot run script(1) for a terminal: {e}");
+            common::cannot_run(&format!(
+                "cannot run script(1) for a terminal (Debian: bsdutils): {e}"
+            ));
             return None;
         }
     };

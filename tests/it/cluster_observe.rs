@@ -1,9 +1,8 @@
 //! Seeing what the cluster does: `sray status`, the coordinator's HTTP
 //! listener (`/healthz`, `/metrics`, `/api/status`, previews) and its
-//! dashboard driven in a real headless browser (Debian's chromium; the
-//! test says why and passes when no browser is installed, and CI
-//! installs one through .ci/run). Real processes on loopback, small
-//! images.
+//! dashboard driven in a real headless browser (Debian's chromium, which
+//! .ci/run installs; without one the test says why and skips, or fails in
+//! CI). Real processes on loopback, small images.
 
 use crate::common;
 
@@ -299,12 +298,13 @@ fn browser() -> Option<String> {
     .map(String::from)
 }
 
-/// A headless browser, or None after saying why the test skips.
+/// A headless browser, or None after saying why the test skips (in CI,
+/// where it must run, it fails instead).
 fn browser_or_skip() -> Option<String> {
     let b = browser();
     if b.is_none() {
-        eprintln!(
-            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
+        common::cannot_run(
+            "no headless browser (chromium) installed; .ci/run installs Debian's chromium",
         );
     }
     b
