@@ -119,17 +119,24 @@ pub struct Proc {
 
 impl Proc {
     pub fn start(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Proc {
-        use std::io::BufRead;
         let mut cmd = sray();
-        cmd.current_dir(dir)
-            .args(args)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped());
+        cmd.current_dir(dir).args(args);
         for (k, v) in env {
             cmd.env(k, v);
         }
-        let mut child = cmd.spawn().expect("start sray");
+        Proc::spawn(cmd)
+    }
+
+    /// Starts `cmd` (another program, or `sray` run some other way), its
+    /// stderr collected as by [`Proc::start`].
+    pub fn spawn(mut cmd: Command) -> Proc {
+        use std::io::BufRead;
+        cmd.stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        let mut child = cmd
+            .spawn()
+            .unwrap_or_else(|e| panic!("start {:?}: {e}", cmd.get_program()));
         let err = child.stderr.take().unwrap();
         let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let l2 = lines.clone();
