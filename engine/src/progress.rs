@@ -251,12 +251,8 @@ impl Progress for RenderRounds<'_> {
         }
         match st.rays.as_mut() {
             None => {
-                let e = RoundsEstimate::new(
-                    total,
-                    self.max_rounds,
-                    self.first_ratio,
-                    self.later_ratio,
-                );
+                let e =
+                    RoundsEstimate::new(total, self.max_rounds, self.first_ratio, self.later_ratio);
                 self.inner.set_total(e.total());
                 st.rays = Some(e);
             }

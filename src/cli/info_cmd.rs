@@ -105,9 +105,11 @@ fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
         .collect();
     outln!(out, "    {}", by_kind.join(", "));
     outln!(out, "  lights       {}", i.lights);
-    outln!(out, 
+    outln!(
+        out,
         "  materials    {} distinct ({} statements)",
-        i.materials, i.material_statements
+        i.materials,
+        i.material_statements
     );
     outln!(out, "  triangles    {}", i.triangles);
     outln!(out, "  vertices     {}", i.vertices);
@@ -118,20 +120,28 @@ fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
         (Some(a), Some(b)) => outln!(out, "  bounds       {a:?} .. {b:?}"),
         _ => outln!(out, "  bounds       (no objects)"),
     }
-    outln!(out, 
+    outln!(
+        out,
         "  file         {} bytes, compression {}",
-        i.file_bytes, i.compression
+        i.file_bytes,
+        i.compression
     );
     if let (Some(raw), Some(blocks)) = (i.raw_bytes, i.blocks) {
         let per = raw as f64 / i.objects.max(1) as f64;
-        outln!(out, "  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)");
+        outln!(
+            out,
+            "  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)"
+        );
     }
     if let (Some(raw), Some(decoded)) = (i.raw_bytes, i.decoded_bytes) {
         // Per triangle only where every object is one or more of them.
         let faces = i.counts.get(ShapeKind::Polygon) + i.counts.get(ShapeKind::Patch);
         if i.triangles >= i.objects && faces == i.objects {
             let per = raw as f64 / i.triangles as f64;
-            outln!(out, "               {per:.1} bytes per triangle; {decoded} bytes expanded");
+            outln!(
+                out,
+                "               {per:.1} bytes per triangle; {decoded} bytes expanded"
+            );
         }
     }
     if let Some(layout) = i.layout {
@@ -140,7 +150,8 @@ fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
             _ => "objects in input order",
         };
         match (i.runs, i.run_triangles) {
-            (Some(r), Some(t)) => outln!(out, 
+            (Some(r), Some(t)) => outln!(
+                out,
                 "  layout       {layout}: {t} of {} triangles in {r} runs, {order}",
                 i.triangles
             ),
@@ -151,14 +162,16 @@ fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
         outln!(out, "  version      {v}");
     }
     if let Some(models) = &i.models {
-        outln!(out, 
+        outln!(
+            out,
             "  models       {} stored once, {} triangles placed by {} instances",
             models.len(),
             i.placed_triangles.unwrap_or(0),
             i.counts.get(ShapeKind::Instance)
         );
         for (k, m) in models.iter().enumerate() {
-            outln!(out, 
+            outln!(
+                out,
                 "    model {k}: {} triangles, {} vertices, {} bytes ({:.1} per triangle), {} instances",
                 m.triangles,
                 m.vertices,
@@ -170,14 +183,18 @@ fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
     }
     match (&i.density_entries, &i.dense_regions) {
         (Some(n), Some(regions)) => {
-            outln!(out, 
+            outln!(
+                out,
                 "  density      {n} occupied cells and size classes; {} dense regions",
                 regions.len()
             );
             for r in regions {
-                outln!(out, 
+                outln!(
+                    out,
                     "    {} objects in {:?} .. {:?}",
-                    r.objects, r.bbox_min, r.bbox_max
+                    r.objects,
+                    r.bbox_min,
+                    r.bbox_max
                 );
             }
         }
