@@ -93,6 +93,19 @@ pub struct ObjectStore {
     ranks: Vec<u32>,
 }
 
+impl Face {
+    /// The kind of primitive a face is (a triangle, or a triangular
+    /// patch: the same intersection test).
+    #[inline(always)]
+    pub fn kind(&self) -> crate::shapes::ShapeKind {
+        if self.patch {
+            crate::shapes::ShapeKind::Patch
+        } else {
+            crate::shapes::ShapeKind::Polygon
+        }
+    }
+}
+
 impl ObjectStore {
     /// Bytes an in-memory copy of `db` takes, about: faces in runs as
     /// six bytes and their runs' corners (at most those of the file's

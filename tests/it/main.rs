@@ -37,3 +37,4 @@ mod cluster_wire;
 mod deploy;
 mod df_paging;
 mod docs_commands;
+mod simd_widths;

@@ -3,7 +3,6 @@
 //! test's of the object's kind, bit for bit.
 
 use super::{Candidate, DfScene};
-use crate::hit::PrimId;
 use crate::kernels::{
     ConeLanes, Crossings, LANES, Lanes, PlaneLanes, RayLanes, SphereLanes, Triangle, each_lane,
 };
@@ -195,14 +194,5 @@ pub fn test<R: Elem, L: Simd>(
                 hits
             }
         },
-    }
-}
-
-/// The primitive lane `i` of a test of candidate `c` (object `id`) hit.
-#[inline(always)]
-pub fn prim_of<R>(c: &Candidate, id: u32, out: &Found<R>, i: usize) -> PrimId {
-    match c {
-        Candidate::Instance(..) => PrimId::instance(id, out.prim[i]),
-        _ => PrimId::object(id),
     }
 }

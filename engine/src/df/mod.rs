@@ -511,6 +511,7 @@ pub fn render(
         depth: opts.max_depth,
         threads: trace::thread_count(opts),
         precision: format!("{:?}", opts.precision).to_lowercase(),
+        simd: Some(crate::simd::Isa::choose(opts.simd)?.name().into()),
         epsilon: scene.shade.eps,
         rays,
         intersection_tests: tests.total(),

@@ -3,14 +3,16 @@
 //! A uniform grid sized for a scanned mesh is mostly empty voxels: the
 //! dragon's grid has 3.5 million, of which 100,000 list anything. A group
 //! of rays walking it voxel by voxel pays for every empty one it crosses.
-//! Level `l` of the pyramid has a bit per block of `2^l x 2^l x 2^l`
-//! voxels of the grid (level 0 is the grid's own bits), set when any voxel
-//! of the block lists something; a walk descends from the one block of the
-//! top level into the set blocks its rays meet, and reaches only voxels
+//! Level `l` of the pyramid has a block per `2^l x 2^l x 2^l` voxels of
+//! the grid (level 0: the voxels), and holds for each block of level 1
+//! and up a byte whose bit `x + 2y + 4z` is set when its child
+//! `(x, y, z)` (a block of the level below, or a voxel) holds a voxel
+//! that lists something. A walk descends from the one block of the top
+//! level into the set children its rays meet, and reaches only voxels
 //! that list something. It is the grid itself, summarised: the voxels
 //! and their lists are those of the paper's uniform subdivision.
 
-/// The levels above the grid's own occupancy bits.
+/// The levels above the grid's voxels.
 #[derive(Default)]
 pub struct Pyramid {
     /// Level `l + 1` at index `l`.
@@ -19,10 +21,12 @@ pub struct Pyramid {
 
 struct Level {
     res: [u32; 3],
-    bits: Vec<u64>,
+    /// Each block's children that hold something, one bit each.
+    kids: Vec<u8>,
 }
 
 impl Level {
+    #[inline(always)]
     fn index(&self, c: [u32; 3]) -> usize {
         c[0] as usize
             + self.res[0] as usize * (c[1] as usize + self.res[1] as usize * c[2] as usize)
@@ -40,18 +44,31 @@ impl Pyramid {
             let cells = up.iter().map(|&r| r as usize).product::<usize>();
             let mut level = Level {
                 res: up,
-                bits: vec![0; cells.div_ceil(64)],
+                kids: vec![0; cells],
             };
-            let below: &[u64] = levels.last().map_or(occupied, |l| &l.bits);
             let (rx, ry) = (below_res[0] as usize, below_res[1] as usize);
-            for (w, &word) in below.iter().enumerate() {
-                let mut bits = word;
-                while bits != 0 {
-                    let i = w * 64 + bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    let c = [i % rx, i / rx % ry, i / (rx * ry)].map(|x| (x / 2) as u32);
-                    let j = level.index(c);
-                    level.bits[j >> 6] |= 1 << (j & 63);
+            let mut mark = |i: usize| {
+                let c = [i % rx, i / rx % ry, i / (rx * ry)];
+                let child = (c[0] & 1) | (c[1] & 1) << 1 | (c[2] & 1) << 2;
+                let j = level.index(c.map(|x| (x / 2) as u32));
+                level.kids[j] |= 1 << child;
+            };
+            match levels.last() {
+                None => {
+                    for (w, &word) in occupied.iter().enumerate() {
+                        let mut bits = word;
+                        while bits != 0 {
+                            mark(w * 64 + bits.trailing_zeros() as usize);
+                            bits &= bits - 1;
+                        }
+                    }
+                }
+                Some(below) => {
+                    for (i, &k) in below.kids.iter().enumerate() {
+                        if k != 0 {
+                            mark(i);
+                        }
+                    }
                 }
             }
             levels.push(level);
@@ -60,29 +77,22 @@ impl Pyramid {
         Pyramid { levels }
     }
 
-    /// Levels above the grid's.
+    /// Levels above the grid's voxels.
     pub fn height(&self) -> usize {
         self.levels.len()
     }
 
-    /// Resolution of level `l` (1 and up).
+    /// The children of block `c` of level `l` (1 and up) that hold a voxel
+    /// that lists something: bit `x + 2y + 4z` for child `(x, y, z)`.
     #[inline(always)]
-    pub fn res(&self, l: usize) -> [u32; 3] {
-        self.levels[l - 1].res
-    }
-
-    /// Whether block `c` of level `l` (1 and up) holds a voxel that lists
-    /// something.
-    #[inline(always)]
-    pub fn occupied(&self, l: usize, c: [u32; 3]) -> bool {
+    pub fn kids(&self, l: usize, c: [u32; 3]) -> u8 {
         let level = &self.levels[l - 1];
-        let i = level.index(c);
-        level.bits[i >> 6] >> (i & 63) & 1 != 0
+        level.kids[level.index(c)]
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| 8 * l.bits.len()).sum()
+        self.levels.iter().map(|l| l.kids.len()).sum()
     }
 }
 
@@ -164,8 +174,8 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_block_is_set_exactly_when_a_voxel_below_it_is() {
-        let res = [13, 7, 5];
+    fn a_child_is_set_exactly_when_a_voxel_below_it_is() {
+        let res = [13u32, 7, 5];
         let cells = 13 * 7 * 5;
         let mut occupied = vec![0u64; (cells as usize).div_ceil(64)];
         let set = [0usize, 12, 13 * 6, 13 * 7 * 4 + 12, 200, 201];
@@ -174,23 +184,39 @@ mod tests {
         }
         let p = Pyramid::build(res, &occupied);
         assert_eq!(p.height(), 4, "13 -> 7 -> 4 -> 2 -> 1");
-        assert_eq!(p.res(p.height()), [1, 1, 1]);
+        let holds = |l: usize, c: [usize; 3]| {
+            set.iter().any(|&i| {
+                let v = [i % 13, i / 13 % 7, i / 91];
+                (0..3).all(|a| v[a] >> l == c[a])
+            })
+        };
+        let mut r = res;
         for l in 1..=p.height() {
-            let r = p.res(l);
+            let below = r;
+            r = r.map(|x| x.div_ceil(2));
             for z in 0..r[2] {
                 for y in 0..r[1] {
                     for x in 0..r[0] {
-                        let want = set.iter().any(|&i| {
-                            let c = [i % 13, i / 13 % 7, i / 91];
-                            c[0] >> l == x as usize
-                                && c[1] >> l == y as usize
-                                && c[2] >> l == z as usize
-                        });
-                        assert_eq!(p.occupied(l, [x, y, z]), want, "level {l} {x} {y} {z}");
+                        let k = p.kids(l, [x, y, z]);
+                        for child in 0..8usize {
+                            let c = [
+                                2 * x as usize + (child & 1),
+                                2 * y as usize + (child >> 1 & 1),
+                                2 * z as usize + (child >> 2 & 1),
+                            ];
+                            let inside = (0..3).all(|a| c[a] < below[a] as usize);
+                            let want = inside && holds(l - 1, c);
+                            assert_eq!(
+                                k >> child & 1 != 0,
+                                want,
+                                "level {l} {x} {y} {z} child {child}"
+                            );
+                        }
                     }
                 }
             }
         }
+        assert_eq!(r, [1, 1, 1]);
     }
 
     #[test]

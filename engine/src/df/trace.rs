@@ -10,7 +10,7 @@ use super::lanes::Found;
 use super::walk::{self, Hits};
 use crate::error::Error;
 use crate::intersect::RayQ;
-use crate::kernels::{LANES, Lanes, RayLanes, each_lane};
+use crate::kernels::{BATCH, LANES, Lanes, RayLanes, TriangleBatch, each_lane};
 use crate::math::Vec3;
 use crate::progress::Progress;
 use crate::render::{
@@ -85,6 +85,12 @@ pub struct Scratch<R = f64> {
     pub found: Box<Found<R>>,
     /// Which lanes of the current walk tested which objects.
     pub mailbox: super::mailbox::Mailbox,
+    /// A voxel's faces, their ids, the lanes that test each, and the
+    /// distances a ray finds to them.
+    pub batch: Box<TriangleBatch<R>>,
+    pub batch_ids: [u32; BATCH],
+    pub batch_lanes: [Lanes; BATCH],
+    pub batch_t: [R; BATCH],
 }
 
 pub const NO_OBJECT: u32 = u32::MAX;
@@ -101,6 +107,10 @@ impl<R: Elem> Scratch<R> {
             intersect_ns: 0,
             found: Found::new(),
             mailbox: Default::default(),
+            batch: TriangleBatch::new(),
+            batch_ids: [0; BATCH],
+            batch_lanes: [0; BATCH],
+            batch_t: [R::ZERO; BATCH],
         }
     }
 }

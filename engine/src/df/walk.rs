@@ -22,8 +22,11 @@ use super::pyramid::BlockBounds;
 use super::trace::{NO_OBJECT, Scratch};
 use super::{Candidate, DfScene, ObjectGrid};
 use crate::hit::{Hit, PrimId};
-use crate::kernels::{BoxLanes, LANES, Lanes, RayLanes, each_lane, widen};
+use crate::kernels::{
+    BATCH, BoxLanes, LANES, Lanes, RayLanes, RayTriangles, Triangle, each_lane, widen,
+};
 use crate::math::Real;
+use crate::objects::Slot;
 use crate::scene::Aabb;
 use crate::simd::{Elem, Job, Lanes as Simd};
 
@@ -87,8 +90,11 @@ trait Goal<R: Elem> {
     /// Each lane's upper bound on the distance of a hit worth finding.
     fn limit(&self) -> &[R; LANES];
     const WANT: Want;
-    /// Takes the hits `hit` of candidate `c` (object `id`), found in `out`.
-    fn take(&mut self, s: &DfScene, c: &Candidate, id: u32, hit: Lanes, out: &Found<R>);
+    /// Takes the hits `hit` of object `id`, found in `out` (which holds a
+    /// placed model's triangles if `instance`).
+    fn take(&mut self, s: &DfScene, id: u32, hit: Lanes, out: &Found<R>, instance: bool);
+    /// Takes lane `i`'s hit at `t` on object `id`.
+    fn take_lane(&mut self, s: &DfScene, i: usize, t: R, id: u32);
 }
 
 struct Nearest<'b, R> {
@@ -110,12 +116,21 @@ impl<R: Elem> Goal<R> for Nearest<'_, R> {
     const WANT: Want = Want::Nearest;
 
     #[inline(always)]
-    fn take(&mut self, s: &DfScene, c: &Candidate, id: u32, hit: Lanes, out: &Found<R>) {
+    fn take(&mut self, s: &DfScene, id: u32, hit: Lanes, out: &Found<R>, instance: bool) {
         let ranks = s.objects.ranks();
         for i in each_lane(hit) {
-            self.best
-                .offer(i, out.t[i], lanes::prim_of(c, id, out, i), ranks);
+            let prim = if instance {
+                PrimId::instance(id, out.prim[i])
+            } else {
+                PrimId::object(id)
+            };
+            self.best.offer(i, out.t[i], prim, ranks);
         }
+    }
+
+    #[inline(always)]
+    fn take_lane(&mut self, s: &DfScene, i: usize, t: R, id: u32) {
+        self.best.offer(i, t, PrimId::object(id), s.objects.ranks());
     }
 }
 
@@ -139,7 +154,12 @@ impl<R: Elem> Goal<R> for Any<'_, R> {
     const WANT: Want = Want::Any;
 
     #[inline(always)]
-    fn take(&mut self, _: &DfScene, _: &Candidate, id: u32, hit: Lanes, _: &Found<R>) {
+    fn take_lane(&mut self, _: &DfScene, i: usize, _: R, id: u32) {
+        self.open &= !(1 << i);
+        self.blocker = id;
+    }
+
+    fn take(&mut self, _: &DfScene, id: u32, hit: Lanes, _: &Found<R>, _: bool) {
         if hit != 0 {
             self.open &= !hit;
             self.blocker = id;
@@ -262,6 +282,8 @@ fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
     goal: &mut G,
 ) {
     let spec = &g.spec;
+    let first = goal.live().trailing_zeros() as usize & (LANES - 1);
+    let order = ChildOrder::of(rays.d(first));
     let mut stack = [(0u8, [0u32; 3], 0 as Lanes); MAX_BLOCKS];
     stack[0] = (g.pyramid.height() as u8, [0; 3], goal.live());
     let mut sp = 1;
@@ -292,37 +314,44 @@ fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
             }
             continue;
         }
-        // The set children, nearest last on the stack (popped first) for
-        // the first lane's direction.
-        let f = lanes.trailing_zeros() as usize;
-        let flip = (rays.d64[0][f] < 0.0) as usize
-            | ((rays.d64[1][f] < 0.0) as usize) << 1
-            | ((rays.d64[2][f] < 0.0) as usize) << 2;
-        let below = if l == 1 {
-            spec.res
-        } else {
-            g.pyramid.res(l - 1)
-        };
+        // The set children, nearest last on the stack (popped first).
+        let kids = g.pyramid.kids(l, c);
         for k in (0..8).rev() {
-            let j = k ^ flip;
-            let child = [
-                c[0] * 2 + (j & 1) as u32,
-                c[1] * 2 + (j >> 1 & 1) as u32,
-                c[2] * 2 + (j >> 2 & 1) as u32,
-            ];
-            if child[0] >= below[0] || child[1] >= below[1] || child[2] >= below[2] {
-                continue;
-            }
-            let set = if l == 1 {
-                g.occupied(spec.index(child))
-            } else {
-                g.pyramid.occupied(l - 1, child)
-            };
-            if set {
-                stack[sp] = (level - 1, child, lanes);
+            let j = order.0[k];
+            if kids >> j & 1 != 0 {
+                stack[sp] = (
+                    level - 1,
+                    [
+                        c[0] * 2 + (j & 1) as u32,
+                        c[1] * 2 + (j >> 1 & 1) as u32,
+                        c[2] * 2 + (j >> 2 & 1) as u32,
+                    ],
+                    lanes,
+                );
                 sp += 1;
             }
         }
+    }
+}
+
+/// The order in which a walk enters a block's eight children: front to
+/// back for a direction, the axis it moves fastest along varying
+/// slowest, so that blocks nearer along it come first.
+struct ChildOrder([u8; 8]);
+
+impl ChildOrder {
+    fn of(d: crate::math::Vec3) -> ChildOrder {
+        // Axes from the slowest along `d` to the fastest.
+        let mut axes = [0usize, 1, 2];
+        axes.sort_by(|&a, &b| d[a].abs().total_cmp(&d[b].abs()));
+        let flip = (d.x < 0.0) as u8 | ((d.y < 0.0) as u8) << 1 | ((d.z < 0.0) as u8) << 2;
+        ChildOrder(std::array::from_fn(|k| {
+            let mut j = 0u8;
+            for (bit, &a) in axes.iter().enumerate() {
+                j |= ((k >> bit & 1) as u8) << a;
+            }
+            j ^ flip
+        }))
     }
 }
 
@@ -345,12 +374,25 @@ fn visit_voxel<R: Elem, L: Simd, G: Goal<R>>(
     let f = lanes.trailing_zeros() as usize & (LANES - 1);
     let hf = high_first(rays.d(f));
     let h = g.hierarchies();
+    // The voxel's faces go in a batch, tested ray by ray once the list is
+    // read; other objects one by one, against the lanes.
+    sc.batch.n = 0;
     for &e in g.cell(index) {
         if goal.live() == 0 {
             return;
         }
         if e & NESTED == 0 {
-            entry::<R, L, G>(s, sc, e, lanes, rays, goal);
+            if let Slot::Face(face) = s.objects.slot(e) {
+                let m = sc.mailbox.untested(e, lanes & goal.live());
+                if m != 0 {
+                    sc.tests.add_n(face.kind(), m.count_ones() as u64);
+                    let j = sc.batch.push(&s.objects.positions(&face));
+                    sc.batch_ids[j] = e;
+                    sc.batch_lanes[j] = m;
+                }
+            } else {
+                entry::<R, L, G>(s, sc, e, lanes, rays, goal);
+            }
             continue;
         }
         let mut pending = [(0u32, 0 as Lanes); MAX_PENDING];
@@ -395,6 +437,52 @@ fn visit_voxel<R: Elem, L: Simd, G: Goal<R>>(
             }
         }
     }
+    if sc.batch.n > 0 {
+        test_batch::<R, L, G>(s, sc, rays, goal);
+    }
+}
+
+/// A voxel that is not crowded lists no more faces than a batch holds.
+const _: () = assert!(super::nested::MIN_OBJECTS <= BATCH);
+
+/// Tests the faces gathered in the batch, each against the lanes that
+/// met it and had not tested it: ray by ray, all of a ray's faces at
+/// once.
+#[inline(always)]
+fn test_batch<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+) {
+    // Each lane's faces (a transpose of the faces' lanes).
+    let mut union = 0;
+    for j in 0..sc.batch.n {
+        union |= sc.batch_lanes[j];
+    }
+    let mut faces = [0 as Lanes; LANES];
+    for j in 0..sc.batch.n {
+        for i in each_lane(sc.batch_lanes[j]) {
+            faces[i] |= 1 << j;
+        }
+    }
+    for i in each_lane(union) {
+        if goal.live() >> i & 1 == 0 {
+            continue;
+        }
+        let hit = RayTriangles {
+            batch: &sc.batch,
+            m: faces[i],
+            rays,
+            i,
+            limit: goal.limit()[i],
+            t_out: &mut sc.batch_t,
+        }
+        .run::<L>();
+        for j in each_lane(hit) {
+            goal.take_lane(s, i, sc.batch_t[j], sc.batch_ids[j]);
+        }
+    }
 }
 
 /// Object `id`, met by the lanes `lm`: tested against those that have not
@@ -424,6 +512,24 @@ fn test<R: Elem, L: Simd, G: Goal<R>>(
     m: Lanes,
     goal: &mut G,
 ) {
+    // Faces (the bulk of a mesh) straight to the triangle kernel; other
+    // objects through their kind's test.
+    if let Slot::Face(f) = s.objects.slot(id) {
+        let v = s.objects.positions(&f);
+        sc.tests.add_n(f.kind(), m.count_ones() as u64);
+        let hit = Triangle {
+            v: &v,
+            rays,
+            m,
+            limit: goal.limit(),
+            t_out: &mut sc.found.t,
+        }
+        .run::<L>();
+        if hit != 0 {
+            goal.take(s, id, hit, &sc.found, false);
+        }
+        return;
+    }
     let c = s.candidate(id);
     let hit = lanes::test::<R, L>(
         s,
@@ -435,7 +541,8 @@ fn test<R: Elem, L: Simd, G: Goal<R>>(
         &mut sc.found,
         &mut sc.tests,
     );
-    goal.take(s, &c, id, hit, &sc.found);
+    let instance = matches!(c, Candidate::Instance(..));
+    goal.take(s, id, hit, &sc.found, instance);
 }
 
 #[inline(always)]

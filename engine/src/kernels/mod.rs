@@ -17,10 +17,14 @@
 //!   vertices;
 //! - [`ConeLanes`] for cones and cylinders;
 //! - [`BoxLanes`], the conservative box test of a traversal, and
-//!   [`MayHitBox`], the exact box pre-test of polygons and cones.
+//!   [`MayHitBox`], the exact box pre-test of polygons and cones;
+//! - and the other way round, [`RayTriangles`]: one ray against a batch
+//!   of triangles, for the few rays of a depth-first packet that reach a
+//!   voxel listing many.
 //!
 //! Run a kernel with [`crate::simd::Isa::run`].
 
+mod batch;
 mod boxes;
 mod cone;
 mod polygon;
@@ -28,6 +32,7 @@ mod rays;
 mod sphere;
 mod triangle;
 
+pub use batch::{BATCH, RayTriangles, TriangleBatch};
 pub use boxes::{BoxLanes, MayHitBox, widen};
 pub use cone::ConeLanes;
 pub use polygon::{Crossings, PlaneLanes};
@@ -55,14 +60,16 @@ pub(crate) fn lane_mask<V: Float>() -> u64 {
 /// never `array::map` or closures, around vector code.
 macro_rules! for_chunks {
     ($V:ty, $m:expr, |$c:ident, $bits:ident| $body:block) => {{
-        let m: u64 = $m;
-        let end = (u64::BITS - m.leading_zeros()) as usize;
+        let n = <$V as $crate::simd::Float>::N;
         let lm = $crate::kernels::lane_mask::<$V>();
-        let mut $c = 0;
-        while $c < end {
+        let m: u64 = $m;
+        // Straight to the next vector holding a lane of `m`.
+        let mut rest = m;
+        while rest != 0 {
+            let $c = rest.trailing_zeros() as usize / n * n;
             let $bits = (m >> $c) & lm;
-            if $bits != 0 $body
-            $c += <$V as $crate::simd::Float>::N;
+            rest &= !(lm << $c);
+            $body
         }
     }};
 }

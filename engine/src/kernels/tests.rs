@@ -394,3 +394,69 @@ fn a_lane_is_the_ray_the_scalar_tests_take() {
         assert_eq!(g.inv_a[i].to_bits(), q.inv_a.to_bits());
     }
 }
+
+/// One ray against a batch of triangles gives each triangle the scalar
+/// test's answer, on every instruction set.
+#[test]
+fn batches_of_triangles_match_the_scalar_test() {
+    fn run<R: Elem>(rng: &mut Rng) -> usize {
+        let mut hits = 0;
+        for round in 0..40 {
+            let tris: Vec<[[f32; 3]; 3]> = (0..BATCH - round % 7)
+                .map(|_| [rng.point(1.0), rng.point(1.0), rng.point(1.0)])
+                .collect();
+            let mut batch = TriangleBatch::<R>::new();
+            for t in &tris {
+                batch.push(t);
+            }
+            let g = rays::<R>(rng, &tris.iter().map(|t| t[0]).collect::<Vec<_>>());
+            for i in 0..LANES {
+                let m = if i % 3 == 0 {
+                    batch.all()
+                } else {
+                    batch.all() & 0x5555_5555_5555_5555
+                };
+                let want: Vec<Option<R>> = (0..BATCH)
+                    .map(|j| {
+                        (m >> j & 1 != 0)
+                            .then(|| {
+                                let t = &tris[j];
+                                triangle::intersect(
+                                    t[0],
+                                    t[1],
+                                    t[2],
+                                    &g.ray(i),
+                                    g.t_min[i],
+                                    g.t_max[i],
+                                )
+                            })
+                            .flatten()
+                    })
+                    .collect();
+                for isa in Isa::available_here() {
+                    let mut t = [R::ZERO; BATCH];
+                    let got = isa.run(RayTriangles {
+                        batch: &batch,
+                        m,
+                        rays: &g,
+                        i,
+                        limit: g.t_max[i],
+                        t_out: &mut t,
+                    });
+                    for j in 0..BATCH {
+                        assert_eq!(
+                            want[j].map(|x| x.to_f64().to_bits()),
+                            (got >> j & 1 != 0).then(|| t[j].to_f64().to_bits()),
+                            "{isa}, ray {i}, triangle {j}"
+                        );
+                    }
+                }
+                hits += want.iter().filter(|w| w.is_some()).count();
+            }
+        }
+        hits
+    }
+    let mut rng = Rng(8);
+    assert!(run::<f64>(&mut rng) > 1000);
+    assert!(run::<f32>(&mut rng) > 1000);
+}

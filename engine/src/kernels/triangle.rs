@@ -3,7 +3,7 @@
 //! operations in the same order.
 
 use super::rays::{LANES, Lanes, RayLanes};
-use super::{for_chunks, lane_mask, ld};
+use super::{for_chunks, lane_mask, ld, ld3, of_f32, splat3, sub3};
 use crate::simd::{Elem, Float, Job, Lanes as Simd, Mask};
 
 /// The lanes of `m` whose rays meet the triangle `v` at some `t` with
@@ -24,82 +24,91 @@ impl<R: Elem> Job for Triangle<'_, R> {
     #[inline(always)]
     fn run<L: Simd>(self) -> Lanes {
         let mut hits = 0;
-        for_chunks!(R::V<L>, self.m, |c, bits| {
-            let h = chunk::<R, R::V<L>>(self.v, self.rays, c, bits, self.limit, self.t_out);
-            hits |= (h & bits) << c;
-        });
+        let rays = self.rays;
+        if rays.same_axes {
+            // Every ray permutes the axes alike: the corners' coordinates
+            // in the rays' axes, splat once for every vector of lanes.
+            let k = rays.axes[0].map(|k| usize::from(k).min(2));
+            let corners = [
+                permuted::<R, R::V<L>>(&self.v[0], k),
+                permuted::<R, R::V<L>>(&self.v[1], k),
+                permuted::<R, R::V<L>>(&self.v[2], k),
+            ];
+            for_chunks!(R::V<L>, self.m, |c, bits| {
+                let o = [
+                    ld::<R::V<L>>(&rays.o[k[0]], c),
+                    ld::<R::V<L>>(&rays.o[k[1]], c),
+                    ld::<R::V<L>>(&rays.o[k[2]], c),
+                ];
+                let rel = [
+                    sub3(&corners[0], &o),
+                    sub3(&corners[1], &o),
+                    sub3(&corners[2], &o),
+                ];
+                let h = finish::<R, R::V<L>>(&rel, rays, c, bits, self.limit, self.t_out);
+                hits |= (h & bits) << c;
+            });
+        } else {
+            for_chunks!(R::V<L>, self.m, |c, bits| {
+                let rel = relative::<R, R::V<L>>(self.v, rays, c);
+                let h = finish::<R, R::V<L>>(&rel, rays, c, bits, self.limit, self.t_out);
+                hits |= (h & bits) << c;
+            });
+        }
         hits
     }
 }
 
-/// One vector of lanes from lane `c`, of which `bits` are asked for: the
-/// mask of hits (relative to `c`).
+/// A corner's coordinates in the axes `k`, each in every lane.
 #[inline(always)]
-fn chunk<R: Elem, V: Float<Elem = R>>(
+fn permuted<R: Elem, V: Float<Elem = R>>(p: &[f32; 3], k: [usize; 3]) -> [V; 3] {
+    [
+        V::splat(R::from_f32(p[k[0]])),
+        V::splat(R::from_f32(p[k[1]])),
+        V::splat(R::from_f32(p[k[2]])),
+    ]
+}
+
+/// The corners relative to the origins of the lanes from `c`, in each
+/// ray's own axes (picked lane by lane).
+#[inline(always)]
+fn relative<R: Elem, V: Float<Elem = R>>(
     v: &[[f32; 3]; 3],
+    rays: &RayLanes<R>,
+    c: usize,
+) -> [[V; 3]; 3] {
+    let o = ld3::<V>(&rays.o, c);
+    let (zero, one) = (V::splat(R::ZERO), V::splat(R::ONE));
+    let (kx, ky, kz) = (
+        ld::<V>(&rays.kx, c),
+        ld::<V>(&rays.ky, c),
+        ld::<V>(&rays.kz, c),
+    );
+    let is0 = [kx.eq(zero), ky.eq(zero), kz.eq(zero)];
+    let is1 = [kx.eq(one), ky.eq(one), kz.eq(one)];
+    let mut out = [[zero; 3]; 3];
+    for (p, corner) in out.iter_mut().zip(v) {
+        let w = sub3(&splat3(of_f32(*corner)), &o);
+        for j in 0..3 {
+            p[j] = V::select(is0[j], w[0], V::select(is1[j], w[1], w[2]));
+        }
+    }
+    out
+}
+
+/// The watertight test proper, for the lanes from `c` (of which `bits`
+/// are asked for), given the corners relative to each origin in each
+/// ray's axes: the mask of hits (relative to `c`).
+#[inline(always)]
+fn finish<R: Elem, V: Float<Elem = R>>(
+    rel: &[[V; 3]; 3],
     rays: &RayLanes<R>,
     c: usize,
     bits: u64,
     limit: &[R; LANES],
     t_out: &mut [R; LANES],
 ) -> u64 {
-    // Each corner relative to the origin, in the ray's axes (x, y, z after
-    // the permutation): read by index when every ray has the same axes,
-    // else picked lane by lane. (Written out: a closure or `array::map`
-    // here might not be inlined into the function compiled for the
-    // instruction set, and its vector operations would become calls.)
-    let (a, b, cc): ([V; 3], [V; 3], [V; 3]);
-    if rays.same_axes {
-        let [kx, ky, kz] = rays.axes[0];
-        let (kx, ky, kz) = (kx as usize, ky as usize, kz as usize);
-        let (ox, oy, oz) = (
-            ld::<V>(&rays.o[kx], c),
-            ld::<V>(&rays.o[ky], c),
-            ld::<V>(&rays.o[kz], c),
-        );
-        let f = R::from_f32;
-        a = [
-            V::splat(f(v[0][kx])) - ox,
-            V::splat(f(v[0][ky])) - oy,
-            V::splat(f(v[0][kz])) - oz,
-        ];
-        b = [
-            V::splat(f(v[1][kx])) - ox,
-            V::splat(f(v[1][ky])) - oy,
-            V::splat(f(v[1][kz])) - oz,
-        ];
-        cc = [
-            V::splat(f(v[2][kx])) - ox,
-            V::splat(f(v[2][ky])) - oy,
-            V::splat(f(v[2][kz])) - oz,
-        ];
-    } else {
-        let o = [
-            ld::<V>(&rays.o[0], c),
-            ld::<V>(&rays.o[1], c),
-            ld::<V>(&rays.o[2], c),
-        ];
-        let (zero, one) = (V::splat(R::ZERO), V::splat(R::ONE));
-        let (kx, ky, kz) = (
-            ld::<V>(&rays.kx, c),
-            ld::<V>(&rays.ky, c),
-            ld::<V>(&rays.kz, c),
-        );
-        let is0 = [kx.eq(zero), ky.eq(zero), kz.eq(zero)];
-        let is1 = [kx.eq(one), ky.eq(one), kz.eq(one)];
-        let mut out = [[V::splat(R::ZERO); 3]; 3];
-        for (p, corner) in out.iter_mut().zip(v) {
-            let w = [
-                V::splat(R::from_f32(corner[0])) - o[0],
-                V::splat(R::from_f32(corner[1])) - o[1],
-                V::splat(R::from_f32(corner[2])) - o[2],
-            ];
-            for j in 0..3 {
-                p[j] = V::select(is0[j], w[0], V::select(is1[j], w[1], w[2]));
-            }
-        }
-        [a, b, cc] = out;
-    }
+    let [a, b, cc] = rel;
     let (sx, sy, sz) = (
         ld::<V>(&rays.sx, c),
         ld::<V>(&rays.sy, c),

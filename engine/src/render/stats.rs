@@ -34,6 +34,10 @@ pub struct RenderStats {
     pub depth: u8,
     pub threads: usize,
     pub precision: String,
+    /// The SIMD instruction set of the intersection kernels (`avx512`,
+    /// `avx2`, `sse`, `neon`, `portable`), for the tracers that use them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub simd: Option<String>,
     pub epsilon: f64,
     #[serde(flatten)]
     pub rays: RayCounts,

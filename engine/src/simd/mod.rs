@@ -83,9 +83,9 @@ impl Isa {
             #[cfg(target_arch = "x86_64")]
             Isa::Sse => true,
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => std::arch::is_x86_feature_detected!("avx2"),
+            Isa::Avx2 => x86::has_avx2(),
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            Isa::Avx512 => x86::has_avx2() && std::arch::is_x86_feature_detected!("avx512f"),
             #[cfg(target_arch = "aarch64")]
             Isa::Neon => true,
             #[allow(unreachable_patterns)]
@@ -148,8 +148,9 @@ impl Isa {
             #[cfg(target_arch = "x86_64")]
             Isa::Avx2 => {
                 assert!(self.available(), "AVX2 kernels on a CPU without AVX2");
-                // SAFETY: `run_avx2` needs AVX2, which the CPU has (checked
-                // just above; `is_x86_feature_detected!` caches its answer).
+                // SAFETY: `run_avx2` needs the features `x86::has_avx2`
+                // checks, which the CPU has (checked just above;
+                // `is_x86_feature_detected!` caches its answers).
                 unsafe { x86::run_avx2(job) }
             }
             #[cfg(target_arch = "x86_64")]

@@ -5,7 +5,8 @@
 //! this module are private to [`super`], and the only code that
 //! instantiates kernels with [`Avx2`] or [`Avx512`] is [`run_avx2`] and
 //! [`run_avx512`], which [`super::Isa::run`] calls only after
-//! `is_x86_feature_detected!` said the CPU has the feature. Loads and
+//! `is_x86_feature_detected!` said the CPU has the features they are
+//! compiled with ([`has_avx2`], and AVX-512F). Loads and
 //! stores read and write exactly `N` elements of a slice whose length was
 //! checked by indexing it first (`&src[..N]`). SSE2 is part of the
 //! x86-64 baseline, so its intrinsics need no such argument.
@@ -33,11 +34,23 @@ impl Lanes for Avx512 {
     type F64 = F64x8;
 }
 
+/// Whether the CPU has AVX2 and the bit instructions that come with every
+/// AVX2 CPU (x86-64-v3): population count, and BMI1/BMI2/LZCNT. The
+/// kernels count and find lanes in masks, which without `popcnt` costs
+/// twenty instructions a count.
+pub fn has_avx2() -> bool {
+    std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("popcnt")
+        && std::arch::is_x86_feature_detected!("bmi1")
+        && std::arch::is_x86_feature_detected!("bmi2")
+        && std::arch::is_x86_feature_detected!("lzcnt")
+}
+
 /// Runs `job` with AVX2 lanes.
 ///
 /// # Safety
-/// The CPU must have AVX2.
-#[target_feature(enable = "avx2")]
+/// The CPU must have what [`has_avx2`] checks.
+#[target_feature(enable = "avx2,popcnt,bmi1,bmi2,lzcnt")]
 pub unsafe fn run_avx2<J: Job>(job: J) -> J::Out {
     job.run::<Avx2>()
 }
@@ -45,8 +58,8 @@ pub unsafe fn run_avx2<J: Job>(job: J) -> J::Out {
 /// Runs `job` with AVX-512 lanes.
 ///
 /// # Safety
-/// The CPU must have AVX-512F.
-#[target_feature(enable = "avx512f")]
+/// The CPU must have AVX-512F and what [`has_avx2`] checks.
+#[target_feature(enable = "avx512f,avx2,popcnt,bmi1,bmi2,lzcnt")]
 pub unsafe fn run_avx512<J: Job>(job: J) -> J::Out {
     job.run::<Avx512>()
 }
