@@ -1,16 +1,7 @@
-//! The `sray` binary: the command line ([`cli`]) over the engine, the
-//! cluster's coordinator and worker, and the benchmarks.
-
-mod cli;
-
-/// The system allocator, until a depth-first render of a scene larger than
-/// its memory budget turns on file-backed large allocations (see
-/// `sray_engine::paging`).
-#[global_allocator]
-static ALLOC: sray_engine::paging::PagingAlloc = sray_engine::paging::PagingAlloc;
+//! The `sray` binary: the command line (`sray_cli`) with the system
+//! allocator. The file-backed allocator that the paper's paging experiment
+//! needs is in `sray-paged` only (`src/bin/sray-paged.rs`).
 
 fn main() -> std::process::ExitCode {
-    sray_engine::sys::report_file_size_limit_as_error();
-    sray_engine::sys::return_freed_memory_to_the_system();
-    cli::main()
+    sray_cli::run()
 }

@@ -94,7 +94,7 @@ fn render(
         ctx.work().display().to_string(),
     ]
     .into();
-    exec::sray_render_maybe_capped(cap, &args, ctx.work(), s.limit_secs)
+    exec::sray_render_maybe_capped(&exec::sray_exe()?, cap, &args, ctx.work(), s.limit_secs)
 }
 
 /// Generates a database with `sray gen`, timed.

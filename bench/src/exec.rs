@@ -105,14 +105,36 @@ pub fn sray_exe() -> anyhow::Result<PathBuf> {
         .context("internal: the sray binary to measure was not set")
 }
 
+/// `sray-paged` beside the `sray` under measurement: the same program with
+/// the file-backed allocator, through which the depth-first tracer pages
+/// past its budget (table2's depth-first runs).
+pub fn sray_paged_exe() -> anyhow::Result<PathBuf> {
+    let sray = sray_exe()?;
+    let p = sray.with_file_name(format!("sray-paged{}", std::env::consts::EXE_SUFFIX));
+    if !p.is_file() {
+        bail!(
+            "{} not found beside {}: the depth-first runs page through sray-paged \
+             (cargo build --release builds it)",
+            p.display(),
+            sray.display()
+        );
+    }
+    Ok(p)
+}
+
 /// Runs `sray render ARGS --stats FILE` and reads the statistics.
 pub fn sray_render(args: &[String], cwd: &Path) -> anyhow::Result<Measured> {
+    sray_render_with(&sray_exe()?, args, cwd)
+}
+
+/// [`sray_render`] with the binary `exe` (`sray` or `sray-paged`).
+pub fn sray_render_with(exe: &Path, args: &[String], cwd: &Path) -> anyhow::Result<Measured> {
     let stats = cwd.join(".bench-stats.json");
     let mut a: Vec<String> = vec!["render".into()];
     a.extend(args.iter().cloned());
     a.push("--stats".into());
     a.push(stats.display().to_string());
-    let mut m = measure(&sray_exe()?, &a, cwd)?;
+    let mut m = measure(exe, &a, cwd)?;
     let text = std::fs::read_to_string(&stats).with_context(|| stats.display().to_string())?;
     m.stats = Some(serde_json::from_str(&text)?);
     let _ = std::fs::remove_file(&stats);
@@ -343,8 +365,10 @@ impl Drop for MemoryCap {
     }
 }
 
-/// `sray render ARGS` under a memory cap, with its statistics.
+/// `exe render ARGS` (`exe` is `sray` or `sray-paged`) under a memory
+/// cap, with its statistics.
 pub fn sray_render_capped(
+    exe: &Path,
     cap: &MemoryCap,
     args: &[String],
     cwd: &Path,
@@ -356,7 +380,7 @@ pub fn sray_render_capped(
     a.extend(args.iter().cloned());
     a.push("--stats".into());
     a.push(stats.display().to_string());
-    let mut c = cap.run(&sray_exe()?, &a, cwd, limit_secs);
+    let mut c = cap.run(exe, &a, cwd, limit_secs);
     if let Some(m) = c.measured.as_mut() {
         let text = std::fs::read_to_string(&stats)?;
         m.stats = Some(serde_json::from_str(&text)?);
@@ -368,15 +392,16 @@ pub fn sray_render_capped(
 /// `sray render ARGS` under `cap` when there is one (stopped after
 /// `limit_secs`), else as a plain measured run.
 pub fn sray_render_maybe_capped(
+    exe: &Path,
     cap: Option<&MemoryCap>,
     args: &[String],
     cwd: &Path,
     limit_secs: f64,
 ) -> anyhow::Result<Capped> {
     match cap {
-        Some(c) => sray_render_capped(c, args, cwd, limit_secs),
+        Some(c) => sray_render_capped(exe, c, args, cwd, limit_secs),
         None => Ok(Capped {
-            measured: Some(sray_render(args, cwd)?),
+            measured: Some(sray_render_with(exe, args, cwd)?),
             oom_killed: false,
             timed_out: false,
             peak_bytes: 0,

@@ -2,7 +2,8 @@
 //! against breadth-first, under a real memory cap that the larger scenes
 //! exceed. The depth-first tracer, forced to run on scenes larger than its
 //! budget, keeps its big arrays in file-backed memory and pages, as the
-//! paper's RayShade paged through swap; the breadth-first tracer stays
+//! paper's RayShade paged through swap (it runs in `sray-paged`, the
+//! binary with the file-backed allocator); the breadth-first tracer stays
 //! within its budget.
 
 use super::chart::{self, Scale, Series};
@@ -65,11 +66,12 @@ pub(super) fn plan(ctx: &Ctx) -> Plan {
 /// one run when they are long (the points span orders of magnitude).
 fn measure(
     ctx: &Ctx,
+    exe: &std::path::Path,
     cap: Option<&MemoryCap>,
     args: &[String],
     limit: f64,
 ) -> anyhow::Result<Capped> {
-    let once = || exec::sray_render_maybe_capped(cap, args, ctx.work(), limit);
+    let once = || exec::sray_render_maybe_capped(exe, cap, args, ctx.work(), limit);
     let first = once()?;
     let short = first.measured.as_ref().is_some_and(|m| m.seconds < 20.0);
     if !short || ctx.runs < 2 {
@@ -113,8 +115,9 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     r.para(&format!(
         "{side}x{side}, depth 5, two threads, whole processes in a cgroup limited to {} (memory and \
          page cache alike, no swap). Both tracers get `--memory {}`. The depth-first tracer (`--mode \
-         df`) keeps its objects and grids in memory; when they need more than its budget it puts \
-         its large arrays in a file-backed mapping, which the kernel pages out and in under the cap, \
+         df`, run by `sray-paged`) keeps its objects and grids in memory; when they need more than \
+         its budget it puts its large arrays in a file-backed mapping, which the kernel pages out and \
+         in under the cap, \
          as the paper's RayShade paged through swap. The breadth-first tracer (`--mode bf`) holds rays \
          within its budget and reads the database front to back. \"df need\" is the depth-first \
          tracer's estimate of its memory. Runs stop after {:.0} s.",
@@ -167,7 +170,14 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                     ctx.work().display().to_string(),
                 ]
                 .into();
-                let c = measure(ctx, cap.as_ref(), &args, s.limit_secs)?;
+                // The depth-first tracer pages past its budget only in
+                // sray-paged, which installs the file-backed allocator.
+                let exe = if *mode == "df" {
+                    exec::sray_paged_exe()?
+                } else {
+                    exec::sray_exe()?
+                };
+                let c = measure(ctx, &exe, cap.as_ref(), &args, s.limit_secs)?;
                 line.push(outcome(&c, s.limit_secs));
                 line.push(if c.peak_bytes > 0 {
                     fmt_bytes(c.peak_bytes)

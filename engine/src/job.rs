@@ -5,7 +5,7 @@ use crate::bf::{self, BfOptions, Shading, StoreNumber};
 use crate::df;
 use crate::error::{Error, IoContext};
 use crate::mesh::MeshOptions;
-use crate::progress::Progress;
+use crate::progress::{Progress, RenderRounds};
 use crate::render::{Frame, Mode, RenderOptions, RenderStats};
 use crate::scene::setup::{Setup, SetupSink};
 use crate::sdb::{Compression, Database, DbWriter};
@@ -312,6 +312,12 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
     let progress = stages.stage("rendering");
     let (frame, mut stats) = match mode {
         Mode::Bf => {
+            // One count of rays for the whole render, not one per round.
+            let rounds = RenderRounds::new(
+                &*progress,
+                req.options.max_depth,
+                scene.db.scene().lights.len(),
+            );
             let out = bf::render(
                 &scene.db,
                 &req.options,
@@ -322,18 +328,32 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
                     shading: req.shading,
                     models: req.models,
                 },
-                &*progress,
+                &rounds,
             )?;
+            rounds.finish();
             (out.frame, out.stats)
         }
         _ => {
-            // A scene larger than the budget, forced depth-first: its big
-            // arrays go to file-backed memory, which pages as RayShade's
-            // heap did through swap, instead of exceeding the budget.
+            // A scene larger than the budget, forced depth-first: in the
+            // paging experiment's binary (`sray-paged`, which installs the
+            // file-backed allocator), its big arrays go to file-backed
+            // memory, which pages as RayShade's heap did through swap,
+            // instead of exceeding the budget. Elsewhere they stay in
+            // ordinary memory, and the user is told.
             let need = df::estimate_bytes(&scene.db);
             let paged = need > memory && {
                 let dir = req.tmp_dir.clone().unwrap_or_else(std::env::temp_dir);
-                crate::paging::enable(&dir).at(&dir)?
+                let on = crate::paging::enable(&dir).at(&dir)?;
+                if !on {
+                    progress.warn(&format!(
+                        "the depth-first tracer needs about {} for this scene, more than the \
+                         budget of {}: it renders in memory all the same (sray-paged, the paging \
+                         experiment's binary, would page to a file)",
+                        fmt_bytes(need),
+                        fmt_bytes(memory)
+                    ));
+                }
+                on
             };
             let out = df::render(&scene.db, &req.options, &*progress)?;
             let mut stats = out.stats;

@@ -14,8 +14,9 @@
 //! space released (`FALLOC_FL_PUNCH_HOLE`). File offsets are never reused,
 //! so a new region is all zeroes.
 //!
-//! The binary installs the allocator (`src/main.rs`); libraries and tests
-//! that do not install it see [`enable`] return `false`.
+//! Only the paging experiment's binary, `sray-paged`, installs the
+//! allocator (`src/bin/sray-paged.rs`); `sray`, libraries and tests do
+//! not, and see [`enable`] return `false`.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::path::Path;

@@ -1,9 +1,11 @@
 //! Terminal progress bars (indicatif) behind the engine's `Progress`.
 //!
 //! A counting bar reads, e.g.,
-//! `rendering [00:00:12] =====>     47% 123,456/263,169 rays (10,288 rays/s, eta 13s) round 1: pass 2, ...`:
+//! `rendering [00:00:12] =====>     47% 123,456/263,169 rays (10,288 rays/s, eta 13s) round 2: pass 3, ...`:
 //! the percentage and the ETA are of the current count (each
-//! `set_total` starts a new one), the rate a whole number with its unit.
+//! `set_total` starts a new one; a breadth-first render's rays are one
+//! count over all its rounds, whose estimated total `grow_total` raises),
+//! the rate a whole number with its unit, the stage beside it.
 
 use indicatif::{HumanCount, ProgressBar, ProgressState, ProgressStyle};
 use sray_engine::progress::Progress;
@@ -128,6 +130,12 @@ impl Progress for Bar {
         self.0.reset_eta();
         self.0.set_length(total);
     }
+    /// The same count with a larger total: position, rate and ETA go on.
+    fn grow_total(&self, total: u64) {
+        if self.0.length().is_none_or(|l| l < total) {
+            self.0.set_length(total);
+        }
+    }
     fn inc(&self, n: u64) {
         self.0.inc(n);
     }
@@ -164,6 +172,18 @@ mod tests {
         assert_eq!((b.0.position(), b.0.length()), (0, Some(4)));
         b.inc(3);
         assert_eq!(b.0.position(), 3);
+    }
+
+    #[test]
+    fn a_growing_total_keeps_the_count() {
+        let b = Bar(ProgressBar::hidden());
+        b.set_total(10);
+        b.inc(7);
+        b.grow_total(25);
+        assert_eq!((b.0.position(), b.0.length()), (7, Some(25)));
+        // Never lowered.
+        b.grow_total(12);
+        assert_eq!(b.0.length(), Some(25));
     }
 
     #[test]

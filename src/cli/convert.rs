@@ -99,12 +99,31 @@ pub fn write_scene(
             if compress != Compression::None {
                 anyhow::bail!("--compress applies to .sdb output only");
             }
+            // NFF has no instances: a database that stores models placed
+            // by instances cannot be written as NFF (the scene it was made
+            // from can: its placements are written as copies).
+            let spatial = match source {
+                SceneSource::Database(p) => {
+                    let db = sray_engine::sdb::Database::open(p)?;
+                    let models = db.models().len();
+                    if models > 0 {
+                        anyhow::bail!(
+                            "{}: this object database stores {models} model(s) placed by \
+                             instances, which NFF cannot express, so it cannot be converted to \
+                             {}; convert the scene it was made from (the .gltf or .glb) to .nff \
+                             instead, which writes every placement as a copy",
+                            p.display(),
+                            output.display()
+                        );
+                    }
+                    db.is_spatial()
+                }
+                _ => false,
+            };
             // NFF numbers objects by their place: a database in spatial
             // order is put back in its input's order first, so that ties
             // (which go by input id) stay as they were.
-            if let SceneSource::Database(p) = source
-                && sray_engine::sdb::Database::open(p)?.is_spatial()
-            {
+            if spatial {
                 let dir = match opts.tmp_dir {
                     Some(d) => tempfile::Builder::new().prefix("sray-").tempdir_in(d)?,
                     None => tempfile::Builder::new().prefix("sray-").tempdir()?,

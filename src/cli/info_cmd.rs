@@ -7,6 +7,14 @@ use sray_engine::mesh::MeshOptions;
 use sray_engine::shapes::ShapeKind;
 use std::path::PathBuf;
 
+/// `println!` into a String.
+macro_rules! outln {
+    ($out:expr, $($arg:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
 #[derive(Args, Debug)]
 pub struct InfoArgs {
     /// A scene file (.nff, .ply, .obj, .off, .gltf, .glb, any of them .gz or .zst
@@ -63,17 +71,19 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
     } else {
         None
     };
+    let mut out = String::new();
     if a.json {
         let mut v = serde_json::to_value(&info)?;
         if let (Some(found), Some(map)) = (aggregates, v.as_object_mut()) {
             map.insert("aggregates".into(), found.aggregates.into());
             map.insert("aggregate_objects".into(), found.aggregate_objects.into());
         }
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!(out, "{}", serde_json::to_string_pretty(&v)?);
     } else {
-        print_human(&a.file, &info);
+        human(&mut out, &a.file, &info);
         if let Some(f) = aggregates {
-            println!(
+            outln!(
+                out,
                 "  aggregates   {} groups of {} objects ({} objects) in the breadth-first grids",
                 f.aggregates,
                 sray_engine::grid::aggregate::SIZE,
@@ -81,46 +91,57 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
             );
         }
     }
+    super::print_stdout(&out)?;
     Ok(())
 }
 
-fn print_human(path: &std::path::Path, i: &SceneInfo) {
-    println!("{} ({})", path.display(), i.format);
-    println!("  objects      {}", i.objects);
+fn human(out: &mut String, path: &std::path::Path, i: &SceneInfo) {
+    outln!(out, "{} ({})", path.display(), i.format);
+    outln!(out, "  objects      {}", i.objects);
     let by_kind: Vec<String> = i
         .counts
         .named()
         .map(|(kind, n)| format!("{kind} {n}"))
         .collect();
-    println!("    {}", by_kind.join(", "));
-    println!("  lights       {}", i.lights);
-    println!(
+    outln!(out, "    {}", by_kind.join(", "));
+    outln!(out, "  lights       {}", i.lights);
+    outln!(
+        out,
         "  materials    {} distinct ({} statements)",
-        i.materials, i.material_statements
+        i.materials,
+        i.material_statements
     );
-    println!("  triangles    {}", i.triangles);
-    println!("  vertices     {}", i.vertices);
+    outln!(out, "  triangles    {}", i.triangles);
+    outln!(out, "  vertices     {}", i.vertices);
     if let Some(d) = i.degenerate_faces {
-        println!("  degenerate   {d} faces skipped");
+        outln!(out, "  degenerate   {d} faces skipped");
     }
     match (i.bbox_min, i.bbox_max) {
-        (Some(a), Some(b)) => println!("  bounds       {a:?} .. {b:?}"),
-        _ => println!("  bounds       (no objects)"),
+        (Some(a), Some(b)) => outln!(out, "  bounds       {a:?} .. {b:?}"),
+        _ => outln!(out, "  bounds       (no objects)"),
     }
-    println!(
+    outln!(
+        out,
         "  file         {} bytes, compression {}",
-        i.file_bytes, i.compression
+        i.file_bytes,
+        i.compression
     );
     if let (Some(raw), Some(blocks)) = (i.raw_bytes, i.blocks) {
         let per = raw as f64 / i.objects.max(1) as f64;
-        println!("  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)");
+        outln!(
+            out,
+            "  records      {raw} bytes in {blocks} blocks ({per:.1} bytes per object)"
+        );
     }
     if let (Some(raw), Some(decoded)) = (i.raw_bytes, i.decoded_bytes) {
         // Per triangle only where every object is one or more of them.
         let faces = i.counts.get(ShapeKind::Polygon) + i.counts.get(ShapeKind::Patch);
         if i.triangles >= i.objects && faces == i.objects {
             let per = raw as f64 / i.triangles as f64;
-            println!("               {per:.1} bytes per triangle; {decoded} bytes expanded");
+            outln!(
+                out,
+                "               {per:.1} bytes per triangle; {decoded} bytes expanded"
+            );
         }
     }
     if let Some(layout) = i.layout {
@@ -129,25 +150,28 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
             _ => "objects in input order",
         };
         match (i.runs, i.run_triangles) {
-            (Some(r), Some(t)) => println!(
+            (Some(r), Some(t)) => outln!(
+                out,
                 "  layout       {layout}: {t} of {} triangles in {r} runs, {order}",
                 i.triangles
             ),
-            _ => println!("  layout       {layout}, {order}"),
+            _ => outln!(out, "  layout       {layout}, {order}"),
         }
     }
     if let Some(v) = i.version {
-        println!("  version      {v}");
+        outln!(out, "  version      {v}");
     }
     if let Some(models) = &i.models {
-        println!(
+        outln!(
+            out,
             "  models       {} stored once, {} triangles placed by {} instances",
             models.len(),
             i.placed_triangles.unwrap_or(0),
             i.counts.get(ShapeKind::Instance)
         );
         for (k, m) in models.iter().enumerate() {
-            println!(
+            outln!(
+                out,
                 "    model {k}: {} triangles, {} vertices, {} bytes ({:.1} per triangle), {} instances",
                 m.triangles,
                 m.vertices,
@@ -159,19 +183,23 @@ fn print_human(path: &std::path::Path, i: &SceneInfo) {
     }
     match (&i.density_entries, &i.dense_regions) {
         (Some(n), Some(regions)) => {
-            println!(
+            outln!(
+                out,
                 "  density      {n} occupied cells and size classes; {} dense regions",
                 regions.len()
             );
             for r in regions {
-                println!(
+                outln!(
+                    out,
                     "    {} objects in {:?} .. {:?}",
-                    r.objects, r.bbox_min, r.bbox_max
+                    r.objects,
+                    r.bbox_min,
+                    r.bbox_max
                 );
             }
         }
         _ if i.format == "sdb" => {
-            println!("  density      no summary (written before version 3)")
+            outln!(out, "  density      no summary (written before version 3)")
         }
         _ => {}
     }

@@ -65,8 +65,8 @@ pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
     bar.finish();
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
     if a.json {
-        println!(
-            "{}",
+        super::print_stdout(&format!(
+            "{}\n",
             serde_json::json!({
                 "objects": objects,
                 "blocks": blocks,
@@ -76,16 +76,16 @@ pub fn run(a: VerifyArgs) -> anyhow::Result<()> {
                 "read_mib_per_s": mib(read) / secs,
                 "decoded_mib_per_s": mib(raw) / secs,
             })
-        );
+        ))?;
     } else {
-        println!(
-            "{}: ok, {objects} objects in {} blocks; read {:.1} MiB in {secs:.3} s ({:.0} MiB/s stored, {:.0} MiB/s decoded)",
+        super::print_stdout(&format!(
+            "{}: ok, {objects} objects in {} blocks; read {:.1} MiB in {secs:.3} s ({:.0} MiB/s stored, {:.0} MiB/s decoded)\n",
             a.file.display(),
             blocks,
             mib(read),
             mib(read) / secs,
             mib(raw) / secs
-        );
+        ))?;
     }
     Ok(())
 }

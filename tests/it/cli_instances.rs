@@ -252,3 +252,28 @@ fn a_budget_too_small_for_the_models_says_so() {
     );
     assert!(e.contains("too small") && e.contains("models"), "{e}");
 }
+
+/// NFF has no instances: a database of models placed by instances is
+/// refused as NFF output, saying why and what to convert instead, and
+/// no file is left; the glTF it was made from converts, its placements
+/// written as copies.
+#[test]
+fn an_instanced_database_is_not_written_as_nff() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let glb = fixture("spot4.glb");
+    ok(d, &["convert", &glb, "-o", "inst.sdb", "--quiet"]);
+    let e = fails(d, &["convert", "inst.sdb", "-o", "inst.nff", "--quiet"]);
+    assert!(
+        e.contains("inst.sdb")
+            && e.contains("1 model(s) placed by instances")
+            && e.contains("NFF cannot express")
+            && e.contains(".gltf or .glb"),
+        "{e}"
+    );
+    assert!(!e.contains("input-order"), "{e}");
+    assert!(!d.join("inst.nff").exists());
+    ok(d, &["convert", &glb, "-o", "copies.nff", "--quiet"]);
+    let nff = std::fs::read_to_string(d.join("copies.nff")).unwrap();
+    assert!(nff.lines().any(|l| l.starts_with("p ")), "no polygons");
+}

@@ -387,7 +387,7 @@ fn the_dragon_breadth_first_with_a_small_budget_equals_depth_first() {
 /// that is missing.
 fn peak_mib(d: &Path, args: &[&str]) -> Option<f64> {
     if !Path::new("/usr/bin/time").exists() {
-        eprintln!("skipping the peak check: /usr/bin/time not found");
+        common::cannot_run("the peak check needs /usr/bin/time (Debian: time)");
         return None;
     }
     let o = std::process::Command::new("/usr/bin/time")

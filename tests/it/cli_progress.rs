@@ -132,7 +132,9 @@ fn on_terminal(dir: &Path, args: &[&str]) -> Option<String> {
     let o = match o {
         Ok(o) => o,
         Err(e) => {
-            eprintln!("skipped: cannot run script(1) for a terminal: {e}");
+            common::cannot_run(&format!(
+                "cannot run script(1) for a terminal (Debian: bsdutils): {e}"
+            ));
             return None;
         }
     };
@@ -158,8 +160,9 @@ fn counts(screen: &str) -> Vec<(u64, u64, String)> {
 }
 
 /// On a terminal: bars whose count never passes its total, with a
-/// percentage, an ETA and whole-number rates, over several breadth-first
-/// rounds; then the summary. --quiet: nothing at all.
+/// percentage, an ETA and whole-number rates; one bar of rays over all
+/// the breadth-first rounds, never going back; then the summary. --quiet:
+/// nothing at all.
 #[test]
 fn on_a_terminal_bars_stay_within_their_totals() {
     let dir = tempfile::tempdir().unwrap();
@@ -203,6 +206,25 @@ fn on_a_terminal_bars_stay_within_their_totals() {
         screen.contains("sray: bf (requested with --mode bf), 256x256, "),
         "no summary:\n{screen}"
     );
+    // One count of rays for the whole render, not one per round: what is
+    // done and the total (the eye rays and an estimate of the later
+    // rounds) only go up, and the round and pass are shown beside it.
+    let mut last = (0, 0);
+    for &&(done, total, _) in &rays {
+        assert!(
+            done >= last.0 && total >= last.1,
+            "{done}/{total} rays drawn after {}/{}:\n{screen}",
+            last.0,
+            last.1
+        );
+        last = (done, total);
+    }
+    assert!(
+        rays.iter().any(|r| r.1 > 257 * 257),
+        "the total is the eye rays' (257 x 257 corners) only:\n{screen}"
+    );
+    assert!(screen.contains("round 1: pass "), "no round 1:\n{screen}");
+    assert!(screen.contains("round 2: "), "no round 2:\n{screen}");
 
     let mut quiet = args.to_vec();
     quiet.push("--quiet");

@@ -140,3 +140,32 @@ fn impossible_requests_fail_clearly() {
     let err = fails(dir.path(), &["info", "junk.sdb"]);
     assert!(err.contains("junk.sdb: header:"), "{err}");
 }
+
+/// `sray info X | head`: a reader that closes the pipe early ends the
+/// output quietly (exit 0, nothing on stderr), as `sray status` and
+/// `sray verify` do; no panic about a broken pipe.
+#[test]
+fn info_into_a_closed_pipe_ends_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(d, &["gen", "tetra", "--size", "3", "-o", "t.sdb"]);
+    for args in [
+        &["info", "t.sdb"][..],
+        &["info", "t.sdb", "--json"],
+        &["verify", "t.sdb"],
+    ] {
+        // The pipe's reader is gone before sray writes: its first write
+        // fails with EPIPE, every time.
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let o = common::sray()
+            .current_dir(d)
+            .args(args)
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{args:?}: {:?}\n{err}", o.status);
+        assert!(err.trim().is_empty(), "{args:?}: {err}");
+    }
+}

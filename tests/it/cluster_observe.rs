@@ -1,9 +1,8 @@
 //! Seeing what the cluster does: `sray status`, the coordinator's HTTP
 //! listener (`/healthz`, `/metrics`, `/api/status`, previews) and its
-//! dashboard driven in a real headless browser (Debian's chromium; the
-//! test says why and passes when no browser is installed, and CI
-//! installs one through .ci/run). Real processes on loopback, small
-//! images.
+//! dashboard driven in a real headless browser (Debian's chromium, which
+//! .ci/run installs; without one the test says why and skips, or fails in
+//! CI). Real processes on loopback, small images.
 
 use crate::common;
 
@@ -48,6 +47,12 @@ fn worker(dir: &Path, url: &str, name: &str) -> Proc {
 
 /// Renders 32x32 spd:balls:1 on the cluster; returns the job's id.
 fn render(dir: &Path, url: &str) -> String {
+    render_sized(dir, url, "32", "32", "256")
+}
+
+/// Renders `width`x`height` spd:balls:1 on the cluster, in shards of
+/// `shard_rays`; returns the job's id.
+fn render_sized(dir: &Path, url: &str, width: &str, height: &str, shard_rays: &str) -> String {
     ok(
         dir,
         &[
@@ -60,11 +65,11 @@ fn render(dir: &Path, url: &str) -> String {
             "--token-file",
             "token",
             "--width",
-            "32",
+            width,
             "--height",
-            "32",
+            height,
             "--shard-rays",
-            "256",
+            shard_rays,
             "--stats",
             "stats.json",
             "--quiet",
@@ -299,12 +304,13 @@ fn browser() -> Option<String> {
     .map(String::from)
 }
 
-/// A headless browser, or None after saying why the test skips.
+/// A headless browser, or None after saying why the test skips (in CI,
+/// where it must run, it fails instead).
 fn browser_or_skip() -> Option<String> {
     let b = browser();
     if b.is_none() {
-        eprintln!(
-            "skipping: no headless browser (chromium) installed; .ci/run installs Debian's chromium"
+        common::cannot_run(
+            "no headless browser (chromium) installed; .ci/run installs Debian's chromium",
         );
     }
     b
@@ -350,7 +356,10 @@ fn dashboard_in_a_headless_browser() {
     let dom = dump_dom(&browser, &profile, &format!("http://{http}/"));
     assert!(dom.contains("dash-w1"), "no worker in the page:\n{dom}");
 
-    let job = render(d, &url);
+    // A wide image, wider than the preview's room: shown smaller, at the
+    // image's aspect ratio (not squeezed into the room's width at the
+    // image's full height).
+    let job = render_sized(d, &url, "320", "120", "4096");
     let dom = dump_dom(&browser, &profile, &format!("http://{http}/"));
     assert!(dom.contains("dash-w1"), "no worker in the page:\n{dom}");
     assert!(dom.contains(&job), "no job {job} in the page:\n{dom}");
@@ -363,17 +372,44 @@ fn dashboard_in_a_headless_browser() {
     let src = format!("/jobs/{job}/preview.png");
     assert!(dom.contains(&src), "no preview <img> in the page:\n{dom}");
     assert!(
-        dom.contains("data-loaded=\"32x32\""),
+        dom.contains("data-loaded=\"320x120\""),
         "the preview did not load in the browser:\n{dom}"
+    );
+    let (w, h) = shown_size(&dom, &src);
+    assert!(
+        w <= 256 && (w * 120).abs_diff(h * 320) <= 320,
+        "the 320x120 preview is shown at {w}x{h}, not at its aspect ratio:\n{dom}"
     );
     let (code, png) = get(&http, &src);
     assert_eq!(code, 200);
     let img = image::load_from_memory(&png).expect("a PNG");
-    assert_eq!((img.width(), img.height()), (32, 32));
+    assert_eq!((img.width(), img.height()), (320, 120));
+}
+
+/// The size (CSS pixels, without the border) at which the browser laid
+/// out the `<img>` whose source starts with `src`: its `data-shown`.
+fn shown_size(dom: &str, src: &str) -> (u64, u64) {
+    let tag = dom
+        .split("<img ")
+        .skip(1)
+        .map(|t| &t[..t.find('>').unwrap_or(t.len())])
+        .find(|t| t.contains(src))
+        .unwrap_or_else(|| panic!("no <img> of {src}:\n{dom}"));
+    let shown = tag
+        .split("data-shown=\"")
+        .nth(1)
+        .and_then(|r| r.split('"').next())
+        .unwrap_or_else(|| panic!("the preview was not laid out (no data-shown): {tag}"));
+    let (w, h) = shown
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+        .unwrap_or_else(|| panic!("data-shown={shown:?}"));
+    assert!(w > 0 && h > 0, "the preview is shown at {shown}");
+    (w, h)
 }
 
 /// Renders on the cluster in the background; the client's process.
-fn render_in_background(dir: &Path, url: &str, size: &str) -> Proc {
+fn render_in_background(dir: &Path, url: &str, width: &str, height: &str) -> Proc {
     Proc::start(
         dir,
         &[
@@ -386,9 +422,9 @@ fn render_in_background(dir: &Path, url: &str, size: &str) -> Proc {
             "--token-file",
             "token",
             "--width",
-            size,
+            width,
             "--height",
-            size,
+            height,
             "--shard-rays",
             "256",
             "--quiet",
@@ -406,7 +442,8 @@ fn signal(p: &Proc, sig: libc::c_int) {
 
 /// The dashboard while a job runs: the worker is stopped (SIGSTOP) in the
 /// job's second round, so the job is certainly still running when the
-/// browser looks, with the first round's image as its preview.
+/// browser looks, with the first round's image as its preview, shown at
+/// the image's aspect ratio (a 64x32 job: twice as wide as high).
 #[test]
 fn dashboard_shows_a_running_job_with_its_preview() {
     let Some(browser) = browser_or_skip() else {
@@ -419,7 +456,7 @@ fn dashboard_shows_a_running_job_with_its_preview() {
     let w = worker(d, &url, "live-w1");
     cluster::registered(&coord, "live-w1");
 
-    let mut client = render_in_background(d, &url, "64");
+    let mut client = render_in_background(d, &url, "64", "32");
     let mark = coord.mark();
     if std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         coord.wait_for_after(mark, &["round done"], 60.0);
@@ -451,14 +488,16 @@ fn dashboard_shows_a_running_job_with_its_preview() {
         "no preview <img> in the page:\n{dom}"
     );
     assert!(
-        dom.contains("data-loaded=\"64x64\""),
+        dom.contains("data-loaded=\"64x32\""),
         "the first round's preview did not load in the browser:\n{dom}"
     );
+    let (w, h) = shown_size(&dom, &format!("/jobs/{id}/preview.png"));
+    assert_eq!(w, 2 * h, "the 64x32 preview is shown at {w}x{h}:\n{dom}");
 
     // Resumed, the job finishes and the client gets its image.
     assert!(client.wait(120.0).success(), "{}", client.log());
     let img = image::open(d.join("out.png")).unwrap();
-    assert_eq!((img.width(), img.height()), (64, 64));
+    assert_eq!((img.width(), img.height()), (64, 32));
 }
 
 /// Standard gRPC health and server reflection answer on the gRPC port,

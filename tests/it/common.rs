@@ -72,17 +72,36 @@ pub fn shared_dir(name: &str) -> Option<PathBuf> {
         .find(|d| d.is_dir())
 }
 
+/// Whether this runs in CI (`CI=true`, which `.ci/run` exports): there,
+/// a test must not skip for want of a tool or of ../shared.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// A test cannot run here for want of something (`why`). Outside CI, says
+/// so on stderr and returns, so that the caller can skip; in CI, fails
+/// with that reason, since a green CI must mean that the test ran.
+pub fn cannot_run(why: &str) {
+    assert!(
+        !in_ci(),
+        "{why}; in CI (CI=true) this test must run, not skip: .ci/run installs its tools and \
+         expects ../shared beside the repository"
+    );
+    eprintln!("skipping: {why}");
+}
+
 /// `shared/meshes` beside the repository (real meshes, not vendored: CI
-/// has them). When it is absent, says so on stderr and returns None, so
-/// that the caller can skip: `let Some(m) = shared_meshes() else { return };`
+/// has them). When it is absent, [`cannot_run`] says so (and fails in CI)
+/// and this returns None, so that the caller can skip:
+/// `let Some(m) = shared_meshes() else { return };`
 pub fn shared_meshes() -> Option<PathBuf> {
     let m = shared_dir("meshes");
     if m.is_none() {
-        eprintln!(
-            "skipping: ../shared/meshes not found (searched upward from {} for \
-             shared/meshes; set SRAY_SHARED_DIR to its parent)",
+        cannot_run(&format!(
+            "../shared/meshes not found (searched upward from {} for shared/meshes; set \
+             SRAY_SHARED_DIR to its parent)",
             env!("CARGO_MANIFEST_DIR")
-        );
+        ));
     }
     m
 }
@@ -100,17 +119,24 @@ pub struct Proc {
 
 impl Proc {
     pub fn start(dir: &Path, args: &[&str], env: &[(&str, &str)]) -> Proc {
-        use std::io::BufRead;
         let mut cmd = sray();
-        cmd.current_dir(dir)
-            .args(args)
-            .stdin(std::process::Stdio::null())
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::piped());
+        cmd.current_dir(dir).args(args);
         for (k, v) in env {
             cmd.env(k, v);
         }
-        let mut child = cmd.spawn().expect("start sray");
+        Proc::spawn(cmd)
+    }
+
+    /// Starts `cmd` (another program, or `sray` run some other way), its
+    /// stderr collected as by [`Proc::start`].
+    pub fn spawn(mut cmd: Command) -> Proc {
+        use std::io::BufRead;
+        cmd.stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        let mut child = cmd
+            .spawn()
+            .unwrap_or_else(|e| panic!("start {:?}: {e}", cmd.get_program()));
         let err = child.stderr.take().unwrap();
         let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let l2 = lines.clone();

@@ -702,3 +702,68 @@ fn the_command_parser_reads_what_the_pages_write() {
         "the-object-database-sdb"
     );
 }
+
+/// Files of the workspace's sources under `dir` (relative to the
+/// repository) whose code has `unsafe`, outside comments.
+fn files_with_unsafe(dir: &str, out: &mut BTreeSet<String>) {
+    let Ok(entries) = std::fs::read_dir(repo().join(dir)) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let rel = format!("{dir}/{}", e.file_name().to_string_lossy());
+        if e.path().is_dir() {
+            files_with_unsafe(&rel, out);
+        } else if rel.ends_with(".rs") {
+            let text = read(&e.path());
+            let code = text.lines().map(|l| l.split("//").next().unwrap_or(""));
+            if code.clone().any(|l| {
+                ["unsafe {", "unsafe fn", "unsafe impl", "unsafe extern"]
+                    .iter()
+                    .any(|u| l.contains(u))
+            }) {
+                out.insert(rel);
+            }
+        }
+    }
+}
+
+/// The list of unsafe code in docs/workspace.md names every file of the
+/// program with `unsafe` and no other.
+#[test]
+fn the_list_of_unsafe_code_is_true() {
+    let mut found = BTreeSet::new();
+    for d in [
+        "src",
+        "engine/src",
+        "coordinator/src",
+        "worker/src",
+        "proto/src",
+        "bench/src",
+    ] {
+        files_with_unsafe(d, &mut found);
+    }
+    let page = read(&repo().join("docs/workspace.md"));
+    let section = page
+        .split("## Unsafe code")
+        .nth(1)
+        .expect("docs/workspace.md has a section \"Unsafe code\"");
+    let section = section.split("In tests only").next().unwrap();
+    // Each item names its files before a colon: "- `a.rs`, `b.rs`: ...".
+    let listed: BTreeSet<String> = section
+        .split("\n- ")
+        .skip(1)
+        .flat_map(|item| {
+            let head = item.split("`:").next().unwrap_or("").to_string() + "`";
+            head.split('`')
+                .skip(1)
+                .step_by(2)
+                .filter(|w| w.ends_with(".rs"))
+                .map(String::from)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    assert_eq!(
+        listed, found,
+        "docs/workspace.md's list of unsafe code (left) and the files with unsafe code (right)"
+    );
+}

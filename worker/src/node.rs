@@ -187,7 +187,9 @@ impl Node {
         loop {
             let req = v1::RegisterRequest {
                 name: self.cfg.name.clone(),
-                threads: self.cfg.threads as u32,
+                // The threads it traces with: "all cores" (0) as a number,
+                // so that `sray status` and the dashboard show it.
+                threads: reported_threads(self.cfg.threads),
                 memory_bytes: self.cfg.memory,
                 protocol_version: sray_proto::PROTOCOL_VERSION,
             };
@@ -482,5 +484,29 @@ async fn heartbeat(
             }
             *jobs.lock().unwrap_or_else(|p| p.into_inner()) = Some((asked, r.running_jobs));
         }
+    }
+}
+
+/// The tracer threads a worker configured with `threads` (0: all cores)
+/// uses, as it reports them to the coordinator.
+fn reported_threads(threads: usize) -> u32 {
+    let n = if threads == 0 {
+        sray_engine::sys::cpus()
+    } else {
+        threads
+    };
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::reported_threads;
+
+    /// `sray status` shows the threads a worker traces with, never 0.
+    #[test]
+    fn all_cores_are_reported_as_their_number() {
+        assert_eq!(reported_threads(0), sray_engine::sys::cpus() as u32);
+        assert!(reported_threads(0) >= 1);
+        assert_eq!(reported_threads(3), 3);
     }
 }

@@ -14,10 +14,17 @@ pub fn spd_fixtures() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/spd")
 }
 
+/// Whether this runs in CI (`CI=true`, which `.ci/run` exports): there,
+/// a test must not skip for want of ../shared.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
 /// `shared/meshes` beside the repository (`$SRAY_SHARED_DIR/meshes` when
 /// that is set): real meshes, not vendored; CI has them. When it is
 /// absent, says so on stderr and returns None, so that the caller can
-/// skip: `let Some(m) = shared_meshes() else { return };`
+/// skip: `let Some(m) = shared_meshes() else { return };`; in CI, fails
+/// saying so instead.
 pub fn shared_meshes() -> Option<PathBuf> {
     let m = match std::env::var("SRAY_SHARED_DIR") {
         Ok(d) => Some(PathBuf::from(d).join("meshes")).filter(|d| d.is_dir()),
@@ -27,11 +34,17 @@ pub fn shared_meshes() -> Option<PathBuf> {
             .find(|d| d.is_dir()),
     };
     if m.is_none() {
-        eprintln!(
-            "skipping: ../shared/meshes not found (searched upward from {} for \
-             shared/meshes; set SRAY_SHARED_DIR to its parent)",
+        let why = format!(
+            "../shared/meshes not found (searched upward from {} for shared/meshes; set \
+             SRAY_SHARED_DIR to its parent)",
             env!("CARGO_MANIFEST_DIR")
         );
+        assert!(
+            !in_ci(),
+            "{why}; in CI (CI=true) this test must run, not skip: .ci/run expects ../shared \
+             beside the repository"
+        );
+        eprintln!("skipping: {why}");
     }
     m
 }

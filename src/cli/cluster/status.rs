@@ -39,12 +39,12 @@ pub fn run(a: StatusArgs) -> anyhow::Result<()> {
         }
     })?;
     if a.json {
-        println!(
-            "{}",
+        crate::cli::print_stdout(&format!(
+            "{}\n",
             serde_json::to_string_pretty(&sray_coordinator::status::to_json(&reply))?
-        );
+        ))?;
     } else {
-        print!("{}", table(&reply));
+        crate::cli::print_stdout(&table(&reply))?;
     }
     Ok(())
 }
