@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Sixteen worker processes on loopback (one thread, --memory 64MiB each)
 # render a scene whose object database is at least 8 times a worker's
-# budget (default tetra12, 1.1 GiB: 17 times); the workers read the scene
+# budget (default rings80, 557 MiB: 8.7 times; tetra12 is 112 MiB, 1.7
+# times, too small); the workers read the scene
 # from the coordinator's data directory as shared storage (--scene-dir),
 # and two of them are killed with SIGKILL while round 2 runs. Checks the
 # image against the embedded render and prints what the coordinator served
@@ -12,7 +13,7 @@
 #   SCENE=spd:balls:7 SIZE=128 SRAY=... benchmarks/cluster-16.sh
 set -euo pipefail
 S=$(realpath "${SRAY:-target/release/sray}")
-SCENE=${SCENE:-spd:tetra:12}
+SCENE=${SCENE:-spd:rings:80}
 SIZE=${SIZE:-128}
 W=$(mktemp -d)
 trap 'kill $(jobs -p) 2>/dev/null || true; rm -rf "$W"' EXIT
@@ -52,6 +53,11 @@ until [ ${#killed[@]} -ge 2 ]; do
 done
 wait $CLIENT
 t1=$(date +%s.%N)
+# Peak resident memory of the workers still running (VmHWM).
+for i in $(seq 0 15); do
+  [[ " ${killed[*]-} " == *" w$i "* ]] && continue
+  awk '/VmHWM/ {print $2}' "/proc/${PIDS[w$i]}/status" 2>/dev/null || true
+done >worker-hwm.txt
 cmp embedded.png cluster.png && echo "image: the same as the embedded render"
 python3 - "$t0" "$t1" <<'PY'
 import json, os, sys
@@ -61,4 +67,7 @@ print(f"database {db / 2**20:.0f} MiB = {db / (64 * 2**20):.1f} x a worker's 64 
 print(f"scene bytes served by the coordinator: {s['scene_bytes_served']} ({s['scene_bytes_served'] / db:.2f} x the database)")
 print(f"tasks requeued {s['tasks_requeued']}, job restarts {s['job_restarts']}, workers {s['workers']}")
 print(f"wall {float(sys.argv[2]) - float(sys.argv[1]):.1f} s")
+hwm = [int(x) for x in open("worker-hwm.txt").read().split()]
+if hwm:
+    print(f"peak memory: coordinator {s.get('peak_rss_bytes', 0) / 2**20:.0f} MiB, workers max {max(hwm) / 1024:.0f} MiB (of {len(hwm)} still running)")
 PY

@@ -91,8 +91,10 @@ pub struct Config {
     /// Records stay at the workers that made them (`Task.keep_output`):
     /// an intersection's results, a shading's spawned rays. The
     /// coordinator receives only their counts and the contributions, so
-    /// tasks run where their input is and nowhere else, and a job whose
-    /// worker is lost starts again from its eye rays. For workers that
+    /// tasks run where their input is and nowhere else, and the records
+    /// of a worker that is lost (or stuck on such a task past a backup's
+    /// deadline) are recomputed elsewhere from the rounds that led to
+    /// them (`driver/recover.rs`). For workers that
     /// live and die with the render (`--local-workers`), where sending
     /// every record to the coordinator and back cost more than the
     /// tracing; it needs `checkpoints` and verification off.

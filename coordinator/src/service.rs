@@ -133,12 +133,16 @@ impl Coordinator for Service {
         require(&req, Role::Worker, "Heartbeat")?;
         let known = self.shared.beat(&req.into_inner().session);
         let running_jobs = if known {
-            self.shared
+            let mut ids: Vec<String> = self
+                .shared
                 .jobs
                 .running()
                 .iter()
                 .map(|e| e.id.clone())
-                .collect()
+                .collect();
+            // A recomputation's records are kept under an id of its own.
+            ids.extend(self.shared.aliases_of(&ids));
+            ids
         } else {
             Vec::new()
         };

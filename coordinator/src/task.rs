@@ -43,6 +43,9 @@ pub struct Held {
     /// workers): the task runs there or, once that worker is gone, fails
     /// as [`TaskEvent::Lost`].
     pub pinned: bool,
+    /// The worker that must run the task, whose input is made there (a
+    /// recomputation's eye rays, see `driver/recover.rs`).
+    pub at: Option<String>,
 }
 
 /// Rays `start .. start + len` of a round: the output of task `task`,
@@ -58,6 +61,9 @@ pub struct Segment {
 impl Held {
     /// The worker most of the rays `first .. first + count` are with.
     pub fn preferred(&self, first: u64, count: u64) -> Option<String> {
+        if let Some(s) = &self.at {
+            return Some(s.clone());
+        }
         if let Some((_, s)) = &self.intersect {
             return Some(s.clone());
         }

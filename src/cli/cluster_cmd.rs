@@ -86,7 +86,8 @@ pub struct CoordinatorArgs {
     /// them: only counts and colour come here, so the wire carries a few
     /// bytes per ray. Tasks then run only where their input is, there are
     /// no checkpoints and no verification, and a job that loses a worker
-    /// starts again from its eye rays. For a cluster whose workers are
+    /// recomputes the records it held (its shards' earlier rounds, on
+    /// another worker). For a cluster whose workers are
     /// trusted and rarely lost
     #[arg(long)]
     pub records_at_workers: bool,

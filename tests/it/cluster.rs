@@ -222,16 +222,14 @@ fn a_coordinator_and_three_workers() {
 }
 
 #[test]
-fn records_at_workers_a_lost_worker_starts_the_job_again() {
+fn records_at_workers_a_lost_worker_costs_only_its_records() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("token"), "cluster-secret\n").unwrap();
     let (coord, url) = coordinator(d, &["--token-file", "token", "--records-at-workers"]);
-    let mut workers: Vec<Proc> = ["k0", "k1"]
-        .iter()
-        .map(|n| worker(d, &url, n, "token"))
-        .collect();
-    let ids: Vec<String> = ["k0", "k1"].iter().map(|n| worker_id(&coord, n)).collect();
+    let names = ["k0", "k1", "k2"];
+    let mut workers: Vec<Proc> = names.iter().map(|n| worker(d, &url, n, "token")).collect();
+    let ids: Vec<String> = names.iter().map(|n| worker_id(&coord, n)).collect();
     let want = embedded(d, "spd:gears:2", "128");
 
     // 1. Results and spawned rays stay at the workers: the embedded
@@ -248,15 +246,19 @@ fn records_at_workers_a_lost_worker_starts_the_job_again() {
         &want,
     );
     assert_eq!(s["job_restarts"], 0, "{s}");
+    assert_eq!(s["recomputations"], 0, "{s}");
     let bpr = s["bytes_per_ray"].as_f64().unwrap();
     assert!(
         bpr > 0.0 && bpr < 16.0,
         "{bpr} bytes per ray: records were sent"
     );
+    let full = s["tasks"].as_u64().unwrap();
 
-    // 2. A worker killed once it holds a finished task's records, which
-    //    nobody else has: the job starts again on the other worker and
-    //    still gives the embedded image.
+    // 2. A worker killed once it has finished a task of round 2: it holds
+    //    records of rounds 2 and 3 that nobody else has. Only the shards
+    //    whose records it held are recomputed (from the rounds that led
+    //    to them, on another worker); the job does not start again, and
+    //    still gives the embedded image and counts.
     let mark = coord.mark();
     let mut client = Proc::start(
         d,
@@ -265,7 +267,7 @@ fn records_at_workers_a_lost_worker_starts_the_job_again() {
     );
     coord.wait_for_after(
         mark,
-        &["task completed", &format!("worker={}", ids[1])],
+        &["task completed", &format!("worker={}", ids[1]), "round=2 "],
         60.0,
     );
     workers[1].child.kill().unwrap();
@@ -278,10 +280,21 @@ fn records_at_workers_a_lost_worker_starts_the_job_again() {
         &s,
         &want,
     );
-    assert!(s["job_restarts"].as_u64().unwrap() >= 1, "{s}");
+    assert_eq!(s["job_restarts"], 0, "{s}");
+    assert!(s["recomputations"].as_u64().unwrap() >= 1, "{s}");
+    // What was redone is the lost worker's part, not the whole job.
+    let redone = s["recomputed_tasks"].as_u64().unwrap();
+    assert!(
+        redone >= 1 && redone < full,
+        "{redone} of {full} tasks redone: {s}"
+    );
     assert!(
         coord.log().contains("task input lost"),
         "the loss was not logged"
+    );
+    assert!(
+        s["log"].to_string().contains("recomputed on worker"),
+        "the recomputation is not in the job's log: {s}"
     );
     drop(coord);
 }

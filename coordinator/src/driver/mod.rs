@@ -27,17 +27,24 @@
 //! output of this stage from a worker found lying, and says so in the
 //! job's log.
 //!
+//! **Records at the workers.** Where results and spawned rays stay at
+//! the workers that made them, a worker lost with some costs only the
+//! shards whose records it held: they are recomputed from the rounds that
+//! led to them, on another worker (`recover.rs`).
+//!
 //! **Checkpoints.** At the end of every round the next round's rays, the
 //! frame and the totals are journaled (see [`crate::jobs`]); a restarted
 //! coordinator resumes the job from there.
 //!
 //! The rooms: `submit.rs` (jobs in, resumed, run to their end), `job.rs`
-//! (a request checked), `rounds.rs` (the round loop), `shards.rs` (a
+//! (a request checked), `rounds.rs` (the round loop), `recover.rs`
+//! (lost records recomputed), `shards.rs` (a
 //! round cut into shards), `stages.rs` (a stage's tasks and their
 //! verification), `verify.rs` (comparing samples, the coordinator's own
 //! tracer) and `stats.rs` (totals and statistics).
 
 mod job;
+mod recover;
 mod rounds;
 mod shards;
 mod stages;

@@ -3,6 +3,7 @@
 //! checkpointed; then the image and the statistics.
 
 use super::job::Job;
+use super::recover::{Lineage, RoundLog, run_stage};
 use super::shards::{Fleet, cut, shard_size};
 use super::stages::{RecordsLost, Stage};
 use super::stats::{Totals, job_stats, passes_of, stat_of};
@@ -18,7 +19,8 @@ use sray_proto::v1;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// How many times a job whose records were lost starts again.
+/// How many times a job whose records were lost (and could not be
+/// recomputed) starts again.
 const MAX_RESTARTS: u32 = 3;
 
 /// The image and the statistics (JSON) of a job that ended well.
@@ -57,8 +59,12 @@ pub(super) async fn drive(
         && !shared.cfg.checkpoints
         && shared.cfg.verify_fraction == 0.0;
     let mut restarts = 0;
-    // A stage's result; with records at the workers, a lost input starts
-    // the job again from its eye rays (a few times at most).
+    // With records at the workers: each round's shards and what they
+    // spawned, to recompute a lost worker's records.
+    let mut lineage = Lineage::default();
+    // A stage's result; with records at the workers, a lost input that
+    // could not be recomputed starts the job again from its eye rays (a
+    // few times at most).
     macro_rules! or_restart {
         ($r:expr, $frame:ident) => {
             match $r {
@@ -70,8 +76,11 @@ pub(super) async fn drive(
                     $frame = Frame::with_sampling(opts.width, opts.height, opts.sampling());
                     tot = Totals {
                         restarts,
+                        recomputations: tot.recomputations,
+                        recomputed_tasks: tot.recomputed_tasks,
                         ..Totals::default()
                     };
+                    lineage = Lineage::default();
                     traffic0 = shared.traffic.snapshot();
                     rays = None;
                     n = opts.eye_rays();
@@ -118,6 +127,7 @@ pub(super) async fn drive(
                             intersect: None,
                             shard_first: first,
                             pinned: held_only,
+                            at: None,
                         },
                     })
                 })
@@ -133,8 +143,13 @@ pub(super) async fn drive(
                 inputs,
                 main_ids: Vec::new(),
                 keep,
+                alias: None,
+                lost_holders: Vec::new(),
             };
-            let outs = or_restart!(stage.run(&mut tot, &mut arbiter).await, frame);
+            let outs = or_restart!(
+                run_stage(&mut stage, &mut lineage, &mut tot, &mut arbiter).await,
+                frame
+            );
             let intersect_ids = stage.main_ids.clone();
             let mut round_passes = Vec::new();
             let mut winners = Vec::new();
@@ -174,15 +189,20 @@ pub(super) async fn drive(
                             intersect: Some((intersect_ids[i], winners[i].clone())),
                             shard_first: first,
                             pinned: keep,
+                            at: None,
                         },
                     })
                 })
                 .collect();
-            let outs = or_restart!(stage.run(&mut tot, &mut arbiter).await, frame);
+            let outs = or_restart!(
+                run_stage(&mut stage, &mut lineage, &mut tot, &mut arbiter).await,
+                frame
+            );
             // The next round's rays are the shards' spawned rays in shard
             // order (each shard's keys lie below the next one's), each run
             // held by the worker that spawned it.
             let mut segs = Vec::with_capacity(outs.len());
+            let mut spawned = Vec::with_capacity(outs.len());
             let mut start = 0;
             let mut last_key: Option<u64> = None;
             for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
@@ -197,6 +217,7 @@ pub(super) async fn drive(
                     );
                     last_key = Some(hi);
                 }
+                spawned.push((len > 0).then_some((start, len)));
                 if len > 0 {
                     segs.push(Segment {
                         start,
@@ -206,6 +227,12 @@ pub(super) async fn drive(
                     });
                 }
                 start += len;
+            }
+            if keep {
+                lineage.rounds.push(RoundLog {
+                    shards: shards.clone(),
+                    spawned,
+                });
             }
             let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();
             drop(stage);
@@ -268,6 +295,7 @@ pub(super) async fn drive(
         Ok(frame)
     }
     .await;
+    shared.drop_aliases(&entry.id);
     let frame = rounds?;
     shared.traced.send_modify(|n| *n += 1);
     drop(arbiter);

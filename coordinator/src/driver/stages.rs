@@ -17,9 +17,9 @@ use std::time::Duration;
 use tokio::sync::mpsc;
 
 /// A task's input was only at a worker that is gone (records at the
-/// workers): the job starts again.
+/// workers), and could not be recomputed: the job starts again.
 #[derive(Debug)]
-pub(super) struct RecordsLost(String);
+pub(super) struct RecordsLost(pub(super) String);
 
 impl std::fmt::Display for RecordsLost {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -69,13 +69,18 @@ pub(super) struct Stage<'a> {
     pub(super) main_ids: Vec<u64>,
     /// Outputs stay at the workers ([`crate::config::Config::records_at_workers`]).
     pub(super) keep: bool,
+    /// The job id its tasks carry, if not the job's (a recomputation's,
+    /// see [`super::recover`]).
+    pub(super) alias: Option<String>,
+    /// The workers that held the inputs of the tasks this stage lost.
+    pub(super) lost_holders: Vec<String>,
 }
 
 impl Stage<'_> {
     fn task(&self, first: u64, count: u64, verification: bool) -> v1::Task {
         v1::Task {
             task_id: 0,
-            job_id: self.entry.id.clone(),
+            job_id: self.alias.clone().unwrap_or_else(|| self.entry.id.clone()),
             attempt: 0,
             stage: self.stage as i32,
             round: self.round,
@@ -136,13 +141,15 @@ impl Stage<'_> {
     }
 
     /// Queues the stage's tasks and waits until every shard is done and
-    /// verified; fails on a task that failed too often, on cancellation,
-    /// or when no worker may do the work for too long.
+    /// verified, or lost (`None`: its task's input was only at a worker
+    /// that is gone; [`super::recover::complete`] recomputes it); fails on
+    /// a task that failed too often, on cancellation, or when no worker
+    /// may do the work for too long. The outputs are not added to `tot`.
     pub(super) async fn run(
         &mut self,
         tot: &mut Totals,
         arbiter: &mut Arbiter,
-    ) -> anyhow::Result<Vec<(TaskOutput, WorkerTag)>> {
+    ) -> anyhow::Result<Vec<Option<(TaskOutput, WorkerTag)>>> {
         let shared = self.shared;
         let cfg = &shared.cfg;
         let total = self.shards.len();
@@ -167,6 +174,21 @@ impl Stage<'_> {
             .map(|(i, &id)| (id, Kind::Main(i)))
             .collect();
         let mut st: Vec<ShardState> = (0..total).map(|_| ShardState::default()).collect();
+        let mut lost = vec![false; total];
+        // Pinned to a worker whose records are not counted on any more
+        // (stuck on an earlier task): lost now, not waited for.
+        for (i, inp) in self.inputs.iter().enumerate() {
+            let (first, count) = self.shards[i];
+            if inp.held.pinned
+                && inp
+                    .held
+                    .preferred(first, count)
+                    .is_some_and(|h| self.lost_holders.contains(&h))
+            {
+                lost[i] = true;
+                shared.forget_tasks(&[main_ids[i]]);
+            }
+        }
         let verify = cfg.verify_fraction > 0.0;
         let mut local_said = false;
         let progress = |st: &[ShardState]| v1::JobProgress {
@@ -179,7 +201,11 @@ impl Stage<'_> {
         };
         self.entry.set_progress(progress(&st));
         let mut tick = tokio::time::interval(Duration::from_millis(250));
-        while !st.iter().all(|s| s.out.is_some() && s.verified) {
+        while !st
+            .iter()
+            .zip(&lost)
+            .all(|(s, &l)| l || (s.out.is_some() && s.verified))
+        {
             tokio::select! {
                 ev = ev_rx.recv() => match ev {
                     Some(TaskEvent::Done { task, output, worker, .. }) => match kinds.get(&task) {
@@ -235,11 +261,22 @@ impl Stage<'_> {
                         }
                         None => {}
                     },
-                    Some(TaskEvent::Lost { error, .. }) => {
-                        return Err(anyhow::Error::new(RecordsLost(format!(
-                            "round {} ({}): {error}",
-                            self.round, self.name()
-                        ))));
+                    Some(TaskEvent::Lost { task, error }) => {
+                        if let Some(&Kind::Main(i)) = kinds.get(&task)
+                            && st[i].out.is_none()
+                        {
+                            lost[i] = true;
+                            let (first, count) = self.shards[i];
+                            if let Some(h) = self.inputs[i].held.preferred(first, count)
+                                && !self.lost_holders.contains(&h)
+                            {
+                                self.lost_holders.push(h);
+                            }
+                            self.entry.log(format!(
+                                "round {} {} shard {i}: {error}",
+                                self.round, self.name()
+                            ));
+                        }
                     }
                     Some(TaskEvent::Failed { task, error }) => match kinds.get(&task) {
                         Some(Kind::Main(_)) => bail!(
@@ -386,18 +423,17 @@ impl Stage<'_> {
             }
         }
         drop(guard);
-        let outs: Vec<(TaskOutput, WorkerTag)> = st
+        let outs: Vec<Option<(TaskOutput, WorkerTag)>> = st
             .into_iter()
-            .map(|s| {
-                let (o, w) = s.out.expect("every shard is done");
-                Arc::try_unwrap(o)
-                    .map(|o| (o, w))
-                    .map_err(|_| anyhow::anyhow!("internal: an output is still shared"))
+            .zip(lost)
+            .map(|(s, l)| match s.out {
+                Some(_) if l => Ok(None),
+                None => Ok(None),
+                Some((o, w)) => Arc::try_unwrap(o)
+                    .map(|o| Some((o, w)))
+                    .map_err(|_| anyhow::anyhow!("internal: an output is still shared")),
             })
             .collect::<anyhow::Result<_>>()?;
-        for (o, _) in &outs {
-            tot.add(o);
-        }
         tot.shard_rays += rays;
         Ok(outs)
     }
@@ -425,7 +461,7 @@ impl Stage<'_> {
     }
 }
 
-fn stage_name(s: v1::Stage) -> &'static str {
+pub(super) fn stage_name(s: v1::Stage) -> &'static str {
     match s {
         v1::Stage::Intersect => "intersection",
         v1::Stage::Shade => "shading",

@@ -51,6 +51,13 @@ pub(super) struct Totals {
     /// a worker).
     #[serde(default)]
     pub(super) restarts: u32,
+    /// Lost records recovered (records at the workers): recomputations
+    /// (each for one stage's lost shards), and the tasks they ran (those
+    /// of the earlier rounds, and the lost ones again).
+    #[serde(default)]
+    pub(super) recomputations: u32,
+    #[serde(default)]
+    pub(super) recomputed_tasks: u64,
     /// Seconds spent writing checkpoints (between rounds).
     #[serde(default)]
     pub(super) checkpoint_seconds: f64,
@@ -122,6 +129,8 @@ pub(super) fn job_stats(
         "tasks": tot.tasks,
         "tasks_requeued": requeued,
         "job_restarts": tot.restarts,
+        "recomputations": tot.recomputations,
+        "recomputed_tasks": tot.recomputed_tasks,
         "backup_tasks": backups.max(tot.backups),
         "worker_seconds": tot.worker_seconds,
         "checkpoint_seconds": tot.checkpoint_seconds,

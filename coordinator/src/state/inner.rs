@@ -152,6 +152,9 @@ pub(super) struct Inner {
     pub(super) workers_ever: u64,
     /// Tasks queued again (worker lost, failed, output redone), ever.
     pub(super) requeued_total: u64,
+    /// Job ids a job's recomputations run under (see
+    /// `driver/recover.rs`), and the job's own.
+    pub(super) aliases: HashMap<String, String>,
 }
 
 /// The task `r` names, if `r` is a live attempt of it by the caller.

@@ -101,6 +101,41 @@ impl Shared {
         g.last_given.remove(job);
     }
 
+    /// Tasks of job `job` may run under the id `alias` too (a
+    /// recomputation's): workers hear it among the jobs running.
+    pub fn add_alias(&self, alias: &str, job: &str) {
+        self.lock()
+            .aliases
+            .insert(alias.to_string(), job.to_string());
+    }
+
+    /// Drops job `job`'s aliases and their counters.
+    pub fn drop_aliases(&self, job: &str) {
+        let mut g = self.lock();
+        let gone: Vec<String> = g
+            .aliases
+            .iter()
+            .filter(|(_, j)| *j == job)
+            .map(|(a, _)| a.clone())
+            .collect();
+        for a in gone {
+            g.aliases.remove(&a);
+            g.requeued.remove(&a);
+            g.backups.remove(&a);
+            g.last_given.remove(&a);
+        }
+    }
+
+    /// The aliases of the jobs `running`.
+    pub fn aliases_of(&self, running: &[String]) -> Vec<String> {
+        self.lock()
+            .aliases
+            .iter()
+            .filter(|(_, j)| running.contains(j))
+            .map(|(a, _)| a.clone())
+            .collect()
+    }
+
     /// Tasks queued again (after a worker loss or failure), and backup
     /// attempts issued, so far for job `job`.
     pub fn requeued(&self, job: &str) -> (u64, u64) {

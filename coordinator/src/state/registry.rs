@@ -114,6 +114,30 @@ impl Shared {
         }
     }
 
+    /// Whether the worker `session` is registered.
+    pub fn is_connected(&self, session: &str) -> bool {
+        self.lock().workers.contains_key(session)
+    }
+
+    /// A worker to recompute lost records on: registered, not
+    /// quarantined, not among `avoid` (sessions); the one running the
+    /// fewest tasks, then the one that has done the fewest.
+    pub fn recompute_worker(&self, avoid: &[String]) -> Option<String> {
+        let g = self.lock();
+        let now = Instant::now();
+        g.workers
+            .iter()
+            .filter(|(s, w)| {
+                let tag = WorkerTag {
+                    session: (*s).clone(),
+                    name: w.name.clone(),
+                };
+                !avoid.contains(s) && !quarantined_now(&g.quarantined, &tag, now)
+            })
+            .min_by_key(|(_, w)| (w.running.len() + w.overdue.len(), w.tasks_done))
+            .map(|(s, _)| s.clone())
+    }
+
     pub fn worker_count(&self) -> usize {
         self.lock().workers.len()
     }

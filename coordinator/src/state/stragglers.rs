@@ -40,11 +40,16 @@ impl Shared {
                 continue;
             };
             let ran = now.duration_since(oldest);
-            // A pinned task can run nowhere else: past the task timeout,
-            // its worker is taken to be stuck and the job starts again.
+            // A pinned task can run nowhere else: past the deadline of a
+            // backup, its worker is taken to be stuck (it gets no other
+            // task until that one ends), and the records it holds are
+            // recomputed elsewhere (see `driver/recover.rs`).
             if t.pinned {
-                if ran > self.cfg.task_timeout {
+                if ran > deadline {
                     stuck.push(*id);
+                    for (a, at) in &t.live {
+                        late.push((at.worker.clone(), (*id, *a)));
+                    }
                 }
                 continue;
             }
@@ -64,7 +69,11 @@ impl Shared {
             }
         }
         for id in stuck {
-            lose(&mut g, id, "it ran past --task-timeout where its input is");
+            lose(
+                &mut g,
+                id,
+                "it ran past a backup's deadline on the only worker holding its input",
+            );
         }
         for (w, a) in &late {
             if let Some(wk) = g.workers.get_mut(&w.session) {
