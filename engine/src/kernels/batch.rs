@@ -12,8 +12,9 @@
 //! into a [`TriangleBatch`] once and tests each of its rays against them.
 
 use super::rays::{LANES, Lanes, RayLanes};
-use super::{for_chunks, lane_mask, ld};
-use crate::simd::{Elem, Float, Job, Lanes as Simd, Mask};
+use super::triangle::watertight;
+use super::{for_chunks, ld};
+use crate::simd::{Elem, Float, Job, Lanes as Simd};
 
 /// Most triangles in a batch (a voxel listing more has a hierarchy).
 pub const BATCH: usize = 64;
@@ -132,29 +133,13 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
         corner(&batch.v[1], k, ray, c),
         corner(&batch.v[2], k, ray, c),
     );
-    let [sx, sy, sz] = ray.s;
-    let ax = a[0] - sx * a[2];
-    let ay = a[1] - sy * a[2];
-    let bx = b[0] - sx * b[2];
-    let by = b[1] - sy * b[2];
-    let cx = cc[0] - sx * cc[2];
-    let cy = cc[1] - sy * cc[2];
-    let u = cx * by - cy * bx;
-    let vv = ax * cy - ay * cx;
-    let w = bx * ay - by * ax;
-    let z = V::splat(R::ZERO);
-    let neg = u.lt(z).or(vv.lt(z)).or(w.lt(z));
-    let pos = u.gt(z).or(vv.gt(z)).or(w.gt(z));
-    let det = u + vv + w;
-    let inside = neg.and(pos).not().and_not(det.eq(z));
-    if inside.bits() & bits == 0 {
-        return 0;
+    match watertight(&[a, b, cc], ray.s, (ray.t_min, ray.limit), bits) {
+        Some((ok, t)) => {
+            t.store(&mut t_out[c..c + V::N]);
+            ok
+        }
+        None => 0,
     }
-    let (az, bz, cz) = (sz * a[2], sz * b[2], sz * cc[2]);
-    let t = (u * az + vv * bz + w * cz) / det;
-    let ok = inside.and(t.gt(ray.t_min)).and(t.lt(ray.limit));
-    t.store(&mut t_out[c..c + V::N]);
-    ok.bits() & lane_mask::<V>()
 }
 
 /// A corner of the triangles from lane `c`, relative to the ray's origin,

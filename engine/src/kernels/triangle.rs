@@ -108,12 +108,35 @@ fn finish<R: Elem, V: Float<Elem = R>>(
     limit: &[R; LANES],
     t_out: &mut [R; LANES],
 ) -> u64 {
-    let [a, b, cc] = rel;
-    let (sx, sy, sz) = (
+    let shear = [
         ld::<V>(&rays.sx, c),
         ld::<V>(&rays.sy, c),
         ld::<V>(&rays.sz, c),
-    );
+    ];
+    let range = (ld::<V>(&rays.t_min, c), ld::<V>(limit, c));
+    match watertight(rel, shear, range, bits) {
+        Some((ok, t)) => {
+            t.store(&mut t_out[c..c + V::N]);
+            ok
+        }
+        None => 0,
+    }
+}
+
+/// The watertight test's arithmetic (Woop, Benthin and Wald), shared by
+/// the kernels of many rays and of many triangles: corners `rel` relative
+/// to the ray's origin in its axes, its shear `sx, sy, sz`, and the open
+/// interval `range` of distances that count. The lanes that hit and their
+/// distances; `None` when no lane of `bits` is inside, before the
+/// division (where most tests end).
+#[inline(always)]
+pub(super) fn watertight<R: Elem, V: Float<Elem = R>>(
+    rel: &[[V; 3]; 3],
+    [sx, sy, sz]: [V; 3],
+    (t_min, limit): (V, V),
+    bits: u64,
+) -> Option<(u64, V)> {
+    let [a, b, cc] = rel;
     let ax = a[0] - sx * a[2];
     let ay = a[1] - sy * a[2];
     let bx = b[0] - sx * b[2];
@@ -130,13 +153,10 @@ fn finish<R: Elem, V: Float<Elem = R>>(
     // Inside (all edge functions of one sign) and not edge-on.
     let inside = neg.and(pos).not().and_not(det.eq(z));
     if inside.bits() & bits == 0 {
-        return 0; // most tests end here, before the division
+        return None;
     }
     let (az, bz, cz) = (sz * a[2], sz * b[2], sz * cc[2]);
     let t = (u * az + vv * bz + w * cz) / det;
-    let ok = inside
-        .and(t.gt(ld::<V>(&rays.t_min, c)))
-        .and(t.lt(ld::<V>(limit, c)));
-    t.store(&mut t_out[c..c + V::N]);
-    ok.bits() & lane_mask::<V>()
+    let ok = inside.and(t.gt(t_min)).and(t.lt(limit));
+    Some((ok.bits() & lane_mask::<V>(), t))
 }
