@@ -305,6 +305,8 @@ struct Shard<R> {
     /// Store numbers of the walks registered this pass, and their number.
     store_sum: u64,
     store_walks: u64,
+    /// Rays registered this pass.
+    registered: u64,
     /// When models are read per pass: the instances met this pass, and
     /// the rays (slots) registered near each, tested once the model is
     /// read after the world's objects.
@@ -331,6 +333,9 @@ pub struct IntersectStats {
     /// Mean store number of the rays registered in each pass.
     pub store_numbers: Vec<f64>,
     pub registrations: u64,
+    /// Rays that registered, summed over the passes (a ray counts once
+    /// per pass it registers in).
+    pub registered_rays: u64,
     pub intersection_tests: KindCounts,
     pub tests_skipped_mailbox: u64,
     pub tests_skipped_last_voxel: u64,
@@ -406,6 +411,7 @@ impl<R: Real> Slots<R> {
                     live: 0,
                     store_sum: 0,
                     store_walks: 0,
+                    registered: 0,
                     placed: Vec::new(),
                     pairs: Vec::new(),
                 })
@@ -890,6 +896,7 @@ pub fn intersect_rays<R: Real>(
                 }
                 sh.store_sum = 0;
                 sh.store_walks = 0;
+                sh.registered = 0;
                 let mut used = 0u64;
                 for i in 0..sh.hot.len() {
                     let h = &sh.hot[i];
@@ -908,6 +915,7 @@ pub fn intersect_rays<R: Real>(
                     );
                     sh.store_sum += sum;
                     sh.store_walks += walks;
+                    sh.registered += 1;
                     used += (sh.regs.iter().map(RegMap::len).sum::<usize>() - before) as u64;
                 }
                 for r in sh.regs.iter_mut() {
@@ -929,6 +937,7 @@ pub fn intersect_rays<R: Real>(
             .map(|sh| sh.regs.iter().map(|r| r.len() as u64).sum::<u64>())
             .sum();
         st.registrations += regs;
+        st.registered_rays += shards.iter().map(|sh| sh.registered).sum::<u64>();
         let mut region = [NO_REGION; MAX_GRIDS];
         let touched = &mut slots.touched;
         touched.clear(setup.grids);
@@ -966,14 +975,35 @@ pub fn intersect_rays<R: Real>(
                 setup.read_ahead,
                 &|index| grids.block_boxes(index).is_some_and(|b| !touched.meets(b)),
                 &|block, found| candidates(block, grids, region, aggregates, found),
-                &mut |block, found| {
-                    if !found.is_empty() {
+                &mut |batch| {
+                    let scan = |shards: &mut [Shard<R>], batch: &[(Block<'_>, &Found)]| {
                         pool.install(|| {
                             shards.par_iter_mut().for_each(|sh| {
-                                scan_block(sh, block, found, grids, models, per_pass, carry, &walk)
+                                for (block, found) in batch {
+                                    if !found.is_empty() {
+                                        scan_block(
+                                            sh, block, found, grids, models, per_pass, carry, &walk,
+                                        );
+                                    }
+                                }
                             });
                         });
-                        if per_pass && pair_bytes(shards) > pairs_cap {
+                    };
+                    if batch.iter().all(|(_, found)| found.is_empty()) {
+                        return Ok(());
+                    }
+                    if !per_pass {
+                        // The whole batch in one call: each shard's thread
+                        // goes through its blocks without waiting.
+                        scan(shards, batch);
+                        return Ok(());
+                    }
+                    // Models read per pass: their pairs are tested when
+                    // they outgrow their share, checked after every block
+                    // (so that when does not depend on the batches).
+                    for one in batch.chunks(1) {
+                        scan(shards, one);
+                        if pair_bytes(shards) > pairs_cap {
                             test_pairs(shards, db, models, pool, carry, &mut st)?;
                         }
                     }
@@ -1263,7 +1293,7 @@ fn candidates(
                     }
                 }
                 // Placed already: one by one.
-                None => push_placed(group, placed, region, &mut out.singles),
+                None => push_placed(group, placed, grids, region, &mut out.singles),
             }
             return;
         }
@@ -1294,7 +1324,7 @@ fn candidates_in(
         |g| grids.grids.get(g).map(|v| &v.spec),
         &mut placed,
     );
-    push_placed(boxes, &placed[..boxes.len()], region, out);
+    push_placed(boxes, &placed[..boxes.len()], grids, region, out);
 }
 
 /// The objects `boxes`, placed in the grids as `placed` says, whose voxel
@@ -1302,16 +1332,45 @@ fn candidates_in(
 fn push_placed(
     boxes: &[BoxRef],
     placed: &[aggregate::Placed],
+    grids: &VoxelGrids,
     region: &[Region; MAX_GRIDS],
     out: &mut Vec<Candidate>,
 ) {
     for (b, &(g, cells)) in boxes.iter().zip(placed) {
         if let Some((lo, hi)) = cells
             && region[g].overlaps(lo, hi)
+            && may_be_registered(&grids.grids[g], lo, hi)
         {
             out.push(Candidate::new(b, g, lo, hi));
         }
     }
+}
+
+/// Voxel boxes larger than this are candidates without looking at their
+/// voxels (the shards look at each anyway).
+const LOOK_AT_MOST: u64 = 64;
+
+/// Whether some voxel of box `lo..=hi` of `grid` holds a registered ray
+/// (or the box is too large to look). Looked at once for every shard, by
+/// the reader: an object with no registered voxel was a candidate for
+/// each shard, which each found out voxel by voxel, a cache miss each,
+/// in every scan (most of mount11's 8.4 million triangles, 18 times).
+#[inline]
+fn may_be_registered(grid: &VoxelGrid, lo: [u32; 3], hi: [u32; 3]) -> bool {
+    let n = (0..3).map(|i| (hi[i] - lo[i] + 1) as u64).product::<u64>();
+    if n > LOOK_AT_MOST {
+        return true;
+    }
+    for z in lo[2]..=hi[2] {
+        for y in lo[1]..=hi[1] {
+            let row = grid.spec.index([0, y, z]);
+            let run = &grid.flags[row + lo[0] as usize..=row + hi[0] as usize];
+            if run.iter().any(|&f| f & REGISTERED != 0) {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// Adds the group `boxes` (placed in the grids as `placed` says), an

@@ -134,9 +134,14 @@ pub struct Budget {
     pub io_buffers: u64,
     /// What the phases share.
     pub shared: u64,
-    /// Bytes of one ray slot with its planned registrations.
+    /// Bytes of one ray slot with its planned registrations: the most a
+    /// fresh ray may make in its first pass, which sizes the smallest
+    /// budget that will do. (How many slots a round gets depends on the
+    /// registrations rays make in fact: see [`Budget::slots`].)
     pub slot_bytes: u64,
-    /// Registrations planned per slot.
+    /// Bytes of one ray slot without its registrations.
+    pub slot_base_bytes: u64,
+    /// Registrations planned per slot, at most.
     pub regs_per_slot: u64,
     /// Bytes of a shading set: the hits, their radix-sort copy and the
     /// rays they spawn (see [`Budget::shading_set_hits`]).
@@ -232,6 +237,7 @@ impl Budget {
             io_buffers: io,
             shared,
             slot_bytes,
+            slot_base_bytes: intersect::slot_bytes::<R>() as u64,
             regs_per_slot: store.planned(),
             shading_set: (shared as f64 * SET_SHARE) as u64,
             next_ray_sort_records: part(NEXT_SHARE, 2 * std::mem::size_of::<RayRec>()),
@@ -278,8 +284,22 @@ impl Budget {
             .max(16)
     }
 
-    /// Ray slots while intersecting, given what else stays in memory.
-    pub fn slots(&self, resident_rays: bool, resident_results: bool) -> u64 {
+    /// Ray slots while intersecting, and the registrations they may make
+    /// in a pass, given what else stays in memory and the registrations a
+    /// registering ray makes in a pass on average (`regs_per_ray`, at most
+    /// [`Budget::regs_per_slot`]).
+    ///
+    /// Planning every slot for the most a ray may register left most of
+    /// the memory unused: mount11's rays make 1.3 registrations a pass
+    /// where 33 were planned, so its rounds took 4-6 passes for want of
+    /// slots. When rays register more than planned, those the pass has no
+    /// room for wait for the next one, which changes no count.
+    pub fn slots(
+        &self,
+        resident_rays: bool,
+        resident_results: bool,
+        regs_per_ray: f64,
+    ) -> (u64, u64) {
         let mut f = SLOTS_SHARE;
         if !resident_rays {
             f += RESIDENT_RAYS;
@@ -287,7 +307,10 @@ impl Budget {
         if !resident_results {
             f += 0.0; // the result sorter keeps its share
         }
-        (((self.shared as f64) * f) as u64 / self.slot_bytes).max(MIN_SLOTS)
+        let regs = regs_per_ray.clamp(1.0, self.regs_per_slot.max(1) as f64);
+        let per = self.slot_base_bytes as f64 + regs * REGISTRATION_BYTES as f64;
+        let slots = (((self.shared as f64) * f / per) as u64).max(MIN_SLOTS);
+        (slots, (slots as f64 * regs).ceil() as u64)
     }
 }
 

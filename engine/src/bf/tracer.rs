@@ -23,6 +23,9 @@ use crate::hit::PrimId;
 use crate::math::Real;
 use crate::models::Models;
 use crate::progress::Progress;
+
+/// Slots plan for this much more than the last round's rays registered.
+const REGS_MARGIN: f64 = 1.25;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
 use crate::scene::Material;
 use crate::sdb::Database;
@@ -163,6 +166,12 @@ pub struct Tracer<'db, R: Real> {
     /// The world's materials followed by the models'.
     materials: Vec<Material>,
     slots: Slots<R>,
+    /// Registrations a ray makes in a pass, on average, as the last round
+    /// found (with a margin): what the next round's slots plan for. The
+    /// first round plans for the most a fresh ray may make: planning for
+    /// fewer than its rays make leaves slots idle (rings80's eye rays make
+    /// 25 a pass, mount11's 1.3).
+    regs_per_ray: f64,
     /// Intersection passes read their blocks on a thread of their own.
     read_ahead: bool,
     // Buffers reused from call to call: allocating them afresh costs page
@@ -326,6 +335,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             materials: models.material_table(&db.scene().materials),
             models,
             slots: Slots::new(threads),
+            regs_per_ray: f64::INFINITY,
             dense_buf: Vec::new(),
             spare_rays: Vec::new(),
             set_buf: Vec::new(),
@@ -385,11 +395,13 @@ impl<'db, R: Real> Tracer<'db, R> {
                 result_key as fn(&Outcome) -> u64,
             ))
         };
-        let mut slots_n = budget.slots(rays_resident, resident);
-        if self.db.decoded_bytes() < CHEAP_SCAN_BYTES {
+        let (mut slots_n, mut registrations) =
+            budget.slots(rays_resident, resident, self.regs_per_ray);
+        if self.db.decoded_bytes() < CHEAP_SCAN_BYTES && slots_n > CACHE_SLOTS {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
-            slots_n = slots_n.min(CACHE_SLOTS);
+            registrations = registrations * CACHE_SLOTS / slots_n;
+            slots_n = CACHE_SLOTS;
         }
         let mut setup = IntersectSetup {
             db: self.db,
@@ -399,7 +411,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
-            registrations: (slots_n * budget.regs_per_slot) as usize,
+            registrations: registrations as usize,
             dense_cells: budget.dense_cells(self.threads),
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
@@ -445,6 +457,12 @@ impl<'db, R: Real> Tracer<'db, R> {
         st.db_blocks_skipped += ist.db_blocks_skipped;
         st.model_reads += ist.model_reads;
         st.ray_voxel_registrations += ist.registrations;
+        if ist.registered_rays > 0 {
+            // The next round's rays are planned for what these made, with
+            // a margin (a round's rays are much alike: eye rays, then
+            // their shadow rays and reflections).
+            self.regs_per_ray = REGS_MARGIN * ist.registrations as f64 / ist.registered_rays as f64;
+        }
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;
         st.aggregate_walks += ist.aggregate_walks;

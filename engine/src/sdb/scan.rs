@@ -144,6 +144,15 @@ impl Scan<'_> {
         })
     }
 
+    /// Hands the last block's decoded words and ids over to the caller in
+    /// exchange for `words` and `ids`, which the next block is decoded
+    /// into (their contents do not matter): a block kept past the next
+    /// read without a copy.
+    pub fn swap_block_buffers(&mut self, words: &mut Vec<u32>, ids: &mut Vec<u32>) {
+        std::mem::swap(&mut self.words, words);
+        std::mem::swap(&mut self.ids, ids);
+    }
+
     /// The index of the block [`Scan::next_block`] reads next.
     pub fn next_index(&self) -> u64 {
         self.next_index
