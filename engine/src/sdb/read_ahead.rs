@@ -48,6 +48,12 @@ fn next_wanted<'s>(
     scan.next_block()
 }
 
+/// A block with what was prepared from it.
+pub type Prepared<'a, P> = (Block<'a>, &'a P);
+
+/// What is done with a batch of prepared blocks.
+pub type Consume<'c, P> = dyn FnMut(&[Prepared<'_, P>]) -> Result<(), Error> + 'c;
+
 /// Runs `consume` on every block of `scan` that `skip` does not pass
 /// over, in file order, with what `prepare` made of it. With `ahead`,
 /// reading and `prepare` run on a thread of their own, a batch ahead of
@@ -59,7 +65,7 @@ pub fn scan_blocks<P: Default + Send>(
     ahead: bool,
     skip: &(dyn Fn(u64) -> bool + Sync),
     prepare: &(dyn Fn(&Block<'_>, &mut P) + Sync),
-    consume: &mut dyn FnMut(&[(Block<'_>, &P)]) -> Result<(), Error>,
+    consume: &mut Consume<'_, P>,
 ) -> Result<DbStats, Error> {
     if !ahead {
         let mut p = P::default();
@@ -129,7 +135,7 @@ pub fn scan_blocks<P: Default + Send>(
             if batch.is_empty() {
                 break;
             }
-            let blocks: Vec<(Block<'_>, &P)> = batch
+            let blocks: Vec<Prepared<'_, P>> = batch
                 .iter()
                 .map(|a| {
                     let block = Block::from_words(
