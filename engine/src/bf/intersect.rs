@@ -389,6 +389,8 @@ pub struct IntersectSetup<'a> {
 /// allocated once.
 pub struct Slots<R> {
     shards: Vec<Shard<R>>,
+    /// The candidates of a batch of blocks, one per block.
+    found: Vec<Found>,
     /// The coarse cells this pass has rays in (which blocks it skips).
     touched: Touched,
 }
@@ -417,6 +419,7 @@ impl<R: Real> Slots<R> {
                 })
                 .collect(),
             touched: Touched::default(),
+            found: Vec::new(),
         }
     }
 
@@ -442,6 +445,7 @@ impl<R: Real> Slots<R> {
     /// Gives the slots' memory back at the end of a round's intersection,
     /// so that shading can use the same share of the budget.
     pub fn release(&mut self) {
+        self.found = Vec::new();
         for sh in self.shards.iter_mut() {
             sh.hot = Vec::new();
             sh.q = Vec::new();
@@ -963,53 +967,69 @@ pub fn intersect_rays<R: Real>(
             let carry = setup.carry;
             let touched = &*touched;
             let region = &region;
-            // A reader thread may read, decompress and pick each block's
-            // candidates ahead of the shards.
+            // A reader thread may read and decompress blocks ahead of the
+            // shards; the shards' threads pick each block's candidates
+            // (the reader doing it too held every shard up: on tetra12 it
+            // was the busiest thread), then test them.
             let aggregates = setup.aggregates;
             let walk = AggregateWalk {
                 pass: st.passes,
                 slack: setup.slack,
             };
-            let stats = crate::sdb::scan_blocks::<Found>(
-                setup.db.scan()?,
-                setup.read_ahead,
-                &|index| grids.block_boxes(index).is_some_and(|b| !touched.meets(b)),
-                &|block, found| candidates(block, grids, region, aggregates, found),
-                &mut |batch| {
-                    let scan = |shards: &mut [Shard<R>], batch: &[(Block<'_>, &Found)]| {
-                        pool.install(|| {
-                            shards.par_iter_mut().for_each(|sh| {
-                                for (block, found) in batch {
-                                    if !found.is_empty() {
-                                        scan_block(
-                                            sh, block, found, grids, models, per_pass, carry, &walk,
-                                        );
-                                    }
-                                }
-                            });
-                        });
-                    };
-                    if batch.iter().all(|(_, found)| found.is_empty()) {
-                        return Ok(());
-                    }
-                    if !per_pass {
-                        // The whole batch in one call: each shard's thread
-                        // goes through its blocks without waiting.
-                        scan(shards, batch);
-                        return Ok(());
-                    }
-                    // Models read per pass: their pairs are tested when
-                    // they outgrow their share, checked after every block
-                    // (so that when does not depend on the batches).
-                    for one in batch.chunks(1) {
-                        scan(shards, one);
-                        if pair_bytes(shards) > pairs_cap {
-                            test_pairs(shards, db, models, pool, carry, &mut st)?;
+            let found = &mut slots.found;
+            let stats =
+                crate::sdb::scan_blocks::<()>(
+                    setup.db.scan()?,
+                    setup.read_ahead,
+                    &|index| grids.block_boxes(index).is_some_and(|b| !touched.meets(b)),
+                    &|_, _| {},
+                    &mut |batch| {
+                        if found.len() < batch.len() {
+                            found.resize_with(batch.len(), Found::default);
                         }
-                    }
-                    Ok(())
-                },
-            )?;
+                        let found = &mut found[..batch.len()];
+                        pool.install(|| {
+                            found.par_iter_mut().zip(batch.par_iter()).for_each(
+                                |(f, (block, ()))| candidates(block, grids, region, aggregates, f),
+                            )
+                        });
+                        let scan = |shards: &mut [Shard<R>],
+                                    blocks: &[(Block<'_>, &())],
+                                    found: &[Found]| {
+                            pool.install(|| {
+                                shards.par_iter_mut().for_each(|sh| {
+                                    for ((block, ()), found) in blocks.iter().zip(found) {
+                                        if !found.is_empty() {
+                                            scan_block(
+                                                sh, block, found, grids, models, per_pass, carry,
+                                                &walk,
+                                            );
+                                        }
+                                    }
+                                });
+                            });
+                        };
+                        if found.iter().all(Found::is_empty) {
+                            return Ok(());
+                        }
+                        if !per_pass {
+                            // The whole batch in one call: each shard's thread
+                            // goes through its blocks without waiting.
+                            scan(shards, batch, found);
+                            return Ok(());
+                        }
+                        // Models read per pass: their pairs are tested when
+                        // they outgrow their share, checked after every block
+                        // (so that when does not depend on the batches).
+                        for (one, f) in batch.chunks(1).zip(found.chunks(1)) {
+                            scan(shards, one, f);
+                            if pair_bytes(shards) > pairs_cap {
+                                test_pairs(shards, db, models, pool, carry, &mut st)?;
+                            }
+                        }
+                        Ok(())
+                    },
+                )?;
             st.db_scans += 1;
             st.db_bytes_read += stats.bytes_read;
             st.db_blocks_skipped += stats.blocks_skipped;
