@@ -306,7 +306,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         let slack = crate::grid::box_slack(&db.scene().view.from, &specs);
         // The paper's passes test objects one by one.
         let aggregates = opts.aggregates.breadth_first() && !db.full_scans();
-        let (grids, pre) = VoxelGrids::build(db, specs, partition, aggregates, progress)?;
+        let work = super::voxels::BuildThreads {
+            pool: (threads > 1).then_some(&pool),
+            read_ahead,
+        };
+        let (grids, pre) = VoxelGrids::build(db, specs, partition, aggregates, work, progress)?;
         let preprocess_seconds = models_seconds + t0.elapsed().as_secs_f64();
         let stats = BfStats {
             memory_budget_bytes: bf.memory,
