@@ -269,6 +269,57 @@ impl Region {
     }
 }
 
+/// Rays [`sample_registrations`] walks at most.
+const SAMPLE_RAYS: u64 = 1024;
+
+/// The registrations rays `ray(0..len)` make in their first pass, on
+/// average, from up to [`SAMPLE_RAYS`] of them spread evenly over the
+/// round (rays that meet no grid take no slot and are not counted); `None`
+/// when no sampled ray meets a grid. What a round's slots are planned for
+/// (see [`super::Budget::slots`]): the rays of one scene differ by tens
+/// of times (mount11's eye rays make 1.3 a pass, rings80's 25), and a
+/// round's shadow rays are unlike its eye rays. Walking a thousand rays
+/// costs a few hundredths of a pass.
+pub fn sample_registrations<R: Real>(
+    len: u64,
+    ray: &(dyn Fn(u64) -> RayRec + Sync),
+    grids: &VoxelGrids,
+    store: &StorePlan,
+    eps: f64,
+) -> Option<f64> {
+    let mut slots = Slots::<R>::new(1);
+    slots.ensure(1);
+    let sh = &mut slots.shards[0];
+    let mut regs: [RegMap; MAX_GRIDS] = Default::default();
+    let mut region = [NO_REGION; MAX_GRIDS];
+    let step = (len / SAMPLE_RAYS).max(1);
+    let (mut rays, mut total) = (0u64, 0u64);
+    let mut i = step / 2;
+    while i < len {
+        let r = ray(i);
+        i += step;
+        if misses_every_grid(&r, grids, eps) {
+            continue;
+        }
+        for m in regs.iter_mut() {
+            m.clear(64, 0);
+        }
+        load(sh, 0, 0, &r, eps);
+        register(
+            &mut sh.hot[0],
+            &mut sh.cold[0],
+            0,
+            grids,
+            store,
+            &mut regs,
+            &mut region,
+        );
+        total += regs.iter().map(RegMap::len).sum::<usize>() as u64;
+        rays += 1;
+    }
+    (rays > 0).then(|| total as f64 / rays as f64)
+}
+
 /// A ray given a slot, to be loaded into it by the shard's own thread.
 type Pending = (u32, u64, RayRec);
 

@@ -399,8 +399,20 @@ impl<'db, R: Real> Tracer<'db, R> {
                 result_key as fn(&Outcome) -> u64,
             ))
         };
-        let (mut slots_n, mut registrations) =
-            budget.slots(rays_resident, resident, self.regs_per_ray);
+        // Planned for what a sample of these rays registers, or else for
+        // what the last round's did.
+        let sampled = match &rays {
+            RaySource::Indexed { len, ray } => super::intersect::sample_registrations::<R>(
+                *len,
+                *ray,
+                &self.grids,
+                &self.store,
+                self.eps,
+            ),
+            RaySource::Stream(_) => None,
+        };
+        let regs_per_ray = sampled.map_or(self.regs_per_ray, |m| REGS_MARGIN * m);
+        let (mut slots_n, mut registrations) = budget.slots(rays_resident, resident, regs_per_ray);
         if self.db.decoded_bytes() < CHEAP_SCAN_BYTES && slots_n > CACHE_SLOTS {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
