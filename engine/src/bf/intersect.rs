@@ -224,6 +224,14 @@ pub fn slot_bytes<R: Real>() -> usize {
         + std::mem::size_of::<u32>()
 }
 
+/// Bytes of a slot's place in the queue of streamed rays (see
+/// [`Shard::pending`]) beyond what a ray admitted by id takes instead (its
+/// id): what a slot saves when its rays can be had by id and its results
+/// have their places.
+pub fn streamed_extra_bytes() -> usize {
+    std::mem::size_of::<Pending>() - std::mem::size_of::<u64>()
+}
+
 /// Memory per registration: its key, its slot id, and its share of the
 /// voxel table.
 pub const REGISTRATION_BYTES: usize = 8 + 4 + 24;
@@ -288,7 +296,7 @@ pub fn sample_registrations<R: Real>(
     eps: f64,
 ) -> Option<f64> {
     let mut slots = Slots::<R>::new(1);
-    slots.ensure(1);
+    slots.ensure(1, false);
     let sh = &mut slots.shards[0];
     let mut regs: [RegMap; MAX_GRIDS] = Default::default();
     let mut region = [NO_REGION; MAX_GRIDS];
@@ -511,7 +519,7 @@ impl<R: Real> Slots<R> {
     }
 
     /// Makes room for `n` rays in all, split evenly over the shards.
-    fn ensure(&mut self, n: usize) {
+    fn ensure(&mut self, n: usize, streamed: bool) {
         let per = n.div_ceil(self.shards.len()).max(1);
         let q0 = RayQ::new(
             crate::math::V3::zero(),
@@ -527,7 +535,11 @@ impl<R: Real> Slots<R> {
             sh.cold.truncate(per);
             // At most every slot waits to be loaded: no growth mid-fill.
             sh.pending.clear();
-            sh.pending.reserve_exact(per);
+            if streamed {
+                sh.pending.reserve_exact(per);
+            } else {
+                sh.pending = Vec::new();
+            }
         }
     }
 }
@@ -781,8 +793,13 @@ pub fn intersect_rays<R: Real>(
             v.len()
         )));
     }
-    // No more slots than rays.
-    slots.ensure((setup.slots as u64).min(total).max(1) as usize);
+    // No more slots than rays. Rays had by id with results put in place
+    // (`ByIdFill`) need no queue.
+    let streamed = !matches!(
+        (&source, &sink),
+        (RaySource::Indexed { .. }, ResultSink::Dense { .. })
+    );
+    slots.ensure((setup.slots as u64).min(total).max(1) as usize, streamed);
     let shards = &mut slots.shards;
     let ngrids = setup.grids.grids.len();
     // Rays that can be had by id, with results that have a place each:

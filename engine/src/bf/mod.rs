@@ -294,11 +294,15 @@ impl Budget {
     /// where 33 were planned, so its rounds took 4-6 passes for want of
     /// slots. When rays register more than planned, those the pass has no
     /// room for wait for the next one, which changes no count.
+    ///
+    /// `streamed` says whether rays come in order from a stream (or their
+    /// results do not have places of their own), which takes a queue.
     pub fn slots(
         &self,
         resident_rays: bool,
         resident_results: bool,
         regs_per_ray: f64,
+        streamed: bool,
     ) -> (u64, u64) {
         let mut f = SLOTS_SHARE;
         if !resident_rays {
@@ -308,7 +312,12 @@ impl Budget {
             f += 0.0; // the result sorter keeps its share
         }
         let regs = regs_per_ray.clamp(1.0, self.regs_per_slot.max(1) as f64);
-        let per = self.slot_base_bytes as f64 + regs * REGISTRATION_BYTES as f64;
+        let base = if streamed {
+            self.slot_base_bytes
+        } else {
+            self.slot_base_bytes - intersect::streamed_extra_bytes() as u64
+        };
+        let per = base as f64 + regs * REGISTRATION_BYTES as f64;
         let slots = (((self.shared as f64) * f / per) as u64).max(MIN_SLOTS);
         (slots, (slots as f64 * regs).ceil() as u64)
     }

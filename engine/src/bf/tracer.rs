@@ -412,7 +412,9 @@ impl<'db, R: Real> Tracer<'db, R> {
             RaySource::Stream(_) => None,
         };
         let regs_per_ray = sampled.map_or(self.regs_per_ray, |m| REGS_MARGIN * m);
-        let (mut slots_n, mut registrations) = budget.slots(rays_resident, resident, regs_per_ray);
+        let streamed = !(matches!(rays, RaySource::Indexed { .. }) && resident);
+        let (mut slots_n, mut registrations) =
+            budget.slots(rays_resident, resident, regs_per_ray, streamed);
         if self.db.decoded_bytes() < CHEAP_SCAN_BYTES && slots_n > CACHE_SLOTS {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
