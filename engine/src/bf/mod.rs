@@ -613,4 +613,49 @@ mod tests {
             Budget::plan::<f64>(600 << 10, 33 * 33 * 24, 20_000, 0, 1 << 17, &store, 2).is_ok()
         );
     }
+
+    /// Slots are planned for the registrations rays make: rays that make
+    /// few get more slots in the same memory (at most as many
+    /// registrations as the slots may make in all), never more than the
+    /// store number allows for, and a stream's queue costs slots.
+    #[test]
+    fn slots_follow_the_registrations_rays_make() {
+        let specs = [GridSpec::new(
+            &crate::scene::Aabb {
+                min: [0.0; 3],
+                max: [1.0; 3],
+            },
+            [300, 300, 300],
+        )];
+        let store = StorePlan::new(StoreNumber::Adaptive, &specs);
+        let b = Budget::plan::<f64>(256 << 20, 513 * 513 * 24, 27_000_000, 0, 1 << 17, &store, 2)
+            .unwrap();
+        assert_eq!(b.regs_per_slot, 30);
+        let (few, few_regs) = b.slots(false, true, 1.5, false);
+        let (many, many_regs) = b.slots(false, true, 25.0, false);
+        let (most, most_regs) = b.slots(false, true, f64::INFINITY, false);
+        assert!(few > 2 * many, "{few} slots against {many}");
+        assert!(many > most, "{many} slots against {most}");
+        assert_eq!(most_regs, most * 30);
+        assert_eq!(few_regs, (few as f64 * 1.5).ceil() as u64);
+        assert!(many_regs >= many * 25);
+        // Planned for the most a ray may make, as before plans followed
+        // what rays make.
+        let before = (b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS)) as u64 / b.slot_bytes;
+        assert!(most >= before, "{most} slots against {before}");
+        let (streamed, _) = b.slots(false, true, 1.5, true);
+        assert!(streamed < few);
+        // Everything fits in what the slots may take.
+        let share = b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS);
+        for (n, regs, streamed) in [(few, few_regs, false), (many, many_regs, false)] {
+            let base = b.slot_base_bytes
+                - if streamed {
+                    0
+                } else {
+                    intersect::streamed_extra_bytes() as u64
+                };
+            let bytes = n * base + regs * REGISTRATION_BYTES as u64;
+            assert!(bytes as f64 <= share * 1.001, "{bytes} bytes of {share}");
+        }
+    }
 }

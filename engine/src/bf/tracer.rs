@@ -142,8 +142,10 @@ impl ResultReader {
     }
 }
 
-/// Read-ahead buffers may take at most this part of the memory budget.
-const READ_AHEAD_SHARE: u64 = 32;
+/// Read-ahead buffers may take at most this part of the memory budget
+/// (two batches of blocks: a few MiB for databases of about a thousand
+/// objects a block, so read-ahead runs from budgets of about 64 MiB).
+const READ_AHEAD_SHARE: u64 = 16;
 
 /// The breadth-first stages over one database.
 pub struct Tracer<'db, R: Real> {
