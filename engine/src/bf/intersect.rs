@@ -1271,9 +1271,9 @@ impl Candidate {
     }
 }
 
-/// What a pass does with one block, worked out once for every shard (by
-/// the reader thread, ahead of the shards): the objects some registered
-/// voxel may hold, and the aggregates among them
+/// What a pass does with one block, worked out once for every shard (the
+/// blocks of a batch in parallel, before the shards test them): the
+/// objects some registered voxel may hold, and the aggregates among them
 /// ([`crate::grid::aggregate`]).
 ///
 /// A group of the block's objects that crowds its voxels is stored in the
