@@ -30,21 +30,22 @@
 //! while it is traced (a finished ray's result is a copy, which another
 //! thread may write to its place).
 
+use super::candidates::{Candidate, Found, NO_REGION, Region, candidates};
 use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::skip::Touched;
+use super::store::StorePlan;
 use super::voxels::{OCCUPIED, REGISTERED, VoxelGrid, VoxelGrids, entry_face};
-use crate::df::{Entry, Hierarchies, high_first, ray_meets};
+use crate::df::{Entry, high_first, ray_meets};
 use crate::error::Error;
-use crate::grid::{Dda, DdaSave, GridSpec, aggregate};
+use crate::grid::{Dda, DdaSave, GridSpec};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
 use crate::math::{Real, Vec3, Vec3Ext};
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
 use crate::render::KindCounts;
-use crate::scene::Aabb;
-use crate::sdb::{Block, BoxRef, Database, ObjectRef};
+use crate::sdb::{Block, Database, ObjectRef};
 use crate::shapes::{Prepared, Shape};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -53,74 +54,6 @@ use serde::Serialize;
 /// objects' grid: see [`crate::grid::MAX_GROUPS`]).
 pub const MAX_GRIDS: usize = crate::grid::MAX_GROUPS;
 const NONE16: u16 = u16::MAX;
-
-/// How many voxels a ray stores itself in per pass.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-pub enum StoreNumber {
-    Fixed(u32),
-    Adaptive,
-}
-
-/// Store numbers per grid.
-#[derive(Clone, Copy, Debug)]
-pub struct StorePlan {
-    fixed: Option<u32>,
-    grids: usize,
-    base: [u32; MAX_GRIDS],
-    max: [u32; MAX_GRIDS],
-    /// Most voxels a walk can cross in the grid (res x + y + z).
-    walk: [u32; MAX_GRIDS],
-}
-
-impl StorePlan {
-    pub fn new(policy: StoreNumber, grids: &[GridSpec]) -> StorePlan {
-        let mut base = [1; MAX_GRIDS];
-        let mut max = [1; MAX_GRIDS];
-        let mut walk = [1; MAX_GRIDS];
-        for (g, spec) in grids.iter().enumerate().take(MAX_GRIDS) {
-            let res = *spec.res.iter().max().unwrap_or(&1);
-            base[g] = ((res as f64 / 10.0).round() as u32).max(1);
-            max[g] = res.max(base[g]);
-            walk[g] = spec.res.iter().sum();
-        }
-        StorePlan {
-            fixed: match policy {
-                StoreNumber::Fixed(n) => Some(n.max(1)),
-                StoreNumber::Adaptive => None,
-            },
-            grids: grids.len().min(MAX_GRIDS),
-            base,
-            max,
-            walk,
-        }
-    }
-
-    /// Registrations a fresh ray makes at most in its first pass: what a
-    /// ray slot plans for (the paper's memory / (ray + store number x
-    /// registration)). Survivors of later passes use what finished rays
-    /// leave.
-    pub fn planned(&self) -> u64 {
-        (0..self.grids)
-            .map(|g| self.store(g, 0).min(self.walk[g]) as u64)
-            .sum()
-    }
-
-    /// The most registrations one ray can make in one pass.
-    pub fn overrun(&self) -> u64 {
-        (0..self.grids)
-            .map(|g| self.store(g, 30).min(self.walk[g]) as u64)
-            .sum()
-    }
-
-    /// Store number in grid `g` for a ray's pass number `k` there.
-    #[inline]
-    pub fn store(&self, g: usize, k: u8) -> u32 {
-        match self.fixed {
-            Some(n) => n,
-            None => self.max[g].min(self.base[g].saturating_mul(1 << k.min(20))),
-        }
-    }
-}
 
 const FRESH: u8 = 0;
 const WALKING: u8 = 1;
@@ -244,37 +177,6 @@ struct PassCounts {
     skipped_last_voxel: u64,
     /// Walks of an aggregate's hierarchy.
     aggregate_walks: u64,
-}
-
-/// Voxel box holding every registration of a pass, per grid.
-#[derive(Clone, Copy, Debug)]
-struct Region {
-    lo: [u32; 3],
-    hi: [u32; 3],
-}
-
-const NO_REGION: Region = Region {
-    lo: [u32::MAX; 3],
-    hi: [0; 3],
-};
-
-impl Region {
-    fn add(&mut self, c: [u32; 3]) {
-        for i in 0..3 {
-            self.lo[i] = self.lo[i].min(c[i]);
-            self.hi[i] = self.hi[i].max(c[i]);
-        }
-    }
-    fn union(&mut self, o: &Region) {
-        for i in 0..3 {
-            self.lo[i] = self.lo[i].min(o.lo[i]);
-            self.hi[i] = self.hi[i].max(o.hi[i]);
-        }
-    }
-    #[inline]
-    fn overlaps(&self, lo: [u32; 3], hi: [u32; 3]) -> bool {
-        (0..3).all(|i| lo[i] <= self.hi[i] && hi[i] >= self.lo[i])
-    }
 }
 
 /// Rays [`sample_registrations`] walks at most.
@@ -1243,97 +1145,6 @@ fn register<R: Real>(
     (store_sum, walks)
 }
 
-/// An object of the block being scanned that some registered voxel may
-/// hold: where its record is, its group and its voxel box. Worked out once
-/// per block for every shard.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Candidate {
-    at: u32,
-    index: u32,
-    /// The object's input id: its place in the tie order.
-    rank: u32,
-    group: u8,
-    lo: [u16; 3],
-    hi: [u16; 3],
-}
-
-impl Candidate {
-    /// Object `b` of grid `g`, over voxels `lo..=hi` there.
-    fn new(b: &BoxRef, g: usize, lo: [u32; 3], hi: [u32; 3]) -> Candidate {
-        Candidate {
-            at: b.at,
-            index: b.index,
-            rank: b.rank,
-            group: g as u8,
-            lo: lo.map(|c| c as u16),
-            hi: hi.map(|c| c as u16),
-        }
-    }
-}
-
-/// What a pass does with one block, worked out once for every shard (the
-/// blocks of a batch in parallel, before the shards test them): the
-/// objects some registered voxel may hold, and the aggregates among them
-/// ([`crate::grid::aggregate`]).
-///
-/// A group of the block's objects that crowds its voxels is stored in the
-/// voxels of its box like one object, and a ray met there walks a
-/// hierarchy of boxes over its objects, built when the block is read,
-/// instead of testing each. Groups are the objects whose index divided by
-/// [`aggregate::SIZE`] is the same, as in the depth-first tracer (which
-/// also takes a group with instances, or one a block boundary cuts: here
-/// those are tested one by one). Every group is
-/// first judged by its box: one that meets no registered voxel of any
-/// grid is passed over without looking at its objects one by one (their
-/// grid, their voxels). Which groups are aggregates depends on the
-/// database and the grids alone, not on the rays of the pass, so every
-/// count is still the same whatever the threads, slots or memory. The
-/// paper's passes (`--full-scans`) test objects one by one.
-#[derive(Default)]
-pub(crate) struct Found {
-    /// Objects tested one by one.
-    singles: Vec<Candidate>,
-    /// The aggregates' objects, each aggregate's together, and their boxes
-    /// (what their hierarchies are built over).
-    members: Vec<Candidate>,
-    member_boxes: Vec<Aabb>,
-    aggregates: Vec<Aggregate>,
-    trees: Hierarchies,
-    /// Room to build in.
-    ids: Vec<u32>,
-    order: Vec<(u32, u32)>,
-}
-
-impl Found {
-    fn clear(&mut self) {
-        self.singles.clear();
-        self.members.clear();
-        self.member_boxes.clear();
-        self.aggregates.clear();
-        self.trees.clear();
-    }
-
-    fn is_empty(&self) -> bool {
-        self.singles.is_empty() && self.aggregates.is_empty()
-    }
-}
-
-/// A crowded group of a block's objects, traced through its hierarchy.
-#[derive(Clone, Copy, Debug)]
-struct Aggregate {
-    /// Its objects: `members[first..first + len]`.
-    first: u32,
-    len: u32,
-    /// The entry of its hierarchy in `Found::trees` (over member indices).
-    tree: u32,
-    /// The database index of its first object, which names it in a ray's
-    /// mailbox.
-    index: u32,
-    group: u8,
-    lo: [u16; 3],
-    hi: [u16; 3],
-}
-
 /// A ray's mailbox value while it walks aggregate `index` in pass
 /// `pass`: no object's (an object's low half is zero), and no other
 /// aggregate's. A ray's mailbox outlives its pass; with the pass in the
@@ -1342,158 +1153,6 @@ struct Aggregate {
 #[inline(always)]
 fn aggregate_tag(index: u32, pass: u64) -> PrimId {
     PrimId(((index as u64) << 32) | (pass % u32::MAX as u64 + 1))
-}
-
-/// The objects of `block` whose voxel box meets `region`, the box of the
-/// voxels rays are registered in this pass, one by one or in aggregates
-/// (when `aggregates`).
-fn candidates(
-    block: &Block<'_>,
-    grids: &VoxelGrids,
-    region: &[Region; MAX_GRIDS],
-    aggregates: bool,
-    out: &mut Found,
-) {
-    out.clear();
-    let spec = |g: usize| grids.grids.get(g).map(|v| &v.spec);
-    // Each object's voxels in its own grid lie within its group's voxels
-    // in that grid: passing over a group whose box is near no registered
-    // voxel drops no candidate.
-    let near = |bounds: &Aabb| {
-        grids.grids.iter().zip(region).any(|(grid, r)| {
-            grid.spec
-                .cell_range(bounds)
-                .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
-        })
-    };
-    let mut placed = [(0, None); aggregate::SIZE];
-    aggregate::each_group(block, |group, bounds| {
-        if !near(bounds) {
-            return;
-        }
-        if aggregates && aggregate::may_be(spec(grids.partition.group(&group[0].bbox)), bounds) {
-            aggregate::place(group, &grids.partition, spec, &mut placed);
-            let placed = &placed[..group.len()];
-            match aggregate::of_grids(group, placed, bounds, spec) {
-                Some((g, lo, hi)) => {
-                    if region[g].overlaps(lo, hi) {
-                        add_aggregate(group, placed, g, lo, hi, out);
-                    }
-                }
-                // Placed already: one by one.
-                None => push_placed(group, placed, grids, region, &mut out.singles),
-            }
-            return;
-        }
-        // One by one, each half of the group judged by its box first.
-        for half in group.chunks(aggregate::SIZE / 2) {
-            let mut bounds = Aabb::EMPTY;
-            for b in half {
-                bounds.union(&b.bbox);
-            }
-            if near(&bounds) {
-                candidates_in(half, grids, region, &mut out.singles);
-            }
-        }
-    });
-}
-
-/// [`candidates`] among `boxes`, one by one.
-fn candidates_in(
-    boxes: &[BoxRef],
-    grids: &VoxelGrids,
-    region: &[Region; MAX_GRIDS],
-    out: &mut Vec<Candidate>,
-) {
-    let mut placed = [(0, None); aggregate::SIZE];
-    aggregate::place(
-        boxes,
-        &grids.partition,
-        |g| grids.grids.get(g).map(|v| &v.spec),
-        &mut placed,
-    );
-    push_placed(boxes, &placed[..boxes.len()], grids, region, out);
-}
-
-/// The objects `boxes`, placed in the grids as `placed` says, whose voxel
-/// box meets `region`, as candidates.
-fn push_placed(
-    boxes: &[BoxRef],
-    placed: &[aggregate::Placed],
-    grids: &VoxelGrids,
-    region: &[Region; MAX_GRIDS],
-    out: &mut Vec<Candidate>,
-) {
-    for (b, &(g, cells)) in boxes.iter().zip(placed) {
-        if let Some((lo, hi)) = cells
-            && region[g].overlaps(lo, hi)
-            && may_be_registered(&grids.grids[g], lo, hi)
-        {
-            out.push(Candidate::new(b, g, lo, hi));
-        }
-    }
-}
-
-/// Voxel boxes larger than this are candidates without looking at their
-/// voxels (the shards look at each anyway).
-const LOOK_AT_MOST: u64 = 64;
-
-/// Whether some voxel of box `lo..=hi` of `grid` holds a registered ray
-/// (or the box is too large to look). Looked at once for every shard, by
-/// the reader: an object with no registered voxel was a candidate for
-/// each shard, which each found out voxel by voxel, a cache miss each,
-/// in every scan (most of mount11's 8.4 million triangles, 18 times).
-#[inline]
-fn may_be_registered(grid: &VoxelGrid, lo: [u32; 3], hi: [u32; 3]) -> bool {
-    let n = (0..3).map(|i| (hi[i] - lo[i] + 1) as u64).product::<u64>();
-    if n > LOOK_AT_MOST {
-        return true;
-    }
-    for z in lo[2]..=hi[2] {
-        for y in lo[1]..=hi[1] {
-            let row = grid.spec.index([0, y, z]);
-            let run = &grid.flags[row + lo[0] as usize..=row + hi[0] as usize];
-            if run.iter().any(|&f| f & REGISTERED != 0) {
-                return true;
-            }
-        }
-    }
-    false
-}
-
-/// Adds the group `boxes` (placed in the grids as `placed` says), an
-/// aggregate of grid `g` over voxels `lo..=hi`, to `out`, with its
-/// hierarchy.
-fn add_aggregate(
-    boxes: &[BoxRef],
-    placed: &[aggregate::Placed],
-    g: usize,
-    lo: [u32; 3],
-    hi: [u32; 3],
-    out: &mut Found,
-) {
-    let first = out.members.len();
-    for (b, &(_, cells)) in boxes.iter().zip(placed) {
-        // Within the group's box, so within the grid.
-        if let Some((blo, bhi)) = cells {
-            out.members.push(Candidate::new(b, g, blo, bhi));
-            out.member_boxes.push(b.bbox);
-        }
-    }
-    out.ids.clear();
-    out.ids.extend(first as u32..out.members.len() as u32);
-    let tree = out
-        .trees
-        .build_with(&out.ids, &out.member_boxes[..], &mut out.order);
-    out.aggregates.push(Aggregate {
-        first: first as u32,
-        len: (out.members.len() - first) as u32,
-        tree,
-        index: boxes[0].index,
-        group: g as u8,
-        lo: lo.map(|c| c as u16),
-        hi: hi.map(|c| c as u16),
-    });
 }
 
 /// Tests one block's candidate objects and aggregates against the shard's

@@ -17,18 +17,21 @@
 //!
 //! Everything the render holds is bounded by `--memory`; see [`Budget`].
 
+mod candidates;
 mod intersect;
 mod records;
 mod regmap;
 mod shade;
 mod skip;
+mod store;
 mod tracer;
 mod voxels;
 
 pub use crate::render::Contribution;
-pub use intersect::{IntersectStats, MAX_GRIDS, RaySource, Slots, StoreNumber, StorePlan};
+pub use intersect::{IntersectStats, MAX_GRIDS, RaySource, Slots};
 pub use records::{Outcome, RayKind, RayRec, ResultRec, SPAWN_SLOTS};
 pub use shade::ShadeStats;
+pub use store::{StoreNumber, StorePlan};
 pub use tracer::{HeldRays, ResultReader, SortedRays, Tracer, eye_ray};
 pub use voxels::{VoxelGrid, VoxelGrids};
 

@@ -10,12 +10,13 @@
 //! a ray's spawn keys only on its id in the round.
 
 use super::intersect::{
-    IntersectSetup, IntersectStats, RaySource, ResultSink, Slots, StorePlan, intersect_rays,
+    IntersectSetup, IntersectStats, RaySource, ResultSink, Slots, intersect_rays,
 };
 use super::records::{Outcome, RayKind, RayRec, ResultRec};
 use super::shade::{
     ChunkOut, NextRays, ShadeSetup, ShadeStats, ray_key, shade_indexed, shade_round,
 };
+use super::store::StorePlan;
 use super::voxels::VoxelGrids;
 use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, ModelHolding};
 use crate::error::Error;
