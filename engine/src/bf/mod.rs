@@ -299,17 +299,24 @@ impl Budget {
     /// room for wait for the next one, which changes no count.
     ///
     /// `streamed` says whether rays come in order from a stream (or their
-    /// results do not have places of their own), which takes a queue.
+    /// results do not have places of their own), which takes a queue;
+    /// `dense_index` whether some grid is small enough for a dense voxel
+    /// index (see [`Budget::dense_cells`]), whose share the slots take
+    /// when none is.
     pub fn slots(
         &self,
         resident_rays: bool,
         resident_results: bool,
         regs_per_ray: f64,
         streamed: bool,
+        dense_index: bool,
     ) -> (u64, u64) {
         let mut f = SLOTS_SHARE;
         if !resident_rays {
             f += RESIDENT_RAYS;
+        }
+        if !dense_index {
+            f += DENSE_SHARE;
         }
         if !resident_results {
             f += 0.0; // the result sorter keeps its share
@@ -634,9 +641,9 @@ mod tests {
         let b = Budget::plan::<f64>(256 << 20, 513 * 513 * 24, 27_000_000, 0, 1 << 17, &store, 2)
             .unwrap();
         assert_eq!(b.regs_per_slot, 30);
-        let (few, few_regs) = b.slots(false, true, 1.5, false);
-        let (many, many_regs) = b.slots(false, true, 25.0, false);
-        let (most, most_regs) = b.slots(false, true, f64::INFINITY, false);
+        let (few, few_regs) = b.slots(false, true, 1.5, false, true);
+        let (many, many_regs) = b.slots(false, true, 25.0, false, true);
+        let (most, most_regs) = b.slots(false, true, f64::INFINITY, false, true);
         assert!(few > 2 * many, "{few} slots against {many}");
         assert!(many > most, "{many} slots against {most}");
         assert_eq!(most_regs, most * 30);
@@ -646,8 +653,11 @@ mod tests {
         // what rays make.
         let before = (b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS)) as u64 / b.slot_bytes;
         assert!(most >= before, "{most} slots against {before}");
-        let (streamed, _) = b.slots(false, true, 1.5, true);
+        let (streamed, _) = b.slots(false, true, 1.5, true, true);
         assert!(streamed < few);
+        // A grid too large for a dense voxel index leaves its share.
+        let (sparse, _) = b.slots(false, true, 1.5, false, false);
+        assert!(sparse > few);
         // Everything fits in what the slots may take.
         let share = b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS);
         for (n, regs, streamed) in [(few, few_regs, false), (many, many_regs, false)] {

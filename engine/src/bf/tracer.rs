@@ -416,8 +416,14 @@ impl<'db, R: Real> Tracer<'db, R> {
         };
         let regs_per_ray = sampled.map_or(self.regs_per_ray, |m| REGS_MARGIN * m);
         let streamed = !(matches!(rays, RaySource::Indexed { .. }) && resident);
+        let dense_cells = budget.dense_cells(self.threads);
+        let dense_index = self
+            .grids
+            .grids
+            .iter()
+            .any(|g| g.spec.cells() <= dense_cells);
         let (mut slots_n, mut registrations) =
-            budget.slots(rays_resident, resident, regs_per_ray, streamed);
+            budget.slots(rays_resident, resident, regs_per_ray, streamed, dense_index);
         if self.db.decoded_bytes() < CHEAP_SCAN_BYTES && slots_n > CACHE_SLOTS {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
@@ -433,7 +439,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             store: self.store,
             slots: slots_n as usize,
             registrations: registrations as usize,
-            dense_cells: budget.dense_cells(self.threads),
+            dense_cells,
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
             eps: self.eps,
