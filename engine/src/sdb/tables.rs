@@ -229,17 +229,7 @@ fn decode_appearance(
     materials: &mut [Material],
 ) -> Option<()> {
     let finite = |x: f32| x.is_finite().then_some(x);
-    let n = d.u32()? as usize;
-    if n > materials.len() || n * PBR_ENTRY > d.remaining() {
-        return None;
-    }
-    let mut last = None;
-    for _ in 0..n {
-        let i = d.u32()? as usize;
-        if last.is_some_and(|l| i <= l) {
-            return None;
-        }
-        last = Some(i);
+    indexed_entries(d, materials.len(), PBR_ENTRY, |d, i| {
         let metallic = finite(d.f32()?)?;
         let roughness = finite(d.f32()?)?;
         let emissive = [finite(d.f32()?)?, finite(d.f32()?)?, finite(d.f32()?)?];
@@ -248,18 +238,9 @@ fn decode_appearance(
             roughness,
             emissive,
         });
-    }
-    let n = d.u32()? as usize;
-    if n > lights.len() || n * LIGHT_ENTRY > d.remaining() {
-        return None;
-    }
-    let mut last = None;
-    for _ in 0..n {
-        let i = d.u32()? as usize;
-        if last.is_some_and(|l| i <= l) {
-            return None;
-        }
-        last = Some(i);
+        Some(())
+    })?;
+    indexed_entries(d, lights.len(), LIGHT_ENTRY, |d, i| {
         let kind = match d.u32()? {
             0 => LightKind::Point,
             1 => LightKind::Spot,
@@ -282,6 +263,31 @@ fn decode_appearance(
             outer_cone,
             direction,
         });
+        Some(())
+    })
+}
+
+/// A count, then that many entries of `entry` bytes each, each led by an
+/// index below `max` larger than the one before; `read` decodes the rest
+/// of entry `i`. `None` on a count or index out of range.
+fn indexed_entries(
+    d: &mut Dec<'_>,
+    max: usize,
+    entry: usize,
+    mut read: impl FnMut(&mut Dec<'_>, usize) -> Option<()>,
+) -> Option<()> {
+    let n = d.u32()? as usize;
+    if n > max || n * entry > d.remaining() {
+        return None;
+    }
+    let mut last = None;
+    for _ in 0..n {
+        let i = d.u32()? as usize;
+        if last.is_some_and(|l| i <= l) {
+            return None;
+        }
+        last = Some(i);
+        read(d, i)?;
     }
     Some(())
 }
