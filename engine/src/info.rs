@@ -23,6 +23,8 @@ pub struct SceneInfo {
     pub materials: u64,
     /// Material statements (`f` lines) in the scene as written.
     pub material_statements: u64,
+    /// Images the materials sample (textures).
+    pub textures: u64,
     /// Bounds of all objects, in world coordinates; `null` for a scene of
     /// none.
     pub bbox_min: Option<[f32; 3]>,
@@ -180,7 +182,7 @@ fn scan_counts(db: &Database) -> Result<(u64, u64), Error> {
             let n = o.shape.triangles();
             if n > 0 {
                 t += n;
-                v += o.shape.count() as u64;
+                v += o.shape.listed_vertices();
             }
         }
     }
@@ -256,6 +258,7 @@ pub fn scene_info_with(
             lights: db.scene().lights.len() as u64,
             materials: db.scene().materials.len() as u64,
             material_statements: db.material_statements(),
+            textures: db.scene().textures.len() as u64,
             bbox_min,
             bbox_max,
             triangles,
@@ -301,6 +304,7 @@ pub fn scene_info_with(
         lights: c.lights,
         materials: c.materials.len() as u64,
         material_statements: c.statements,
+        textures: c.textures,
         bbox_min,
         bbox_max,
         triangles: c.triangles,
@@ -335,7 +339,8 @@ fn models_stored(models: &Option<(Vec<ModelInfo>, u64)>) -> u64 {
 struct Counter {
     counts: KindCounts,
     lights: u64,
-    materials: HashSet<[u32; 14]>,
+    materials: HashSet<[u32; 23]>,
+    textures: u64,
     statements: u64,
     any_material: bool,
     bbox: Aabb,
@@ -380,7 +385,7 @@ impl SceneSink for Counter {
         let t = s.triangles();
         if t > 0 {
             self.triangles += t;
-            self.listed_vertices += s.count() as u64;
+            self.listed_vertices += s.listed_vertices();
         }
         Ok(())
     }
@@ -391,5 +396,9 @@ impl SceneSink for Counter {
     fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
         self.mesh_vertices = Some(self.mesh_vertices.unwrap_or(0) + facts.vertices);
         Ok(())
+    }
+    fn texture(&mut self, _: &crate::scene::TextureImage) -> Result<u32, Error> {
+        self.textures += 1;
+        Ok(self.textures as u32 - 1)
     }
 }

@@ -40,7 +40,7 @@ use crate::df::{Entry, high_first, ray_meets};
 use crate::error::Error;
 use crate::grid::{Dda, DdaSave, GridSpec};
 use crate::hit::{Hit, PrimId};
-use crate::intersect::RayQ;
+use crate::intersect::{Attrs, RayQ};
 use crate::math::{Real, Vec3, Vec3Ext};
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
@@ -58,6 +58,9 @@ const NONE16: u16 = u16::MAX;
 const FRESH: u8 = 0;
 const WALKING: u8 = 1;
 const DONE: u8 = 2;
+/// A carried material that asks for the shading join instead (the
+/// surface has attributes, which slots do not keep).
+const JOIN: u32 = u32::MAX;
 
 /// A ray's walk through one grid.
 #[derive(Clone, Copy, Debug)]
@@ -1491,7 +1494,14 @@ fn offer<R: Real>(
         if carry && let Some((surf, material)) = surface(&RayQ::from_vec3(c.o, c.d)) {
             c.ng = surf.ng;
             c.ns = surf.ns;
-            c.material = material;
+            // A surface with attributes (texture coordinates, colours)
+            // is not carried: the shading join works it out again, so
+            // that slots need no room for attributes.
+            c.material = if surf.attrs == Attrs::NONE {
+                material
+            } else {
+                JOIN
+            };
         }
     }
 }
@@ -1607,17 +1617,19 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize, carry: bool) {
                 prim: h.best.prim,
                 t: h.best.t,
             };
-            sh.done.push(if carry && !h.shadow && h.best.is_some() {
-                Outcome {
-                    res,
-                    ng: c.ng.to_array(),
-                    ns: c.ns.to_array(),
-                    material: c.material,
-                    has_surface: 1,
-                }
-            } else {
-                Outcome::bare(res)
-            });
+            sh.done.push(
+                if carry && !h.shadow && h.best.is_some() && c.material != JOIN {
+                    Outcome {
+                        res,
+                        ng: c.ng.to_array(),
+                        ns: c.ns.to_array(),
+                        material: c.material,
+                        has_surface: 1,
+                    }
+                } else {
+                    Outcome::bare(res)
+                },
+            );
             h.active = false;
         }
     }

@@ -357,6 +357,8 @@ fn shade_one_carried(
         p,
         ng: Vec3::from_array(h.out.ng),
         ns: Vec3::from_array(h.out.ns),
+        // A hit with attributes is never carried (see `offer`).
+        attrs: crate::intersect::Attrs::NONE,
     };
     let mat = &materials[h.out.material as usize];
     shade_surface(shade_scene, r, h.id, &surf, mat, out, c);

@@ -302,7 +302,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
         let spill = SpillDir::new(bf.spill_dir.as_deref())?;
         let eps = epsilon(&db.bbox(), opts.precision);
-        let shade_scene = ShadeScene::new(db.scene(), opts.max_depth, eps);
+        let shade_scene = ShadeScene::new(db.scene(), opts.max_depth, eps)?;
 
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");

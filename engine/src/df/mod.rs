@@ -317,7 +317,7 @@ impl<'t> DfScene<'t> {
             edge_bins,
             materials: models.material_table(&header.materials),
             grids,
-            shade: ShadeScene::new(header, opts.max_depth, eps),
+            shade: ShadeScene::new(header, opts.max_depth, eps)?,
             camera: Camera::new(&header.view, opts.width, opts.height)?,
             slack,
             blocks,

@@ -31,7 +31,7 @@ use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
-use crate::shapes::{Instance, KindCounts, Patch, Polygon, Shape, ShapeKind};
+use crate::shapes::{Instance, KindCounts, Patch, Polygon, Shape, ShapeKind, Textured};
 use glam::{DAffine3, DMat3, DVec3};
 
 /// How a model is placed: the transform, its inverse (to walk the
@@ -450,20 +450,25 @@ impl Model {
         if prim as usize >= self.objects.len() {
             return None;
         }
-        let (v, n, material) = corners_of(&self.objects, prim)?;
-        let v = v.map(|p| pl.point(p));
-        let surface = match n {
-            Some(n) => {
-                let n = n.map(|x| pl.normal(x));
-                Shape::Patch(Patch {
-                    vertices: &v,
-                    normals: &n,
-                })
-                .surface(ray, t)
-            }
-            None => Shape::Polygon(Polygon { vertices: &v }).surface(ray, t),
+        let tri = corners_of(&self.objects, prim)?;
+        let v = tri.v.map(|p| pl.point(p));
+        let n = tri.n.map(|n| n.map(|x| pl.normal(x)));
+        let surface = match (&n, tri.attrs) {
+            (_, Some((uvs, colors))) => Shape::Textured(Textured {
+                vertices: &v,
+                normals: n.as_ref().map_or(&[][..], |n| &n[..]),
+                uvs,
+                colors,
+            })
+            .surface(ray, t),
+            (Some(n), None) => Shape::Patch(Patch {
+                vertices: &v,
+                normals: n,
+            })
+            .surface(ray, t),
+            (None, None) => Shape::Polygon(Polygon { vertices: &v }).surface(ray, t),
         };
-        Some((surface, self.material_base + material))
+        Some((surface, self.material_base + tri.material))
     }
 }
 
@@ -548,15 +553,13 @@ impl Model {
                 },
             ),
             Slot::Record(_) => {
-                let (v, n, _) = corners_of(&self.objects, id)?;
-                (
-                    v,
-                    if n.is_some() {
-                        ShapeKind::Patch
-                    } else {
-                        ShapeKind::Polygon
-                    },
-                )
+                let tri = corners_of(&self.objects, id)?;
+                let kind = match (tri.attrs, tri.n) {
+                    (Some(_), _) => ShapeKind::Textured,
+                    (None, Some(_)) => ShapeKind::Patch,
+                    (None, None) => ShapeKind::Polygon,
+                };
+                (tri.v, kind)
             }
         };
         tests.add(kind);
@@ -568,30 +571,50 @@ impl Model {
 /// Three corners (or normals) of a triangle.
 type Corners = [[f32; 3]; 3];
 
-/// A model triangle's corners, its normals if it is a patch, and its
-/// material; `None` if the object is not a triangle.
-fn corners_of(objects: &ObjectStore, id: u32) -> Option<(Corners, Option<Corners>, u32)> {
+/// A textured triangle's texture coordinates and packed colours (see
+/// [`Textured`]), borrowed from its record.
+type CornerAttrs<'a> = (&'a [[f32; 2]], &'a [[u32; 2]]);
+
+/// A model triangle: its corners, its normals (a patch's, or a textured
+/// triangle's if it has them), a textured triangle's texture coordinates
+/// and colours (borrowed from the record), and its material.
+struct Tri<'a> {
+    v: Corners,
+    n: Option<Corners>,
+    attrs: Option<CornerAttrs<'a>>,
+    material: u32,
+}
+
+/// Model triangle `id`; `None` if the object is not a triangle.
+fn corners_of(objects: &ObjectStore, id: u32) -> Option<Tri<'_>> {
+    let three = |v: &[[f32; 3]]| [v[0], v[1], v[2]];
     match objects.slot(id) {
-        Slot::Face(f) => Some((
-            objects.positions(&f),
-            f.patch.then(|| objects.normals(&f)),
-            f.material,
-        )),
+        Slot::Face(f) => Some(Tri {
+            v: objects.positions(&f),
+            n: f.patch.then(|| objects.normals(&f)),
+            attrs: None,
+            material: f.material,
+        }),
         Slot::Record(r) => {
             let o = objects.record(r, id);
-            match o.shape {
-                Shape::Polygon(p) if p.vertices.len() == 3 => Some((
-                    [p.vertices[0], p.vertices[1], p.vertices[2]],
-                    None,
-                    o.material,
-                )),
-                Shape::Patch(p) if p.vertices.len() == 3 => Some((
-                    [p.vertices[0], p.vertices[1], p.vertices[2]],
-                    Some([p.normals[0], p.normals[1], p.normals[2]]),
-                    o.material,
-                )),
-                _ => None,
-            }
+            let (v, n, attrs) = match o.shape {
+                Shape::Polygon(p) if p.vertices.len() == 3 => (three(p.vertices), None, None),
+                Shape::Patch(p) if p.vertices.len() == 3 => {
+                    (three(p.vertices), Some(three(p.normals)), None)
+                }
+                Shape::Textured(t) => (
+                    three(t.vertices),
+                    (!t.normals.is_empty()).then(|| three(t.normals)),
+                    Some((t.uvs, t.colors)),
+                ),
+                _ => return None,
+            };
+            Some(Tri {
+                v,
+                n,
+                attrs,
+                material: o.material,
+            })
         }
     }
 }

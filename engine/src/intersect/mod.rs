@@ -8,4 +8,4 @@ mod surface;
 pub mod triangle;
 
 pub use ray::RayQ;
-pub use surface::Surface;
+pub use surface::{Attrs, Surface};

@@ -4,12 +4,30 @@ use crate::math::Vec3;
 /// What shading needs at a hit: the point, the geometric normal (outward
 /// for spheres and cones; by the vertex order for polygons and patches) and
 /// the shading normal (interpolated for patches), both unit length. Neither
-/// is turned toward the ray here.
+/// is turned toward the ray here. `attrs` holds what a triangle carries
+/// at its corners, interpolated at the point (none for every other kind).
 #[derive(Clone, Copy, Debug)]
 pub struct Surface {
     pub p: Vec3,
     pub ng: Vec3,
     pub ns: Vec3,
+    pub attrs: Attrs,
+}
+
+/// Attributes interpolated at a hit from a triangle's corners: texture
+/// coordinates and a linear RGBA colour (glTF's `TEXCOORD_n`, `COLOR_0`;
+/// OBJ's `vt`; PLY's `u v`), when the triangle has them.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Attrs {
+    pub uv: Option<[f32; 2]>,
+    pub color: Option<[f32; 4]>,
+}
+
+impl Attrs {
+    pub const NONE: Attrs = Attrs {
+        uv: None,
+        color: None,
+    };
 }
 
 impl Surface {

@@ -21,8 +21,8 @@
 use super::geometry::{self, Plan};
 use crate::error::Error;
 use crate::progress::Progress;
-use crate::scene::{Material, MeshFacts, SceneSink};
-use crate::shapes::{Patch, Polygon, Shape};
+use crate::scene::{Material, MeshFacts, SceneSink, TextureImage};
+use crate::shapes::{Patch, Polygon, Shape, Textured};
 use crate::spill::{ExternalSorter, RecordFile, RecordReader, RecordWriter, SpillDir};
 use bytemuck::{Pod, Zeroable};
 use std::path::{Path, PathBuf};
@@ -36,6 +36,7 @@ pub const NO_MATERIAL: u32 = u32::MAX;
 /// diffuse (NFF `f 0.8 0.8 0.8 1 0 0 0 1`).
 pub const NEUTRAL: Material = Material {
     pbr: None,
+    texture: None,
     color: [0.8, 0.8, 0.8],
     kd: 1.0,
     ks: 0.0,
@@ -59,6 +60,8 @@ const FACE_COLOR: u32 = 1;
 struct CornerRec {
     v: u64,
     n: u64,
+    /// Index in the texture coordinates' table, or [`NO_INDEX`].
+    t: u64,
 }
 
 /// A corner on its way through the external join.
@@ -69,13 +72,16 @@ struct Joined {
     seq: u64,
     v: u64,
     n: u64,
+    t: u64,
     pos: [f32; 3],
     normal: [f32; 3],
     color: [f32; 3],
+    uv: [f32; 2],
     flags: u32,
 }
 const HAS_NORMAL: u32 = 1;
 const HAS_COLOR: u32 = 2;
+const HAS_UV: u32 = 4;
 
 /// A corner of a face, resolved.
 #[derive(Clone, Copy, Debug)]
@@ -83,6 +89,7 @@ struct Corner {
     pos: [f32; 3],
     normal: Option<[f32; 3]>,
     color: Option<[f32; 3]>,
+    uv: Option<[f32; 2]>,
 }
 
 /// Records per chunk of a table in memory.
@@ -243,12 +250,18 @@ pub struct MeshBuilder<'a> {
     positions: Table<[f64; 3]>,
     normals: Table<[f32; 3]>,
     colors: Table<[f32; 3]>,
+    /// Texture coordinates (glTF's convention: v down the image),
+    /// indexed by the corners' `t`.
+    uvs: Table<[f32; 2]>,
     faces: Table<FaceRec>,
     corners: Table<CornerRec>,
     /// Normals are per vertex, indexed like the positions (PLY, OFF);
     /// else they are a table of their own that corners index (OBJ).
     vertex_normals: bool,
     materials: Vec<Material>,
+    /// The images the materials bind, by [`MeshBuilder::add_image`]'s
+    /// numbers; sent to the sink first, the bindings renumbered.
+    images: Vec<TextureImage>,
     lo: [f64; 3],
     hi: [f64; 3],
     up: Option<[f64; 3]>,
@@ -296,10 +309,12 @@ impl<'a> MeshBuilder<'a> {
             positions: Table::new("mesh-positions"),
             normals: Table::new("mesh-normals"),
             colors: Table::new("mesh-colors"),
+            uvs: Table::new("mesh-uvs"),
             faces: Table::new("mesh-faces"),
             corners: Table::new("mesh-corners"),
             vertex_normals,
             materials: Vec::new(),
+            images: Vec::new(),
             lo: [f64::INFINITY; 3],
             hi: [f64::NEG_INFINITY; 3],
             up: None,
@@ -348,6 +363,7 @@ impl<'a> MeshBuilder<'a> {
         self.used -= self.positions.spill(dir)?;
         self.used -= self.normals.spill(dir)?;
         self.used -= self.colors.spill(dir)?;
+        self.used -= self.uvs.spill(dir)?;
         Ok(())
     }
 
@@ -381,6 +397,26 @@ impl<'a> MeshBuilder<'a> {
     }
 
     /// A material faces may refer to by the index returned.
+    /// Adds texture coordinates (glTF's convention) that corners name by
+    /// their place in the order added ([`MeshBuilder::add_face_uv`]).
+    pub fn add_uv(&mut self, uv: [f32; 2]) -> Result<(), Error> {
+        if self.uvs.needs_chunk() {
+            self.room(Kind::Vertex, Table::<[f32; 2]>::CHUNK_BYTES)?;
+        }
+        self.uvs.push(uv)
+    }
+
+    pub fn uv_count(&self) -> u64 {
+        self.uvs.len
+    }
+
+    /// Adds an image materials may bind by the number returned
+    /// ([`crate::scene::TextureBinding::image`]).
+    pub fn add_image(&mut self, image: TextureImage) -> u32 {
+        self.images.push(image);
+        (self.images.len() - 1) as u32
+    }
+
     pub fn add_material(&mut self, m: Material) -> u32 {
         self.materials.push(m);
         (self.materials.len() - 1) as u32
@@ -396,20 +432,53 @@ impl<'a> MeshBuilder<'a> {
         material: u32,
         color: Option<[f32; 3]>,
     ) -> Result<(), Error> {
+        self.push_face(
+            corners
+                .iter()
+                .map(|&(v, n)| CornerRec { v, n, t: NO_INDEX }),
+            corners.len(),
+            material,
+            color,
+        )
+    }
+
+    /// A face whose corners are (vertex, normal, texture coordinates)
+    /// indices, either of the last two [`NO_INDEX`].
+    pub fn add_face_uv(
+        &mut self,
+        corners: &[(u64, u64, u64)],
+        material: u32,
+        color: Option<[f32; 3]>,
+    ) -> Result<(), Error> {
+        self.push_face(
+            corners.iter().map(|&(v, n, t)| CornerRec { v, n, t }),
+            corners.len(),
+            material,
+            color,
+        )
+    }
+
+    fn push_face(
+        &mut self,
+        corners: impl Iterator<Item = CornerRec>,
+        n: usize,
+        material: u32,
+        color: Option<[f32; 3]>,
+    ) -> Result<(), Error> {
         if self.faces.needs_chunk() {
             self.room(Kind::Face, Table::<FaceRec>::CHUNK_BYTES)?;
         }
         self.faces.push(FaceRec {
-            corners: corners.len() as u32,
+            corners: n as u32,
             material,
             color: color.unwrap_or([0.0; 3]),
             flags: if color.is_some() { FACE_COLOR } else { 0 },
         })?;
-        for &(v, n) in corners {
+        for c in corners {
             if self.corners.needs_chunk() {
                 self.room(Kind::Face, Table::<CornerRec>::CHUNK_BYTES)?;
             }
-            self.corners.push(CornerRec { v, n })?;
+            self.corners.push(c)?;
         }
         Ok(())
     }
@@ -430,11 +499,24 @@ impl<'a> MeshBuilder<'a> {
             self.normals.len > 0
         };
         let has_colors = self.colors.len == nv && nv > 0;
+        let has_uvs = self.uvs.len > 0;
+        // The images first, the bindings renumbered as the sink numbers
+        // them.
+        let mut numbers = Vec::with_capacity(self.images.len());
+        for im in std::mem::take(&mut self.images) {
+            numbers.push(sink.texture(&im)?);
+        }
+        for m in &mut self.materials {
+            if let Some(t) = m.texture.as_mut() {
+                t.image = numbers.get(t.image as usize).copied().unwrap_or(t.image);
+            }
+        }
         let nfaces = self.faces.len;
         let ncorners = self.corners.len;
         let positions = self.positions.finish()?;
         let normals = self.normals.finish()?;
         let colors = self.colors.finish()?;
+        let uvs = self.uvs.finish()?;
         let faces = self.faces.finish()?;
         let corners = self.corners.finish()?;
         let mut em = Emitter {
@@ -447,6 +529,7 @@ impl<'a> MeshBuilder<'a> {
             },
             pos: Vec::new(),
             nrm: Vec::new(),
+            uv: Vec::new(),
             tris: Vec::new(),
             corners: Vec::new(),
         };
@@ -460,7 +543,7 @@ impl<'a> MeshBuilder<'a> {
             up: self.up,
         };
 
-        if positions.is_memory() && normals.is_memory() && colors.is_memory() {
+        if positions.is_memory() && normals.is_memory() && colors.is_memory() && uvs.is_memory() {
             progress.set_message("resolving faces");
             let mut cr = corners.reader()?;
             while let Some(c) = cr.next()? {
@@ -490,6 +573,7 @@ impl<'a> MeshBuilder<'a> {
                         pos: local(positions.get(c.v)),
                         normal,
                         color: has_colors.then(|| colors.get(c.v)),
+                        uv: (has_uvs && c.t != NO_INDEX).then(|| uvs.get(c.t)),
                     });
                 }
                 em.face(&f, sink)?;
@@ -512,8 +596,12 @@ impl<'a> MeshBuilder<'a> {
         type Key = fn(&Joined) -> u64;
         let by_vertex: Key = |j| j.v;
         let by_normal: Key = |j| j.n;
+        let by_uv: Key = |j| j.t;
         let by_seq: Key = |j| j.seq;
         let separate_normals = has_normals && !self.vertex_normals;
+        // After the vertices: the normals' join, the texture
+        // coordinates', then file order.
+        let after_normals = if has_uvs { by_uv } else { by_seq };
 
         // 1. Corners, numbered in file order, sorted by vertex index and
         // merged with the vertex tables read front to back.
@@ -529,6 +617,7 @@ impl<'a> MeshBuilder<'a> {
                     seq,
                     v: c.v,
                     n: c.n,
+                    t: c.t,
                     ..Zeroable::zeroed()
                 })?;
                 seq += 1;
@@ -544,7 +633,11 @@ impl<'a> MeshBuilder<'a> {
             &dir,
             "mesh-sort",
             cap,
-            if separate_normals { by_normal } else { by_seq },
+            if separate_normals {
+                by_normal
+            } else {
+                after_normals
+            },
         );
         {
             let mut sorted = sorter.finish()?;
@@ -598,7 +691,7 @@ impl<'a> MeshBuilder<'a> {
             progress.set_message("joining corners with normals");
             progress.set_total(ncorners);
             let mut sorted = next.finish()?;
-            next = ExternalSorter::new(&dir, "mesh-sort", cap, by_seq);
+            next = ExternalSorter::new(&dir, "mesh-sort", cap, after_normals);
             let mut nr = normals.reader()?;
             let mut at = 0u64;
             let mut cur = [0.0f32; 3];
@@ -621,7 +714,36 @@ impl<'a> MeshBuilder<'a> {
             progress.inc(done % (1 << 16));
         }
 
-        // 3. Back into file order, and out.
+        // 3. Sorted by texture coordinates' index (corners without one
+        // last) and merged with their table.
+        if has_uvs {
+            progress.set_message("joining corners with texture coordinates");
+            progress.set_total(ncorners);
+            let mut sorted = next.finish()?;
+            next = ExternalSorter::new(&dir, "mesh-sort", cap, by_seq);
+            let mut tr = uvs.reader()?;
+            let mut at = 0u64;
+            let mut cur = [0.0f32; 2];
+            let mut done = 0u64;
+            while let Some(mut j) = sorted.next()? {
+                if j.t != NO_INDEX {
+                    while at <= j.t {
+                        cur = tr.next()?.ok_or_else(|| truncated_table(&self.name))?;
+                        at += 1;
+                    }
+                    j.uv = cur;
+                    j.flags |= HAS_UV;
+                }
+                next.push(j)?;
+                done += 1;
+                if done.is_multiple_of(1 << 16) {
+                    progress.inc(1 << 16);
+                }
+            }
+            progress.inc(done % (1 << 16));
+        }
+
+        // 4. Back into file order, and out.
         sink.origin(origin)?;
         sink.mesh(&facts(&bounds))?;
         progress.set_message("writing faces");
@@ -638,6 +760,7 @@ impl<'a> MeshBuilder<'a> {
                     pos: j.pos,
                     normal: (j.flags & HAS_NORMAL != 0).then_some(j.normal),
                     color: (j.flags & HAS_COLOR != 0).then_some(j.color),
+                    uv: (j.flags & HAS_UV != 0).then_some(j.uv),
                 });
             }
             em.face(&f, sink)?;
@@ -712,10 +835,11 @@ impl Bounds {
 /// Turns faces into objects, by the polygon policy.
 struct Emitter {
     materials: Vec<Material>,
-    last: Option<[u32; 14]>,
+    last: Option<[u32; 23]>,
     summary: MeshSummary,
     pos: Vec<[f32; 3]>,
     nrm: Vec<[f32; 3]>,
+    uv: Vec<[f32; 2]>,
     tris: Vec<[usize; 3]>,
     corners: Vec<Corner>,
 }
@@ -731,6 +855,7 @@ impl Emitter {
         if f.flags & FACE_COLOR != 0 {
             return Material {
                 pbr: None,
+                texture: None,
                 color: quantize(f.color),
                 ..NEUTRAL
             };
@@ -746,6 +871,7 @@ impl Emitter {
             let n = self.corners.len() as f32;
             return Material {
                 pbr: None,
+                texture: None,
                 color: quantize(s.map(|x| x / n)),
                 ..NEUTRAL
             };
@@ -754,6 +880,84 @@ impl Emitter {
             Some(m) => *m,
             None => NEUTRAL,
         }
+    }
+
+    /// A face of a textured material whose every corner has texture
+    /// coordinates: its triangles (a polygon triangulated as
+    /// [`geometry::triangulate`] does) as textured triangles, smooth if
+    /// every corner has a normal.
+    fn textured_face(&mut self, f: &FaceRec, sink: &mut dyn SceneSink) -> Result<(), Error> {
+        self.pos.clear();
+        self.nrm.clear();
+        self.uv.clear();
+        let smooth = self.corners.iter().all(|c| c.normal.is_some());
+        // Repeated corners dropped as `geometry::merge_repeats` drops
+        // them: one equal to the next, and the last if equal to the first
+        // kept.
+        let same = |a: &[f32; 3], b: &[f32; 3]| a.map(f32::to_bits) == b.map(f32::to_bits);
+        let n = self.corners.len();
+        let mut first: Option<usize> = None;
+        for i in 0..n {
+            let c = &self.corners[i];
+            let dup = if i + 1 < n {
+                same(&c.pos, &self.corners[i + 1].pos)
+            } else {
+                n > 1 && first.is_some_and(|f| same(&c.pos, &self.corners[f].pos))
+            };
+            if dup {
+                continue;
+            }
+            first.get_or_insert(i);
+            self.pos.push(c.pos);
+            self.uv.push(c.uv.expect("checked"));
+            if smooth {
+                self.nrm.push(c.normal.expect("checked"));
+            }
+        }
+        if self.pos.len() < 3 || geometry::plan(&self.pos, smooth) == Plan::Degenerate {
+            self.summary.degenerate += 1;
+            return Ok(());
+        }
+        let m = self.material(f);
+        if self.last != Some(m.key()) {
+            sink.material(&m)?;
+            self.last = Some(m.key());
+        }
+        let mut tris = std::mem::take(&mut self.tris);
+        tris.clear();
+        if self.pos.len() == 3 {
+            tris.push([0, 1, 2]);
+        } else {
+            self.summary.triangulated += 1;
+            geometry::triangulate(&self.pos, &mut tris);
+        }
+        let mut r = Ok(());
+        for &[a, b, c] in &tris {
+            let v = [self.pos[a], self.pos[b], self.pos[c]];
+            if !geometry::has_area(v[0], v[1], v[2]) {
+                continue;
+            }
+            let uv = [self.uv[a], self.uv[b], self.uv[c]];
+            let nrm = if smooth {
+                [self.nrm[a], self.nrm[b], self.nrm[c]]
+            } else {
+                [[0.0; 3]; 3]
+            };
+            r = self.emit(
+                sink,
+                &Shape::Textured(Textured {
+                    vertices: &v,
+                    normals: if smooth { &nrm } else { &[] },
+                    uvs: &uv,
+                    colors: &[],
+                }),
+            );
+            if r.is_err() {
+                break;
+            }
+        }
+        self.tris = tris;
+        r
     }
 
     fn emit(&mut self, sink: &mut dyn SceneSink, shape: &Shape<'_>) -> Result<(), Error> {
@@ -766,6 +970,15 @@ impl Emitter {
     }
 
     fn face(&mut self, f: &FaceRec, sink: &mut dyn SceneSink) -> Result<(), Error> {
+        let textured = self
+            .materials
+            .get(f.material as usize)
+            .is_some_and(|m| m.texture.is_some())
+            && f.flags & FACE_COLOR == 0
+            && self.corners.iter().all(|c| c.uv.is_some());
+        if textured {
+            return self.textured_face(f, sink);
+        }
         self.pos.clear();
         self.nrm.clear();
         let smooth = self.corners.iter().all(|c| c.normal.is_some());

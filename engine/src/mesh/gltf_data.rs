@@ -277,12 +277,13 @@ fn glb_chunks(
 }
 
 /// Extensions read here (the gltf crate's validation knows only some).
-const READ: [&str; 5] = [
+const READ: [&str; 6] = [
     "EXT_mesh_gpu_instancing",
     "KHR_mesh_quantization",
     "KHR_lights_punctual",
     "KHR_materials_transmission",
     "KHR_materials_ior",
+    "KHR_texture_transform",
 ];
 
 /// Extensions without which a file's geometry cannot be read.
@@ -334,6 +335,47 @@ fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> 
         }
     }
     Ok((gltf::Document::from_json(root).map_err(invalid)?, ignored))
+}
+
+/// The bytes of image `image` (PNG or JPEG, as the file holds them): from
+/// its buffer view, a data URI or a file beside the glTF's (`base` its
+/// directory); at most `budget` bytes.
+pub(super) fn image_bytes(
+    image: &gltf::Image<'_>,
+    bufs: &mut Buffers<'_>,
+    base: Option<&Path>,
+    budget: u64,
+) -> Result<Vec<u8>, String> {
+    let i = image.index();
+    let too_big =
+        |n: u64| format!("image {i}: {n} bytes, more than the {budget} this render may hold");
+    match image.source() {
+        gltf::image::Source::View { view, .. } => {
+            let n = view.length() as u64;
+            if n > budget {
+                return Err(too_big(n));
+            }
+            let b = view.buffer().index();
+            let mut out = vec![0u8; view.length()];
+            bufs.read(b, view.offset() as u64, &mut out)
+                .map_err(|e| format!("image {i}: {e}"))?;
+            Ok(out)
+        }
+        gltf::image::Source::Uri { uri, .. } => match uri.strip_prefix("data:") {
+            Some(rest) => data_uri(rest).map_err(|e| format!("image {i}: {e}")),
+            None => {
+                let path = buffer_path(uri, base).map_err(|e| format!("image {i}: {e}"))?;
+                let n = std::fs::metadata(&path)
+                    .map_err(|e| format!("image {i}: cannot open {}: {e}", path.display()))?
+                    .len();
+                if n > budget {
+                    return Err(too_big(n));
+                }
+                std::fs::read(&path)
+                    .map_err(|e| format!("image {i}: cannot read {}: {e}", path.display()))
+            }
+        },
+    }
 }
 
 /// The bytes of a base64 data URI (what follows `data:`).
@@ -740,17 +782,71 @@ impl Elements {
     /// Element `k` as three floats (see [`Self::expect_vectors`]): one
     /// read, through the page cache, allocating nothing.
     pub fn vec3(&self, bufs: &mut Buffers<'_>, k: usize) -> Result<[f32; 3], String> {
-        let mut e = [0u8; 16];
-        let e = &mut e[..self.size.min(16)];
+        self.vec::<3>(bufs, k)
+    }
+
+    /// Element `k` as `D` floats (see [`Self::vec3`]).
+    pub fn vec<const D: usize>(
+        &self,
+        bufs: &mut Buffers<'_>,
+        k: usize,
+    ) -> Result<[f32; D], String> {
+        Ok(self.decode::<D>(&self.element(bufs, k)?))
+    }
+
+    /// Element `k`'s components (up to four; zeros after them).
+    pub fn padded(&self, bufs: &mut Buffers<'_>, k: usize) -> Result<[f32; 4], String> {
+        Ok(self.decode_padded(&self.element(bufs, k)?))
+    }
+
+    /// The accessor's index in the file.
+    pub fn index(&self) -> usize {
+        self.index
+    }
+
+    /// Components per element (2 for a VEC2, ...).
+    pub fn components(&self) -> usize {
+        self.dims.multiplicity()
+    }
+
+    /// Every element's components (up to four, zeros after them).
+    pub fn floats_padded(&self, bufs: &mut Buffers<'_>) -> Result<Vec<[f32; 4]>, String> {
+        let mut out = Vec::with_capacity(self.count);
+        self.chunks(bufs, |_, raw| {
+            out.extend(raw.chunks_exact(self.size).map(|e| self.decode_padded(e)));
+            Ok(())
+        })?;
+        Ok(out)
+    }
+
+    /// `e` as [`Self::decode`] reads it, its missing components zero.
+    fn decode_padded(&self, e: &[u8]) -> [f32; 4] {
+        let n = self.components().min(4);
+        let mut out = [0f32; 4];
+        match n {
+            1 => out[..1].copy_from_slice(&self.decode::<1>(e)),
+            2 => out[..2].copy_from_slice(&self.decode::<2>(e)),
+            3 => out[..3].copy_from_slice(&self.decode::<3>(e)),
+            _ => out = self.decode::<4>(e),
+        }
+        out
+    }
+
+    /// Element `k`'s bytes (its first 16, zeros after it), through the
+    /// page cache.
+    fn element(&self, bufs: &mut Buffers<'_>, k: usize) -> Result<[u8; 16], String> {
+        let mut buf = [0u8; 16];
+        let e = &mut buf[..self.size.min(16)];
         if let Some((b, at, stride)) = self.view {
             bufs.read(b, at + k as u64 * stride, e)?;
         }
         if let Some((idx, vals)) = &self.sparse
             && let Ok(j) = idx.binary_search(&(k as u32))
         {
-            e.copy_from_slice(&vals[j * self.size..][..e.len()]);
+            let n = e.len();
+            e.copy_from_slice(&vals[j * self.size..][..n]);
         }
-        Ok(self.decode::<3>(e))
+        Ok(buf)
     }
 
     /// One element's components as floats, as glTF 2.0 (with

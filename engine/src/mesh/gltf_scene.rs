@@ -49,10 +49,13 @@ use crate::models::{place_normal, place_point};
 use crate::progress::Progress;
 use crate::scene::setup::{DEFAULT_BACKGROUND, default_lights};
 use crate::scene::{Light, LightKind, Material, MeshFacts, Pbr, Photometric, SceneSink, View};
-use crate::shapes::{Patch, Polygon, Shape};
+use crate::scene::{TextureBinding, TextureImage};
+use crate::shapes::{Patch, Polygon, Shape, Textured, pack_color};
+use crate::texture::{Encoding, Filter, Sampler, Texture, UvTransform, Wrap};
 use glam::{DAffine3, DMat4, DVec3};
 use gltf::accessor::Dimensions;
 use gltf::mesh::Mode;
+use std::collections::HashMap;
 use std::path::Path;
 
 /// Reads the glTF scene at `path` into `sink`, within `opts.memory`: the
@@ -113,6 +116,8 @@ struct Shares {
     /// One primitive's vertices (and normals) held, placed, while its
     /// faces are written; beyond that they are looked up by index.
     primitive: u64,
+    /// One image's bytes, read to be stored with the scene.
+    images: u64,
 }
 
 impl Shares {
@@ -122,6 +127,7 @@ impl Shares {
             cache: memory / 8,
             lists: memory / 16,
             primitive: memory * 3 / 8,
+            images: memory / 4,
         }
     }
 }
@@ -284,6 +290,8 @@ fn read_main(
     let mut model_of: Vec<Option<u32>> = vec![None; drawn_by.len()];
     let mut out = Emit {
         bufs: &mut bufs,
+        base,
+        images: HashMap::new(),
         shares: &shares,
         sink,
         current: None,
@@ -366,6 +374,10 @@ fn triangle_count(p: &gltf::Primitive<'_>) -> u64 {
 /// Writes meshes' triangles into a sink.
 struct Emit<'e, 'b> {
     bufs: &'e mut Buffers<'b>,
+    /// The directory of the file, where images named by a path are.
+    base: Option<&'e Path>,
+    /// The sink's number of each image sent, by the file's image index.
+    images: HashMap<usize, u32>,
     shares: &'e Shares,
     sink: &'e mut dyn SceneSink,
     /// The material the sink has now.
@@ -511,7 +523,43 @@ impl Emit<'_, '_> {
                     Vertices::Held(points, Some(ns))
                 }
             };
-            let m = material(&prim.material(), self.warnings);
+            let m = self.material(&prim.material())?;
+            let uvs = match (m.texture, base_color_set(&prim.material())) {
+                (Some(_), Some(set)) => match prim.get(&gltf::Semantic::TexCoords(set)) {
+                    Some(a) => {
+                        let e = Elements::new(&a, self.bufs, lists).map_err(bad)?;
+                        e.expect_vectors(
+                            Dimensions::Vec2,
+                            "texture coordinates",
+                            Components::Quantized,
+                        )
+                        .map_err(bad)?;
+                        Some(Corners::read(e, count, held, self.bufs, what).map_err(bad)?)
+                    }
+                    None => {
+                        self.warnings.add(
+                            "a textured material on a primitive without its texture coordinates is untextured",
+                            what,
+                        );
+                        None
+                    }
+                },
+                _ => None,
+            };
+            let colors = match prim.get(&gltf::Semantic::Colors(0)) {
+                Some(a) => {
+                    let e = Elements::new(&a, self.bufs, lists).map_err(bad)?;
+                    let dims = if a.dimensions() == Dimensions::Vec3 {
+                        Dimensions::Vec3
+                    } else {
+                        Dimensions::Vec4
+                    };
+                    e.expect_vectors(dims, "vertex colours", Components::Quantized)
+                        .map_err(bad)?;
+                    Some(Corners::read(e, count, held, self.bufs, what).map_err(bad)?)
+                }
+                None => None,
+            };
             if self.current != Some(m) {
                 self.sink.material(&m)?;
                 self.current = Some(m);
@@ -569,6 +617,27 @@ impl Emit<'_, '_> {
                     self.summary.faces += 1;
                     if !super::geometry::has_area(v[0], v[1], v[2]) {
                         self.summary.degenerate += 1;
+                        continue;
+                    }
+                    if uvs.is_some() || colors.is_some() {
+                        let uv = match &uvs {
+                            Some(c) => Some(c.corners::<2>(self.bufs, t).map_err(bad)?),
+                            None => None,
+                        };
+                        let color = match &colors {
+                            Some(c) => {
+                                Some(c.corners::<4>(self.bufs, t).map_err(bad)?.map(pack_color))
+                            }
+                            None => None,
+                        };
+                        let none3: &[[f32; 3]] = &[];
+                        self.sink.object(&Shape::Textured(Textured {
+                            vertices: &v,
+                            normals: n.as_ref().map_or(none3, |n| &n[..]),
+                            uvs: uv.as_ref().map_or(&[][..], |u| &u[..]),
+                            colors: color.as_ref().map_or(&[][..], |c| &c[..]),
+                        }))?;
+                        self.summary.objects += 1;
                         continue;
                     }
                     match &n {
@@ -852,19 +921,132 @@ impl Bounds {
 }
 
 /// The NFF material of a glTF one (see the module documentation).
+/// The texture coordinate set the base colour texture of `m` reads, if it
+/// has one (`KHR_texture_transform` may name another).
+fn base_color_set(m: &gltf::Material<'_>) -> Option<u32> {
+    let info = m.pbr_metallic_roughness().base_color_texture()?;
+    Some(
+        info.texture_transform()
+            .and_then(|t| t.tex_coord())
+            .unwrap_or(info.tex_coord()),
+    )
+}
+
+/// A primitive's per-vertex attribute (texture coordinates, colours):
+/// held when its vertices are, else read by index.
+struct Corners {
+    elements: Elements,
+    held: Option<Vec<[f32; 4]>>,
+    dims: usize,
+}
+
+impl Corners {
+    fn read(
+        elements: Elements,
+        count: usize,
+        held: bool,
+        bufs: &mut Buffers<'_>,
+        what: impl Fn() -> String,
+    ) -> Result<Corners, String> {
+        if elements.count != count {
+            return Err(format!(
+                "{}: accessor {} has {} elements for {count} positions",
+                what(),
+                elements.index(),
+                elements.count
+            ));
+        }
+        let dims = elements.components();
+        let held = held.then(|| elements.floats_padded(bufs)).transpose()?;
+        Ok(Corners {
+            elements,
+            held,
+            dims,
+        })
+    }
+
+    /// The attribute at the three corners `t`, as `D` numbers (a colour
+    /// without alpha gets alpha 1).
+    fn corners<const D: usize>(
+        &self,
+        bufs: &mut Buffers<'_>,
+        t: [u32; 3],
+    ) -> Result<[[f32; D]; 3], String> {
+        let mut out = [[0f32; D]; 3];
+        for (o, &i) in out.iter_mut().zip(&t) {
+            let v = match &self.held {
+                Some(h) => h[i as usize],
+                None => self.elements.padded(bufs, i as usize)?,
+            };
+            for (k, x) in o.iter_mut().enumerate() {
+                *x = if k < self.dims { v[k] } else { 1.0 };
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl Emit<'_, '_> {
+    /// The sray material of glTF material `m`, its base colour texture
+    /// sent to the sink (once per image) and bound.
+    fn material(&mut self, m: &gltf::Material<'_>) -> Result<Material, Error> {
+        let mut out = material(m, self.warnings);
+        let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
+            return Ok(out);
+        };
+        let tex = info.texture();
+        let image = tex.source();
+        let idx = match self.images.get(&image.index()) {
+            Some(&i) => i,
+            None => {
+                let bytes =
+                    gltf_data::image_bytes(&image, self.bufs, self.base, self.shares.images)
+                        .map_err(self.bad)?;
+                let name = format!("image {}", image.index());
+                // Checked now, so that a render does not fail on it.
+                let what = (self.bad)(name.clone()).to_string();
+                Texture::decode(&bytes, &what, Encoding::Srgb)?;
+                let i = self.sink.texture(&TextureImage { name: what, bytes })?;
+                self.images.insert(image.index(), i);
+                i
+            }
+        };
+        let smp = tex.sampler();
+        let sampler = Sampler {
+            wrap_s: Wrap::from_gltf(smp.wrap_s().as_gl_enum()),
+            wrap_t: Wrap::from_gltf(smp.wrap_t().as_gl_enum()),
+            filter: Filter::from_gltf(smp.mag_filter().map(|f| f.as_gl_enum())),
+        };
+        let transform = info
+            .texture_transform()
+            .map_or(UvTransform::default(), |t| UvTransform {
+                offset: t.offset(),
+                rotation: t.rotation(),
+                scale: t.scale(),
+            });
+        out.texture = Some(TextureBinding {
+            image: idx,
+            sampler,
+            transform,
+        });
+        Ok(out)
+    }
+}
+
 fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
     if m.index().is_none() {
         return NEUTRAL;
     }
     let pbr = m.pbr_metallic_roughness();
-    if pbr.base_color_texture().is_some()
-        || pbr.metallic_roughness_texture().is_some()
+    if pbr.metallic_roughness_texture().is_some()
         || m.normal_texture().is_some()
         || m.emissive_texture().is_some()
+        || m.occlusion_texture().is_some()
     {
-        warnings.add("textures are ignored", || {
-            format!("material {}", m.index().unwrap_or(0))
-        });
+        warnings.add(
+            "metallic-roughness, normal, occlusion and emissive textures are not applied yet (base colour textures are)",
+            || format!("material {}", m.index().unwrap_or(0)),
+        );
     }
     let [r, g, b, _] = pbr.base_color_factor();
     let metallic = pbr.metallic_factor().clamp(0.0, 1.0);
@@ -887,6 +1069,7 @@ fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
             roughness,
             emissive: m.emissive_factor(),
         }),
+        texture: None,
     }
 }
 

@@ -11,14 +11,21 @@
 //! | `Tr` | T = Tr (the same thing, inverted; `d` wins if both are given) |
 //! | `Ni` | ior (1 if absent) |
 //!
+//! `map_Kd` names the diffuse texture (an image beside the library),
+//! which multiplies `Kd` where faces have texture coordinates; its
+//! `-clamp on` clamps instead of repeating, `-o` and `-s` offset and scale
+//! the coordinates, and other options are ignored.
+//!
 //! A material without `Kd` takes the neutral grey of meshes without
-//! materials. Ambient, emissive, texture maps and the rest are ignored.
+//! materials. Ambient, emissive, other texture maps and the rest are
+//! ignored.
 
 use super::NEUTRAL;
 use super::text::{LineReader, real, shown, words};
 use crate::error::Error;
 use crate::input::Wrapping;
 use crate::scene::Material;
+use crate::texture::{Filter, Sampler, UvTransform, Wrap};
 use std::io::BufRead;
 use std::path::Path;
 
@@ -34,6 +41,112 @@ struct Partial {
     d: Option<f32>,
     tr: Option<f32>,
     illum: Option<i64>,
+    map_kd: Option<MapKd>,
+}
+
+/// A material's `map_Kd`: the image's file name (relative to the
+/// library's directory) and how it is sampled.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct MapKd {
+    pub file: String,
+    pub sampler: Sampler,
+    pub transform: UvTransform,
+}
+
+/// Arguments each `map_Kd` option takes (at most; `-o`, `-s` and `-t`
+/// take one to three numbers).
+fn option_args(o: &[u8]) -> Option<usize> {
+    Some(match o {
+        b"-blendu" | b"-blendv" | b"-bm" | b"-boost" | b"-cc" | b"-clamp" | b"-imfchan"
+        | b"-texres" | b"-type" => 1,
+        b"-mm" => 2,
+        b"-o" | b"-s" | b"-t" => 3,
+        _ => return None,
+    })
+}
+
+/// Parses the words after `map_Kd`: options, then the file name (which
+/// may hold spaces).
+fn map_kd(rest: &[&[u8]], warn: &mut dyn FnMut(&str)) -> Option<MapKd> {
+    let mut clamp = false;
+    let (mut offset, mut scale) = ([0f32; 2], [1f32; 2]);
+    let mut i = 0;
+    while i < rest.len() && rest[i].starts_with(b"-") {
+        let o = rest[i];
+        let Some(n) = option_args(o) else {
+            warn("unknown map_Kd options ignored");
+            i += 1;
+            continue;
+        };
+        i += 1;
+        let mut args = Vec::new();
+        while args.len() < n && i < rest.len() {
+            match real(rest[i]) {
+                Ok(v) if n == 3 => args.push(v as f32),
+                _ if n == 3 => break,
+                _ => args.push(0.0),
+            }
+            if o == b"-clamp" {
+                clamp = rest[i] == b"on";
+            }
+            i += 1;
+        }
+        match o {
+            b"-o" => {
+                offset = [
+                    args.first().copied().unwrap_or(0.0),
+                    args.get(1).copied().unwrap_or(0.0),
+                ]
+            }
+            b"-s" => {
+                scale = [
+                    args.first().copied().unwrap_or(1.0),
+                    args.get(1).copied().unwrap_or(1.0),
+                ]
+            }
+            b"-clamp" => {}
+            _ => warn("map_Kd options other than -clamp, -o and -s ignored"),
+        }
+    }
+    let file = rest[i.min(rest.len())..]
+        .iter()
+        .map(|w| String::from_utf8_lossy(w))
+        .collect::<Vec<_>>()
+        .join(" ");
+    if file.is_empty() {
+        warn("a map_Kd without a file name ignored");
+        return None;
+    }
+    let wrap = if clamp {
+        Wrap::ClampToEdge
+    } else {
+        Wrap::Repeat
+    };
+    // OBJ's v runs up the image, sray's (glTF's) down it: v' = s v + o in
+    // OBJ's terms is v' = s v + (1 - s - o) in sray's.
+    let transform = UvTransform {
+        offset: [offset[0], 1.0 - scale[1] - offset[1]],
+        rotation: 0.0,
+        scale,
+    };
+    Some(MapKd {
+        file,
+        sampler: Sampler {
+            wrap_s: wrap,
+            wrap_t: wrap,
+            filter: Filter::Linear,
+        },
+        transform: if transform
+            == (UvTransform {
+                offset: [0.0; 2],
+                rotation: 0.0,
+                scale: [1.0; 2],
+            }) {
+            UvTransform::default()
+        } else {
+            transform
+        },
+    })
 }
 
 impl Partial {
@@ -50,6 +163,7 @@ impl Partial {
         };
         Material {
             pbr: None,
+            texture: None,
             color: self.kd.unwrap_or(NEUTRAL.color),
             kd: 1.0,
             ks: ks.clamp(0.0, 1.0),
@@ -60,14 +174,17 @@ impl Partial {
     }
 }
 
+/// A library's material: its name, the material, its diffuse texture.
+pub(crate) type MtlEntry = (String, Material, Option<MapKd>);
+
 /// Reads a material library: its materials by name, in file order.
 pub(crate) fn read_mtl<R: BufRead>(
     src: R,
     name: &Path,
     warn: &mut dyn FnMut(&str, u64),
-) -> Result<Vec<(String, Material)>, Error> {
+) -> Result<Vec<MtlEntry>, Error> {
     let mut lines = LineReader::new(src, name, Wrapping::Plain, 64 << 10);
-    let mut out: Vec<(String, Material)> = Vec::new();
+    let mut out: Vec<MtlEntry> = Vec::new();
     let mut cur: Option<(String, Partial)> = None;
     let mut line: Vec<u8> = Vec::new();
     while let Some(l) = lines.next_line()? {
@@ -119,7 +236,8 @@ pub(crate) fn read_mtl<R: BufRead>(
         };
         if key == b"newmtl" {
             if let Some((n, p)) = cur.take() {
-                out.push((n, p.material()));
+                let m = p.material();
+                out.push((n, m, p.map_kd));
             }
             if out.len() >= MAX_LIBRARY_MATERIALS {
                 return Err(lines.err(format!(
@@ -158,11 +276,16 @@ pub(crate) fn read_mtl<R: BufRead>(
                 let v = nums(1)?[0];
                 p.illum = Some(v as i64);
             }
+            b"map_Kd" => {
+                let at = lines.line();
+                p.map_kd = map_kd(&rest, &mut |w| warn(w, at));
+            }
             _ => {}
         }
     }
     if let Some((n, p)) = cur.take() {
-        out.push((n, p.material()));
+        let m = p.material();
+        out.push((n, m, p.map_kd));
     }
     Ok(out)
 }
@@ -189,6 +312,7 @@ newmtl bare\n";
             m[0].1,
             Material {
                 pbr: None,
+                texture: None,
                 color: [1.0, 0.0, 0.0],
                 kd: 1.0,
                 ks: 0.0,
@@ -205,6 +329,7 @@ newmtl bare\n";
             m[4].1,
             Material {
                 pbr: None,
+                texture: None,
                 ior: 1.0,
                 ..NEUTRAL
             }

@@ -1,6 +1,8 @@
 //! Wavefront OBJ: `v` (positions; a fourth weight or trailing colour
 //! values are ignored), `vn` (normals: a face whose every corner has one is
-//! shaded smoothly), `vt` (parsed and checked, unused), `f` in all four
+//! shaded smoothly), `vt` (texture coordinates, for the faces of a
+//! material with a `map_Kd` texture: such faces become textured
+//! triangles; OBJ's v runs up the image), `f` in all four
 //! forms (`v`, `v/vt`, `v//vn`, `v/vt/vn`) with positive or negative
 //! (relative) indices and any number of corners, `o`/`g`/`s` (ignored),
 //! `usemtl` with the materials of `mtllib` libraries (see [`super::mtl`]
@@ -15,8 +17,9 @@ use super::{MeshOptions, Warnings, report_summary};
 use crate::error::Error;
 use crate::input::Wrapping;
 use crate::progress::Progress;
-use crate::scene::SceneSink;
+use crate::scene::{SceneSink, TextureBinding, TextureImage};
 use crate::shapes::MAX_POLYGON_VERTICES;
+use crate::texture::{Encoding, Texture};
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -76,6 +79,30 @@ const SKIPPED: &[&[u8]] = &[
     b"csh",
 ];
 
+/// Reads the image at `path` for the builder, checked to decode; a
+/// missing or unreadable image is a warning (its faces are untextured).
+fn read_image(path: &Path, b: &mut MeshBuilder<'_>, warnings: &mut Warnings) -> Option<u32> {
+    let what = path.display().to_string();
+    let bytes = match std::fs::read(path) {
+        Ok(bytes) => bytes,
+        Err(e) => {
+            warnings.add(
+                "a map_Kd texture not found; its faces are untextured",
+                || format!("{what}: {e}"),
+            );
+            return None;
+        }
+    };
+    if let Err(e) = Texture::decode(&bytes, &what, Encoding::Srgb) {
+        warnings.add(
+            "a map_Kd texture that does not decode; its faces are untextured",
+            || e.to_string(),
+        );
+        return None;
+    }
+    Some(b.add_image(TextureImage { name: what, bytes }))
+}
+
 /// Reads OBJ text from `src`; `name` is used in messages. Material
 /// libraries are looked for in `mtl_dir` (none are read if `None`).
 pub fn read_obj_from<R: BufRead>(
@@ -99,8 +126,9 @@ pub fn read_obj_from<R: BufRead>(
     let mut materials: HashMap<String, u32> = HashMap::new();
     let mut libraries: Vec<PathBuf> = Vec::new();
     let mut material = NO_MATERIAL;
-    let mut texcoords = 0u64;
-    let mut corners: Vec<(u64, u64)> = Vec::new();
+    let mut corners: Vec<(u64, u64, u64)> = Vec::new();
+    // The images `map_Kd` names, read once each: the builder's number.
+    let mut images: HashMap<PathBuf, Option<u32>> = HashMap::new();
     let mut joined: Vec<u8> = Vec::new();
     let mut line: Vec<u8> = Vec::new();
     loop {
@@ -175,21 +203,26 @@ pub fn read_obj_from<R: BufRead>(
             }
             b"vt" => {
                 let mut k = 0;
+                let mut uv = [0f32; 2];
                 for t in w {
                     if k == 3 {
                         return Err(lines.err("'vt' takes at most 3 numbers"));
                     }
-                    real(t).map_err(|m| lines.err(m))?;
+                    let x = real(t).map_err(|m| lines.err(m))?;
+                    if k < 2 {
+                        uv[k] = if x.is_finite() { x as f32 } else { 0.0 };
+                    }
                     k += 1;
                 }
                 if k == 0 {
                     return Err(lines.err("'vt' needs at least 1 number"));
                 }
-                texcoords += 1;
+                // sray's (glTF's) v runs down the image.
+                b.add_uv([uv[0], 1.0 - uv[1]])?;
             }
             b"f" | b"fo" => {
                 corners.clear();
-                let (nv, nn) = (b.vertex_count(), b.normal_count());
+                let (nv, nn, nt) = (b.vertex_count(), b.normal_count(), b.uv_count());
                 for t in w {
                     if corners.len() == MAX_POLYGON_VERTICES {
                         return Err(lines.err(format!(
@@ -207,14 +240,17 @@ pub fn read_obj_from<R: BufRead>(
                         )));
                     }
                     let v = index(v, nv, "vertex").map_err(|m| lines.err(m))?;
-                    if let Some(vt) = vt.filter(|s| !s.is_empty()) {
-                        index(vt, texcoords, "texture coordinate").map_err(|m| lines.err(m))?;
-                    }
+                    let t = match vt.filter(|s| !s.is_empty()) {
+                        Some(vt) => {
+                            index(vt, nt, "texture coordinate").map_err(|m| lines.err(m))?
+                        }
+                        None => NO_INDEX,
+                    };
                     let n = match vn.filter(|s| !s.is_empty()) {
                         Some(vn) => index(vn, nn, "normal").map_err(|m| lines.err(m))?,
                         None => NO_INDEX,
                     };
-                    corners.push((v, n));
+                    corners.push((v, n, t));
                 }
                 if corners.len() < 3 {
                     return Err(lines.err(format!(
@@ -222,7 +258,7 @@ pub fn read_obj_from<R: BufRead>(
                         corners.len()
                     )));
                 }
-                b.add_face(&corners, material, None)?;
+                b.add_face_uv(&corners, material, None)?;
             }
             b"usemtl" => {
                 let n = String::from_utf8_lossy(body.trim_ascii()[6..].trim_ascii()).into_owned();
@@ -278,11 +314,31 @@ pub fn read_obj_from<R: BufRead>(
                     for (w, l) in lib_warnings {
                         warnings.add(&w, || format!("{}:{l}", path.display()));
                     }
-                    for (mname, m) in mats {
+                    let lib_dir = path.parent().unwrap_or(dir);
+                    for (mname, mut m, map) in mats {
                         if materials.len() >= super::mtl::MAX_LIBRARY_MATERIALS * 4 {
                             return Err(lines.err("too many materials in the libraries"));
                         }
-                        materials.entry(mname).or_insert_with(|| b.add_material(m));
+                        if materials.contains_key(&mname) {
+                            continue;
+                        }
+                        if let Some(map) = map {
+                            let file = lib_dir.join(map.file.replace('\\', "/"));
+                            let image = match images.get(&file) {
+                                Some(&i) => i,
+                                None => {
+                                    let i = read_image(&file, &mut b, &mut warnings);
+                                    images.insert(file, i);
+                                    i
+                                }
+                            };
+                            m.texture = image.map(|image| TextureBinding {
+                                image,
+                                sampler: map.sampler,
+                                transform: map.transform,
+                            });
+                        }
+                        materials.insert(mname, b.add_material(m));
                     }
                 }
             }

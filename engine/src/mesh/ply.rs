@@ -7,9 +7,17 @@
 //! `vertex_indices` (or `vertex_index`) list of any count and index types,
 //! polygons of any number of vertices, and its `red`, `green`, `blue`; the
 //! `tristrips` element's `vertex_indices` list (strips separated by -1, as
-//! Cyberware and older Stanford files write them). Every other element and
-//! property is skipped by its declared type; comments and `obj_info` lines
-//! are read for a declared up axis only.
+//! Cyberware and older Stanford files write them).
+//!
+//! Textures, as scanning and photogrammetry tools write them: the image a
+//! `comment TextureFile NAME` names (beside the file), sampled at the
+//! vertices' `u v` (or `s t`, `texture_u texture_v`, `texture_s
+//! texture_t`) or at the faces' per-corner `texcoord` list; the faces
+//! then become textured triangles (v runs up the image, as OpenGL's).
+//!
+//! Every other element and property is skipped by its declared type;
+//! comments and `obj_info` lines are read for a declared up axis and the
+//! texture file only.
 
 use super::builder::{MeshBuilder, MeshSummary, NO_INDEX, NO_MATERIAL};
 use super::text::{LineReader, coordinate, declared_up, shown, words};
@@ -17,8 +25,9 @@ use super::{MeshOptions, Warnings, report_summary};
 use crate::error::{At, Error};
 use crate::input::{Wrapping, read_error};
 use crate::progress::Progress;
-use crate::scene::SceneSink;
+use crate::scene::{Material, SceneSink, TextureBinding, TextureImage};
 use crate::shapes::MAX_POLYGON_VERTICES;
+use crate::texture::{Encoding as ImageEncoding, Texture};
 use std::io::{BufRead, ErrorKind};
 use std::path::{Path, PathBuf};
 
@@ -132,6 +141,9 @@ struct Header {
     encoding: Encoding,
     elements: Vec<Element>,
     up: Option<[f64; 3]>,
+    /// The first `comment TextureFile` name, and how many there were.
+    texture_file: Option<String>,
+    texture_files: usize,
     lines: u64,
     bytes: u64,
 }
@@ -171,6 +183,7 @@ pub fn read_ply_from<R: BufRead>(
         b.declare_up(up);
     }
     let mut warnings = Warnings::default();
+    let material = texture_material(&header, name, &mut b, &mut warnings);
     match header.encoding {
         Encoding::Ascii => {
             let mut d = Ascii {
@@ -183,7 +196,7 @@ pub fn read_ply_from<R: BufRead>(
             };
             // The first value's line, past blank lines.
             d.skip_space()?;
-            read_body(&header, &mut d, &mut b, &mut warnings)?;
+            read_body(&header, &mut d, &mut b, material, &mut warnings)?;
         }
         Encoding::Little | Encoding::Big => {
             let mut d = Binary {
@@ -193,13 +206,78 @@ pub fn read_ply_from<R: BufRead>(
                 pos: header.bytes,
                 big: header.encoding == Encoding::Big,
             };
-            read_body(&header, &mut d, &mut b, &mut warnings)?;
+            read_body(&header, &mut d, &mut b, material, &mut warnings)?;
         }
     }
     warnings.report(name, progress);
     let summary = b.finish(sink)?;
     report_summary(name, &summary, progress);
     Ok(summary)
+}
+
+/// The material of a file whose `comment TextureFile` names an image
+/// that reads and decodes (white, the texture its colour), or
+/// [`NO_MATERIAL`] with a warning.
+fn texture_material(
+    h: &Header,
+    name: &Path,
+    b: &mut MeshBuilder<'_>,
+    warnings: &mut Warnings,
+) -> u32 {
+    let Some(file) = &h.texture_file else {
+        return NO_MATERIAL;
+    };
+    let has =
+        |el: &str, f: &dyn Fn(&Element) -> bool| h.elements.iter().any(|e| e.name == el && f(e));
+    let uvs = has("vertex", &|e| {
+        let slots = vertex_slots(e);
+        slots.contains(&Slot::Keep(9)) && slots.contains(&Slot::Keep(10))
+    }) || has("face", &|e| face_slots(e).contains(&Slot::TexCoords));
+    if !uvs {
+        warnings.add(
+            "a TextureFile without texture coordinates (vertex u v or face texcoord) is ignored",
+            || file.clone(),
+        );
+        return NO_MATERIAL;
+    }
+    if h.texture_files > 1 {
+        warnings.add(
+            "several TextureFile comments: only the first texture is used",
+            || file.clone(),
+        );
+    }
+    let path = name
+        .parent()
+        .unwrap_or(Path::new(""))
+        .join(file.replace('\\', "/"));
+    let what = path.display().to_string();
+    let bytes = match std::fs::read(&path) {
+        Ok(b) => b,
+        Err(e) => {
+            warnings.add(
+                "the TextureFile is not found; the mesh is untextured",
+                || format!("{what}: {e}"),
+            );
+            return NO_MATERIAL;
+        }
+    };
+    if let Err(e) = Texture::decode(&bytes, &what, ImageEncoding::Srgb) {
+        warnings.add(
+            "the TextureFile does not decode; the mesh is untextured",
+            || e.to_string(),
+        );
+        return NO_MATERIAL;
+    }
+    let image = b.add_image(TextureImage { name: what, bytes });
+    b.add_material(Material {
+        color: [1.0; 3],
+        texture: Some(TextureBinding {
+            image,
+            sampler: Default::default(),
+            transform: Default::default(),
+        }),
+        ..super::NEUTRAL
+    })
 }
 
 fn read_header<R: BufRead>(lines: &mut LineReader<R>) -> Result<Header, Error> {
@@ -210,6 +288,7 @@ fn read_header<R: BufRead>(lines: &mut LineReader<R>) -> Result<Header, Error> {
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut up = None;
+    let (mut texture_file, mut texture_files) = (None, 0);
     loop {
         let Some(line) = lines.next_line()? else {
             return Err(lines.err("the file ends inside the header (no 'end_header')"));
@@ -224,7 +303,16 @@ fn read_header<R: BufRead>(lines: &mut LineReader<R>) -> Result<Header, Error> {
         let Some(key) = w.next() else { continue };
         match key {
             b"comment" | b"obj_info" => {
-                if up.is_none() {
+                let rest = line[key.len()..].trim_ascii();
+                if key == b"comment"
+                    && let Some(name) = rest.strip_prefix(b"TextureFile")
+                    && name.first().is_some_and(u8::is_ascii_whitespace)
+                {
+                    texture_files += 1;
+                    texture_file.get_or_insert_with(|| {
+                        String::from_utf8_lossy(name.trim_ascii()).into_owned()
+                    });
+                } else if up.is_none() {
                     up = declared_up(&line[key.len()..]);
                 }
             }
@@ -338,6 +426,8 @@ fn read_header<R: BufRead>(lines: &mut LineReader<R>) -> Result<Header, Error> {
         encoding,
         elements,
         up,
+        texture_file,
+        texture_files,
         lines: lines.line(),
         bytes: lines.consumed,
     };
@@ -348,10 +438,12 @@ fn read_header<R: BufRead>(lines: &mut LineReader<R>) -> Result<Header, Error> {
 /// What a property of a vertex or face element is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Slot {
-    /// Index into the values kept per vertex (x y z nx ny nz r g b) or
-    /// per face (r g b).
+    /// Index into the values kept per vertex (x y z nx ny nz r g b u v)
+    /// or per face (r g b).
     Keep(usize),
     Indices,
+    /// A face's texture coordinates, two per corner.
+    TexCoords,
     Skip,
 }
 
@@ -369,6 +461,8 @@ fn vertex_slots(el: &Element) -> Vec<Slot> {
                 "red" | "diffuse_red" => 6,
                 "green" | "diffuse_green" => 7,
                 "blue" | "diffuse_blue" => 8,
+                "u" | "s" | "texture_u" | "texture_s" => 9,
+                "v" | "t" | "texture_v" | "texture_t" => 10,
                 _ => return Slot::Skip,
             };
             match p.ty {
@@ -388,6 +482,7 @@ fn face_slots(el: &Element) -> Vec<Slot> {
                 have_indices = true;
                 Slot::Indices
             }
+            ("texcoord", PropType::List { .. }) => Slot::TexCoords,
             ("red" | "diffuse_red", PropType::Scalar(_)) => Slot::Keep(0),
             ("green" | "diffuse_green", PropType::Scalar(_)) => Slot::Keep(1),
             ("blue" | "diffuse_blue", PropType::Scalar(_)) => Slot::Keep(2),
@@ -794,19 +889,29 @@ fn read_body(
     h: &Header,
     d: &mut impl Data,
     b: &mut MeshBuilder<'_>,
+    material: u32,
     warnings: &mut Warnings,
 ) -> Result<(), Error> {
+    // Texture coordinates are kept only for a texture.
+    let vertex_uvs = material != NO_MATERIAL
+        && h.elements
+            .iter()
+            .find(|e| e.name == "vertex")
+            .is_some_and(|e| {
+                let slots = vertex_slots(e);
+                slots.contains(&Slot::Keep(9)) && slots.contains(&Slot::Keep(10))
+            });
     let nv = h
         .elements
         .iter()
         .find(|e| e.name == "vertex")
         .map_or(0, |e| e.count);
-    let mut corners: Vec<(u64, u64)> = Vec::new();
+    let mut corners: Vec<(u64, u64, u64)> = Vec::new();
     for el in &h.elements {
         let mut i = 0u64;
         let r = match el.name.as_str() {
-            "vertex" => read_vertices(el, d, b, &mut i),
-            "face" => read_faces(el, d, b, nv, &mut corners, &mut i),
+            "vertex" => read_vertices(el, d, b, vertex_uvs, &mut i),
+            "face" => read_faces(el, d, b, nv, (material, vertex_uvs), &mut corners, &mut i),
             "tristrips" => read_strips(el, d, b, nv, &mut i),
             // An element without properties takes no bytes, whatever its
             // count says: nothing to skip (and no loop of 10^10 turns
@@ -842,16 +947,19 @@ fn at_text(at: At) -> String {
     }
 }
 
+/// The vertices; their texture coordinates too with `keep_uvs`.
 fn read_vertices(
     el: &Element,
     d: &mut impl Data,
     b: &mut MeshBuilder<'_>,
+    keep_uvs: bool,
     i: &mut u64,
 ) -> Result<(), Fail> {
     let slots = vertex_slots(el);
     let has = |k: usize| slots.contains(&Slot::Keep(k));
     let normals = has(3) && has(4) && has(5);
     let colors = has(6) && has(7) && has(8);
+    let uvs = keep_uvs && has(9) && has(10);
     let color_type: Vec<Scalar> = el
         .props
         .iter()
@@ -861,7 +969,7 @@ fn read_vertices(
             _ => None,
         })
         .collect();
-    let mut vals = [0.0f64; 9];
+    let mut vals = [0.0f64; 11];
     while *i < el.count {
         let at = d.at();
         for (p, s) in el.props.iter().zip(&slots) {
@@ -890,22 +998,32 @@ fn read_vertices(
             let c = [vals[6], vals[7], vals[8]].map(|x| if x.is_finite() { x as f32 } else { 0.0 });
             b.add_color(c)?;
         }
+        if uvs {
+            let f = |x: f64| if x.is_finite() { x as f32 } else { 0.0 };
+            // sray's (glTF's) v runs down the image.
+            b.add_uv([f(vals[9]), 1.0 - f(vals[10])])?;
+        }
         *i += 1;
     }
     Ok(())
 }
 
+/// The faces; with `(material, vertex_uvs)`, their material and whether
+/// corners take their vertex's texture coordinates (a face's own
+/// `texcoord` list wins).
 fn read_faces(
     el: &Element,
     d: &mut impl Data,
     b: &mut MeshBuilder<'_>,
     nv: u64,
-    corners: &mut Vec<(u64, u64)>,
+    (material, vertex_uvs): (u32, bool),
+    corners: &mut Vec<(u64, u64, u64)>,
     i: &mut u64,
 ) -> Result<(), Fail> {
     let slots = face_slots(el);
     let colored = (0..3).all(|k| slots.contains(&Slot::Keep(k)));
     let mut color = [0.0f64; 3];
+    let mut wedges: Vec<f32> = Vec::new();
     while *i < el.count {
         let at = d.at();
         corners.clear();
@@ -940,7 +1058,16 @@ fn read_faces(
                                 ),
                             )));
                         }
-                        corners.push((x as u64, NO_INDEX));
+                        let v = x as u64;
+                        corners.push((v, NO_INDEX, if vertex_uvs { v } else { NO_INDEX }));
+                    }
+                }
+                (Slot::TexCoords, PropType::List { count, item }) => {
+                    let n = d.count(count, 2 * MAX_POLYGON_VERTICES as u64, "a texcoord list")?;
+                    wedges.clear();
+                    for _ in 0..n {
+                        let x = d.value(item)?;
+                        wedges.push(if x.is_finite() { x as f32 } else { 0.0 });
                     }
                 }
                 (Slot::Keep(k), PropType::Scalar(t)) => color[*k] = t.unit(d.value(t)?),
@@ -948,7 +1075,15 @@ fn read_faces(
             }
         }
         let c = colored.then(|| color.map(|x| if x.is_finite() { x as f32 } else { 0.0 }));
-        b.add_face(corners, NO_MATERIAL, c)?;
+        // Per-corner texture coordinates, when the face lists one pair
+        // per corner.
+        if material != NO_MATERIAL && wedges.len() == 2 * corners.len() && c.is_none() {
+            for (corner, uv) in corners.iter_mut().zip(wedges.chunks_exact(2)) {
+                corner.2 = b.uv_count();
+                b.add_uv([uv[0], 1.0 - uv[1]])?;
+            }
+        }
+        b.add_face_uv(corners, if c.is_some() { NO_MATERIAL } else { material }, c)?;
         *i += 1;
     }
     Ok(())

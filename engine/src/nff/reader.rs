@@ -268,6 +268,7 @@ impl<R: BufRead> Parser<R> {
                 let s = |i: usize| single(&self.lines, n[i]);
                 sink.material(&Material {
                     pbr: None,
+                    texture: None,
                     color: [s(0)?, s(1)?, s(2)?],
                     kd: s(3)?,
                     ks: s(4)?,

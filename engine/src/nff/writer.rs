@@ -170,6 +170,24 @@ impl<W: Write> SceneSink for NffWriter<W> {
                     self.end_line();
                 }
             }
+            // NFF has no texture coordinates or vertex colours: a
+            // textured triangle is written as its triangle (as glTF's
+            // material parameters become NFF's), smooth if it has normals.
+            Shape::Textured(t) if t.normals.is_empty() => {
+                self.word("p 3\n");
+                for v in t.vertices {
+                    self.points(*v);
+                    self.end_line();
+                }
+            }
+            Shape::Textured(t) => {
+                self.word("pp 3\n");
+                for (v, n) in t.vertices.iter().zip(t.normals) {
+                    self.points(*v);
+                    self.nums(&f3(*n));
+                    self.end_line();
+                }
+            }
             // NFF has these four entities; a kind it cannot express is
             // refused rather than approximated.
             #[allow(unreachable_patterns)]

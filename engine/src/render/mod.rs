@@ -35,6 +35,10 @@ pub fn epsilon(bounds: &Aabb, precision: Precision) -> f64 {
 }
 
 /// The lights of a scene with their colours resolved, as shading uses them.
-pub fn shade_scene(h: &SceneHeader, max_depth: u8, eps: f64) -> ShadeScene {
+pub fn shade_scene(
+    h: &SceneHeader,
+    max_depth: u8,
+    eps: f64,
+) -> Result<ShadeScene, crate::error::Error> {
     ShadeScene::new(h, max_depth, eps)
 }

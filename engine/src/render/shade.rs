@@ -2,9 +2,12 @@
 //! ("Shading a hit") states them: one function for every tracer, so every
 //! tracer computes the same colours from the same hits.
 
+use crate::error::Error;
 use crate::intersect::Surface;
 use crate::math::Vec3;
 use crate::scene::{LightKind, Material, Pbr, Photometric, SceneHeader};
+use crate::texture::{Encoding, Texture};
+use std::sync::Arc;
 
 /// A light as shading sees it: its position in the geometry's frame, its
 /// colour (resolved, see [`crate::scene::Light::resolved_color`]) and,
@@ -24,12 +27,21 @@ pub struct ShadeScene {
     pub max_depth: u8,
     /// Secondary and shadow rays ignore hits closer than this.
     pub eps: f64,
+    /// The scene's images, decoded (base colour textures: sRGB).
+    pub textures: Arc<[Texture]>,
 }
 
 impl ShadeScene {
-    pub fn new(h: &SceneHeader, max_depth: u8, eps: f64) -> ShadeScene {
+    /// What shading needs of `h`; its images are decoded here (an image
+    /// that does not decode is an error naming it).
+    pub fn new(h: &SceneHeader, max_depth: u8, eps: f64) -> Result<ShadeScene, Error> {
         let n = h.lights.len();
-        ShadeScene {
+        let textures = h
+            .textures
+            .iter()
+            .map(|t| Texture::decode(&t.bytes, &t.name, Encoding::Srgb))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ShadeScene {
             lights: h
                 .lights
                 .iter()
@@ -42,7 +54,31 @@ impl ShadeScene {
             background: h.background,
             max_depth,
             eps,
+            textures: textures.into(),
+        })
+    }
+
+    /// Material `m` as it looks at surface `s`: its colour times the base
+    /// colour texture at the surface's texture coordinates and times the
+    /// surface's vertex colour, when it has them; `None` when neither
+    /// applies (the material as it is).
+    #[inline]
+    pub fn look(&self, m: &Material, s: &Surface) -> Option<Material> {
+        let tex = match (m.texture, s.attrs.uv) {
+            (Some(b), Some(uv)) => self
+                .textures
+                .get(b.image as usize)
+                .map(|t| t.sample(&b.sampler, b.transform.apply(uv))),
+            _ => None,
+        };
+        if tex.is_none() && s.attrs.color.is_none() {
+            return None;
         }
+        let mut out = *m;
+        for k in 0..3 {
+            out.color[k] *= tex.map_or(1.0, |t| t[k]) * s.attrs.color.map_or(1.0, |c| c[k]);
+        }
+        Some(out)
     }
 
     /// The colour a ray of weight `weight` brings back when it hits nothing.
@@ -96,6 +132,8 @@ pub fn shade(
     m: &Material,
     emit: &mut impl FnMut(Spawn),
 ) {
+    let looked = sc.look(m, s);
+    let m = looked.as_ref().unwrap_or(m);
     let n = if s.ns.dot(d) > 0.0 { -s.ns } else { s.ns };
     let dn = d.dot(n);
     let mirror = (d - n * (2.0 * dn)).try_normalize();

@@ -16,6 +16,7 @@ pub use density::{CELLS as DENSITY_CELLS, DensitySummary, Lattice};
 pub use sink::{ModelRef, SceneSink};
 pub use sizes::{SIZE_CLASSES, SizeClass, SizeSummary, size_class};
 
+use crate::texture::{Sampler, UvTransform};
 use serde::Serialize;
 
 /// The pinhole camera of an NFF `v` block.
@@ -47,6 +48,50 @@ pub struct Material {
     pub ior: f32,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pbr: Option<Pbr>,
+    /// A glTF base colour texture (or OBJ's `map_Kd`): multiplies `color`
+    /// where the surface has texture coordinates.
+    #[serde(skip)]
+    pub texture: Option<TextureBinding>,
+}
+
+/// A texture a material binds: one of the scene's images
+/// ([`SceneHeader::textures`]), sampled by `sampler` at the surface's
+/// texture coordinates mapped by `transform`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureBinding {
+    pub image: u32,
+    pub sampler: Sampler,
+    pub transform: UvTransform,
+}
+
+impl TextureBinding {
+    /// The binding's bits, to deduplicate materials exactly.
+    fn key(&self) -> [u32; 9] {
+        let s = &self.sampler;
+        let t = &self.transform;
+        [
+            self.image,
+            s.wrap_s as u32 | (s.wrap_t as u32) << 4 | (s.filter as u32) << 8,
+            t.offset[0].to_bits(),
+            t.offset[1].to_bits(),
+            t.rotation.to_bits(),
+            t.scale[0].to_bits(),
+            t.scale[1].to_bits(),
+            1,
+            0,
+        ]
+    }
+}
+
+/// An image a scene's materials sample, as the file gave it (PNG or
+/// JPEG bytes): decoded when a render starts
+/// ([`crate::texture::Texture::decode`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureImage {
+    /// Where it came from (a file name, or the glTF image's index), for
+    /// messages.
+    pub name: String,
+    pub bytes: Vec<u8>,
 }
 
 /// glTF 2.0's metallic-roughness material (Appendix B of the
@@ -82,11 +127,13 @@ impl Material {
         t: 0.0,
         ior: 1.0,
         pbr: None,
+        texture: None,
     };
 
     /// Bit pattern used to deduplicate materials exactly.
-    pub fn key(&self) -> [u32; 14] {
+    pub fn key(&self) -> [u32; 23] {
         let pbr = self.pbr.map_or([0; 5], |p| p.key());
+        let tex = self.texture.map_or([0; 9], |t| t.key());
         [
             self.color[0].to_bits(),
             self.color[1].to_bits(),
@@ -102,6 +149,15 @@ impl Material {
             pbr[2],
             pbr[3],
             pbr[4],
+            tex[0],
+            tex[1],
+            tex[2],
+            tex[3],
+            tex[4],
+            tex[5],
+            tex[6],
+            tex[7],
+            tex[8],
         ]
     }
 }
@@ -176,4 +232,6 @@ pub struct SceneHeader {
     pub background: [f32; 3],
     pub lights: Vec<Light>,
     pub materials: Vec<Material>,
+    /// The images materials bind ([`TextureBinding::image`]).
+    pub textures: Vec<TextureImage>,
 }

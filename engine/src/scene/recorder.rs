@@ -1,7 +1,7 @@
 //! A scene stream captured in memory, for tests and tools that compare
 //! scenes. Not for large scenes.
 
-use super::{Light, Material, MeshFacts, SceneSink, View};
+use super::{Light, Material, MeshFacts, SceneSink, TextureImage, View};
 use crate::Error;
 use crate::shapes::{OwnedShape, Shape};
 
@@ -15,6 +15,7 @@ pub enum Event {
     Object(OwnedShape),
     Origin([f64; 3]),
     Mesh(MeshFacts),
+    Texture(TextureImage),
 }
 
 /// Records a scene stream.
@@ -42,6 +43,9 @@ impl Recorder {
                 Event::Object(o) => sink.object(&o.shape())?,
                 Event::Origin(o) => sink.origin(*o)?,
                 Event::Mesh(m) => sink.mesh(m)?,
+                Event::Texture(t) => {
+                    sink.texture(t)?;
+                }
             }
         }
         Ok(())
@@ -76,5 +80,14 @@ impl SceneSink for Recorder {
     fn mesh(&mut self, facts: &MeshFacts) -> Result<(), Error> {
         self.events.push(Event::Mesh(*facts));
         Ok(())
+    }
+    fn texture(&mut self, t: &TextureImage) -> Result<u32, Error> {
+        let n = self
+            .events
+            .iter()
+            .filter(|e| matches!(e, Event::Texture(_)))
+            .count();
+        self.events.push(Event::Texture(t.clone()));
+        Ok(n as u32)
     }
 }

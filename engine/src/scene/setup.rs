@@ -157,6 +157,7 @@ pub fn parse_material(s: &str) -> Result<Material, String> {
     }
     Ok(Material {
         pbr: None,
+        texture: None,
         color: [f(0), f(1), f(2)],
         kd: f(3),
         ks: f(4),
@@ -419,6 +420,10 @@ impl SceneSink for SetupSink<'_> {
         } else {
             self.send_override_lights()
         }
+    }
+
+    fn texture(&mut self, image: &super::TextureImage) -> Result<u32, Error> {
+        self.inner.texture(image)
     }
 
     fn material(&mut self, material: &Material) -> Result<(), Error> {

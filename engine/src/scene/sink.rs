@@ -1,4 +1,4 @@
-use super::{Light, Material, MeshFacts, View};
+use super::{Light, Material, MeshFacts, TextureImage, View};
 use crate::Error;
 use crate::shapes::Shape;
 use glam::DAffine3;
@@ -81,5 +81,14 @@ pub trait SceneSink {
     /// Whether [`SceneSink::begin_model`] is accepted.
     fn takes_models(&self) -> bool {
         false
+    }
+
+    /// An image the following materials may bind
+    /// ([`crate::scene::TextureBinding::image`] is the number returned: 0,
+    /// 1, 2, ... in the order sent). A sink that keeps no images (the
+    /// default) numbers them all the same and drops them: its materials
+    /// render untextured.
+    fn texture(&mut self, _image: &TextureImage) -> Result<u32, Error> {
+        Ok(0)
     }
 }

@@ -115,6 +115,18 @@ impl Database {
                 message: "a model places models of its own (models do not nest)".into(),
             });
         }
+        let images = self.scene.textures.len();
+        if let Some((i, t)) = db.scene.materials.iter().enumerate().find_map(|(i, m)| {
+            m.texture
+                .filter(|t| t.image as usize >= images)
+                .map(|t| (i, t))
+        }) {
+            return Err(Error::Database {
+                file: self.path.clone(),
+                location: format!("model {m}"),
+                message: format!("material {i} binds image {} of {images}", t.image),
+            });
+        }
         Ok(db)
     }
 

@@ -41,8 +41,17 @@ pub const VERSION_IDS: u32 = 6;
 /// ([`super::tables`]). Written only when a scene has them, so that every
 /// NFF, SPD or untextured mesh database stays as it was, byte for byte.
 pub const VERSION_APPEARANCE: u32 = 7;
+/// Version 8: as version 7, whose appearance table goes on with the
+/// materials' textures and the images they sample, and whose records may
+/// be textured triangles ([`crate::shapes::Textured`]). Written only when
+/// a scene has either, so every other database stays as it was.
+pub const VERSION_TEXTURES: u32 = 8;
 /// The newest version read.
-pub const VERSION_NEWEST: u32 = VERSION_APPEARANCE;
+pub const VERSION_NEWEST: u32 = VERSION_TEXTURES;
+/// Limits on a database's images: how many, and how many bytes in all
+/// (they are held in memory with the tables).
+pub const MAX_IMAGES: usize = 1 << 16;
+pub const MAX_IMAGE_BYTES: u64 = 1 << 30;
 /// Header `layout` bit (version 7): blocks store input ids (as version 6).
 pub const LAYOUT_IDS: u32 = 1;
 /// Limit on the models of one database.
@@ -274,6 +283,12 @@ impl Dec<'_> {
     }
     pub fn u64(&mut self) -> Option<u64> {
         self.take::<8>().map(u64::from_le_bytes)
+    }
+    /// The next `n` bytes.
+    pub fn bytes(&mut self, n: usize) -> Option<&[u8]> {
+        let s = self.buf.get(self.pos..self.pos.checked_add(n)?)?;
+        self.pos += n;
+        Some(s)
     }
     pub fn remaining(&self) -> usize {
         self.buf.len() - self.pos

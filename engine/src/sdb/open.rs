@@ -9,7 +9,7 @@ use super::format::*;
 use super::packed::PackCounts;
 use super::tables::{Tables, decode_tables};
 use crate::error::{Error, IoContext};
-use crate::scene::{Aabb, SceneHeader};
+use crate::scene::{Aabb, Material, SceneHeader};
 use crate::shapes::{KINDS, KindCounts, ShapeKind};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -76,6 +76,11 @@ impl Database {
         let layout = check_header(&h, file_bytes, &at)?;
         let (mut scene, sizes, density, models) = read_tables(&mut f, &h, &layout, &at)?;
         check_models(&h, &models, layout.has_models, file_bytes, &at)?;
+        // A model's materials bind the world's images (checked when the
+        // world opens it); the world's, its own.
+        if len.is_none() {
+            check_bindings(&scene.materials, scene.textures.len(), &at)?;
+        }
         let origin = h.origin();
         if !origin.iter().all(|c| c.is_finite()) {
             return Err(at.err("header", "the origin is not finite".into()));
@@ -197,7 +202,7 @@ fn check_header(h: &RawHeader, file_bytes: u64, at: &At) -> Result<Layout, Error
             ),
         ));
     }
-    if h.tables_len > (64 << 20) + 64 * MAX_MATERIALS as u64 {
+    if h.tables_len > (64 << 20) + 64 * MAX_MATERIALS as u64 + MAX_IMAGE_BYTES {
         return Err(at.err("header", "tables are implausibly large".into()));
     }
     if h.counts[KINDS..].iter().any(|&c| c != 0) {
@@ -218,6 +223,25 @@ fn check_header(h: &RawHeader, file_bytes: u64, at: &At) -> Result<Layout, Error
     })
 }
 
+/// Checks that every texture binding of `materials` names one of the
+/// `images` images there are.
+fn check_bindings(materials: &[Material], images: usize, at: &At) -> Result<(), Error> {
+    match materials
+        .iter()
+        .enumerate()
+        .find(|(_, m)| m.texture.is_some_and(|t| t.image as usize >= images))
+    {
+        Some((i, m)) => Err(at.err(
+            "tables",
+            format!(
+                "material {i} binds image {} of {images}",
+                m.texture.map_or(0, |t| t.image)
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Reads the tables, checks their checksum (but when fuzzing) and decodes
 /// them.
 fn read_tables(f: &mut File, h: &RawHeader, layout: &Layout, at: &At) -> Result<Tables, Error> {
@@ -233,6 +257,7 @@ fn read_tables(f: &mut File, h: &RawHeader, layout: &Layout, at: &At) -> Result<
         &tables,
         h.version >= VERSION_DENSITY,
         h.version >= VERSION_APPEARANCE,
+        h.version >= VERSION_TEXTURES,
         layout.has_models,
     )
     .ok_or_else(|| at.err("tables", "malformed tables".into()))

@@ -6,8 +6,9 @@ use super::format::*;
 use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
 use crate::scene::{
     Aabb, DENSITY_CELLS, DensitySummary, Light, LightKind, Material, Pbr, Photometric,
-    SIZE_CLASSES, SceneHeader, SizeClass, SizeSummary, View,
+    SIZE_CLASSES, SceneHeader, SizeClass, SizeSummary, TextureBinding, TextureImage, View,
 };
+use crate::texture::{Filter, Sampler, UvTransform, Wrap};
 
 /// What the tables hold, decoded.
 pub(super) type Tables = (
@@ -19,11 +20,13 @@ pub(super) type Tables = (
 
 /// The tables: the scene's header, the size summary, (`density`: from
 /// version 3 on) the density summary, (`appearance`: version 7) the glTF
-/// materials and lights, and (`with_models`) the models.
+/// materials and lights (`textures`: version 8, then the materials'
+/// textures and their images), and (`with_models`) the models.
 pub(super) fn decode_tables(
     buf: &[u8],
     density: bool,
     appearance: bool,
+    textures: bool,
     with_models: bool,
 ) -> Option<Tables> {
     let mut d = Dec { buf, pos: 0 };
@@ -67,6 +70,7 @@ pub(super) fn decode_tables(
         }
         materials.push(Material {
             pbr: None,
+            texture: None,
             color: [m[0], m[1], m[2]],
             kd: m[3],
             ks: m[4],
@@ -136,8 +140,12 @@ pub(super) fn decode_tables(
     } else {
         None
     };
+    let mut images = Vec::new();
     if appearance {
         decode_appearance(&mut d, &mut lights, &mut materials)?;
+        if textures {
+            images = decode_textures(&mut d, &mut materials)?;
+        }
         if !with_models && d.remaining() != 0 {
             return None;
         }
@@ -164,6 +172,7 @@ pub(super) fn decode_tables(
             background,
             lights,
             materials,
+            textures: images,
         },
         sizes,
         density,
@@ -265,6 +274,110 @@ fn decode_appearance(
         });
         Some(())
     })
+}
+
+/// Bytes of one material's texture entry.
+const TEXTURE_ENTRY: usize = 4 * 8;
+
+/// The texture part of the appearance table (version 8): each textured
+/// material's binding (image, sampler, transform), then the images, each
+/// its name and its bytes as the file gave them (PNG or JPEG).
+pub(super) fn encode_textures(materials: &[Material], images: &[TextureImage]) -> Vec<u8> {
+    let mut e = Enc::default();
+    let bound: Vec<(usize, &TextureBinding)> = materials
+        .iter()
+        .enumerate()
+        .filter_map(|(i, m)| m.texture.as_ref().map(|t| (i, t)))
+        .collect();
+    e.u32(bound.len() as u32);
+    for (i, t) in bound {
+        e.u32(i as u32);
+        e.u32(t.image);
+        let s = &t.sampler;
+        e.u32(s.wrap_s as u32 | (s.wrap_t as u32) << 4 | (s.filter as u32) << 8);
+        for x in [
+            t.transform.offset[0],
+            t.transform.offset[1],
+            t.transform.rotation,
+            t.transform.scale[0],
+            t.transform.scale[1],
+        ] {
+            e.f32(x);
+        }
+    }
+    e.u32(images.len() as u32);
+    for im in images {
+        e.u32(im.name.len() as u32);
+        e.0.extend_from_slice(im.name.as_bytes());
+        e.u64(im.bytes.len() as u64);
+        e.0.extend_from_slice(&im.bytes);
+    }
+    e.0
+}
+
+/// Reads the texture part of the appearance table into the materials it
+/// names; returns the images.
+fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<TextureImage>> {
+    let wrap = |c: u32| match c {
+        0 => Some(Wrap::Repeat),
+        1 => Some(Wrap::ClampToEdge),
+        2 => Some(Wrap::MirroredRepeat),
+        _ => None,
+    };
+    let finite = |x: f32| x.is_finite().then_some(x);
+    indexed_entries(d, materials.len(), TEXTURE_ENTRY, |d, i| {
+        let image = d.u32()?;
+        let s = d.u32()?;
+        if s >> 12 != 0 {
+            return None;
+        }
+        let sampler = Sampler {
+            wrap_s: wrap(s & 15)?,
+            wrap_t: wrap(s >> 4 & 15)?,
+            filter: match s >> 8 & 15 {
+                0 => Filter::Nearest,
+                1 => Filter::Linear,
+                _ => return None,
+            },
+        };
+        let v: [f32; 5] = [
+            finite(d.f32()?)?,
+            finite(d.f32()?)?,
+            finite(d.f32()?)?,
+            finite(d.f32()?)?,
+            finite(d.f32()?)?,
+        ];
+        materials.get_mut(i)?.texture = Some(TextureBinding {
+            image,
+            sampler,
+            transform: UvTransform {
+                offset: [v[0], v[1]],
+                rotation: v[2],
+                scale: [v[3], v[4]],
+            },
+        });
+        Some(())
+    })?;
+    let n = d.u32()? as usize;
+    if n > MAX_IMAGES || n * 12 > d.remaining() {
+        return None;
+    }
+    let mut images = Vec::with_capacity(n);
+    let mut total = 0u64;
+    for _ in 0..n {
+        let len = d.u32()? as usize;
+        let name = String::from_utf8(d.bytes(len)?.to_vec()).ok()?;
+        let len = d.u64()?;
+        total = total.checked_add(len)?;
+        if total > MAX_IMAGE_BYTES {
+            return None;
+        }
+        let bytes = d.bytes(usize::try_from(len).ok()?)?.to_vec();
+        images.push(TextureImage { name, bytes });
+    }
+    // Bindings are checked against the images by the database that holds
+    // them (a model's materials bind the world's images).
+    Some(images)
 }
 
 /// A count, then that many entries of `entry` bytes each, each led by an

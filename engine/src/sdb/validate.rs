@@ -34,7 +34,7 @@ pub(super) fn validate_records(
                 head[1]
             ));
         }
-        instances |= kind == ShapeKind::Instance;
+        instances |= matches!(kind, ShapeKind::Instance | ShapeKind::Textured);
         pos += RECORD_HEADER_WORDS + payload;
         if pos > words.len() {
             return Err(format!("record {i} is cut off"));
@@ -45,7 +45,8 @@ pub(super) fn validate_records(
     }
     if instances {
         // An instance's transform is stored as `f64` words, whose low
-        // halves are any bit pattern: its record is checked as a shape.
+        // halves are any bit pattern, and a textured triangle's colours
+        // as 16-bit integers: their records are checked as shapes.
         return validate_with_instances(words, count, models);
     }
     // No number may be NaN or infinite. The integer words (kind and vertex
@@ -63,7 +64,8 @@ pub(super) fn validate_records(
 }
 
 /// The finiteness check of [`validate_records`], record by record, for a
-/// block holding instances (checked whole, and their model's index).
+/// block holding instances (checked whole, and their model's index) or
+/// textured triangles (checked whole, their colours aside).
 fn validate_with_instances(words: &[u32], count: u32, models: usize) -> Result<(), String> {
     let finite = |w: &[u32]| w.iter().all(|w| (w & 0x7f80_0000) != 0x7f80_0000);
     let mut pos = 0usize;
@@ -83,6 +85,13 @@ fn validate_with_instances(words: &[u32], count: u32, models: usize) -> Result<(
                         inst.model()
                     ));
                 }
+            }
+            Shape::Textured(t) => {
+                let colors = 2 * t.colors.len();
+                if !finite(&rec[..len - colors]) {
+                    return Err(format!("record {i} has a non-finite number"));
+                }
+                o.shape.validate().map_err(|e| format!("record {i}: {e}"))?;
             }
             _ if !finite(rec) => return Err(format!("record {i} has a non-finite number")),
             _ => {}

@@ -7,9 +7,9 @@ use super::spatial::SpatialSorter;
 use crate::error::{Error, IoContext};
 use crate::scene::{
     Aabb, DensitySummary, Light, Material, MeshFacts, ModelRef, SceneHeader, SceneSink,
-    SizeSummary, View,
+    SizeSummary, TextureImage, View,
 };
-use crate::shapes::{KindCounts, Shape};
+use crate::shapes::{KindCounts, Shape, ShapeKind};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -60,7 +60,10 @@ pub struct DbWriter {
     background: [f32; 3],
     lights: Vec<Light>,
     materials: Vec<Material>,
-    material_index: HashMap<[u32; 14], u32>,
+    material_index: HashMap<[u32; 23], u32>,
+    /// The images materials bind (version 8).
+    textures: Vec<TextureImage>,
+    texture_bytes: u64,
     current_material: Option<u32>,
     material_statements: u64,
     origin: [f64; 3],
@@ -149,6 +152,8 @@ impl DbWriter {
             lights: Vec::new(),
             materials: Vec::new(),
             material_index: HashMap::new(),
+            textures: Vec::new(),
+            texture_bytes: 0,
             current_material: None,
             material_statements: 0,
             origin: [0.0; 3],
@@ -400,6 +405,20 @@ impl DbWriter {
         // The appearance (version 7), before the models' table: only a
         // scene with glTF materials or lights has it.
         let appearance = super::tables::encode_appearance(&self.lights, &self.materials);
+        // Textures (version 8) go on after the rest of the appearance
+        // (empty lists when the scene has none of it).
+        let textured = !self.textures.is_empty() || self.counts.get(ShapeKind::Textured) > 0;
+        let appearance = match (appearance, textured) {
+            (a, true) => {
+                let mut a = a.unwrap_or_else(|| vec![0; 8]);
+                a.extend(super::tables::encode_textures(
+                    &self.materials,
+                    &self.textures,
+                ));
+                Some(a)
+            }
+            (a, false) => a,
+        };
         if let Some(a) = &appearance {
             tables.extend_from_slice(a);
         }
@@ -449,7 +468,9 @@ impl DbWriter {
         let c = self.counts;
         let mut h = RawHeader {
             magic: MAGIC,
-            version: if appearance.is_some() {
+            version: if textured {
+                VERSION_TEXTURES
+            } else if appearance.is_some() {
                 VERSION_APPEARANCE
             } else if self.ids {
                 VERSION_IDS
@@ -546,6 +567,7 @@ impl DbWriter {
             background: self.background,
             lights: self.lights.clone(),
             materials: self.materials.clone(),
+            textures: self.textures.clone(),
         })
     }
 }
@@ -668,6 +690,21 @@ impl SceneSink for DbWriter {
         Ok(())
     }
 
+    fn texture(&mut self, image: &TextureImage) -> Result<u32, Error> {
+        if self.textures.len() >= MAX_IMAGES {
+            return Err(Error::Scene(format!("more than {MAX_IMAGES} textures")));
+        }
+        self.texture_bytes += image.bytes.len() as u64;
+        if self.texture_bytes > MAX_IMAGE_BYTES {
+            return Err(Error::Scene(format!(
+                "the scene's textures take more than {} MiB, the most a database holds",
+                MAX_IMAGE_BYTES >> 20
+            )));
+        }
+        self.textures.push(image.clone());
+        Ok(self.textures.len() as u32 - 1)
+    }
+
     fn material(&mut self, m: &Material) -> Result<(), Error> {
         if let Some(model) = self.open_model.as_mut() {
             return model.material(m);
@@ -722,7 +759,12 @@ impl DbWriter {
     /// spatial order), else numbered by its place.
     fn object_ranked(&mut self, shape: &Shape<'_>, rank: Option<u32>) -> Result<(), Error> {
         if let Some(model) = self.open_model.as_mut() {
-            if !matches!(shape, Shape::Polygon(_) | Shape::Patch(_)) || shape.count() != 3 {
+            let triangle = match shape {
+                Shape::Polygon(_) | Shape::Patch(_) => shape.count() == 3,
+                Shape::Textured(_) => true,
+                _ => false,
+            };
+            if !triangle {
                 return Err(Error::Scene(format!(
                     "a model holds triangles only (a {} with count {} was given)",
                     shape.kind().name(),
@@ -775,7 +817,7 @@ impl DbWriter {
         let triangles = shape.triangles();
         if triangles > 0 {
             self.triangles += triangles;
-            self.listed_vertices += count as u64;
+            self.listed_vertices += shape.listed_vertices();
         }
         self.counts.add(kind);
         self.objects += 1;

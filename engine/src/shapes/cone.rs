@@ -147,6 +147,7 @@ impl Kind for ConeKind {
             p: p.into(),
             ng,
             ns: ng,
+            attrs: crate::intersect::Attrs::NONE,
         }
     }
 

@@ -167,6 +167,7 @@ impl Kind for InstanceKind {
             p: ray.at(t).into(),
             ng,
             ns: ng,
+            attrs: crate::intersect::Attrs::NONE,
         }
     }
 

@@ -280,6 +280,22 @@ kinds! {
     Cone = 3 => cone::ConeKind(Cone),
     /// A model of the database placed by an affine transform.
     Instance = 4 => instance::InstanceKind(Instance<'a>),
+    /// A triangle with texture coordinates, colours or normals at its
+    /// corners (glTF, OBJ and PLY meshes that carry them).
+    Textured = 5 => textured::TexturedKind(Textured<'a>),
+}
+
+impl Shape<'_> {
+    /// Vertices the primitive lists, if it is made of triangles (a
+    /// polygon's or patch's count, a textured triangle's three), else 0:
+    /// what statistics call a scene's listed vertices.
+    pub fn listed_vertices(&self) -> u64 {
+        match self {
+            Shape::Polygon(_) | Shape::Patch(_) => self.count() as u64,
+            Shape::Textured(_) => 3,
+            _ => 0,
+        }
+    }
 }
 
 /// Nearest `t` in `(t_min, t_max)` at which `ray` meets `shape`, whose

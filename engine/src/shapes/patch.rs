@@ -114,6 +114,7 @@ impl Kind for PatchKind {
             p,
             ng,
             ns: ns.try_normalize().unwrap_or(ng),
+            attrs: crate::intersect::Attrs::NONE,
         }
     }
 

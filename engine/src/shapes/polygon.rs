@@ -2,7 +2,7 @@
 //! from the first three vertices, as NFF defines it.
 
 use super::{GeometryMap, Kind, check_vertex_count, push_points};
-use crate::intersect::{RayQ, Surface, triangle};
+use crate::intersect::{Attrs, RayQ, Surface, triangle};
 use crate::math::{Real, V3};
 use crate::math::Aabb;
 
@@ -98,7 +98,12 @@ impl Kind for PolygonKind {
     fn surface(s: &Polygon<'_>, ray: &RayQ<f64>, t: f64) -> Surface {
         let p = ray.at(t).into();
         let ng = Surface::unit_or_facing(normal::<f64>(s.vertices).into(), ray);
-        Surface { p, ng, ns: ng }
+        Surface {
+            p,
+            ng,
+            ns: ng,
+            attrs: Attrs::NONE,
+        }
     }
 
     fn map(s: &Polygon<'_>, m: &GeometryMap<'_>, out: &mut Vec<u32>) {

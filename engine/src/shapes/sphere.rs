@@ -1,7 +1,7 @@
 //! Spheres: centre and radius.
 
 use super::{GeometryMap, Kind};
-use crate::intersect::{RayQ, Surface};
+use crate::intersect::{Attrs, RayQ, Surface};
 use crate::math::{Real, V3, Vec3, Vec3Ext};
 use crate::math::Aabb;
 use crate::math::{f32_down, f32_up};
@@ -127,7 +127,12 @@ impl Kind for SphereKind {
     fn surface(s: &Sphere, ray: &RayQ<f64>, t: f64) -> Surface {
         let p: Vec3 = ray.at(t).into();
         let ng = Surface::unit_or_facing(p - Vec3::from_f32(s.center), ray);
-        Surface { p, ng, ns: ng }
+        Surface {
+            p,
+            ng,
+            ns: ng,
+            attrs: Attrs::NONE,
+        }
     }
 
     fn map(s: &Sphere, m: &GeometryMap<'_>, out: &mut Vec<u32>) {

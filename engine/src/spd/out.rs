@@ -113,6 +113,7 @@ impl<'a> Out<'a> {
         };
         self.sink.material(&Material {
             pbr: None,
+            texture: None,
             color: r3(c),
             kd: r32(kd),
             ks: r32(ks),

@@ -216,14 +216,15 @@ fn wrong_magic_and_wrong_version() {
     // A future version with a valid header checksum (2 is a database
     // whose geometry is relative to an origin, 3 one with a density
     // summary, 4 one with triangle runs, 5 one with models, 6 one in
-    // spatial order, 7 one with glTF materials and lights).
+    // spatial order, 7 one with glTF materials and lights, 8 one with
+    // textures).
     let mut b = good.clone();
-    b[8..12].copy_from_slice(&8u32.to_le_bytes());
+    b[8..12].copy_from_slice(&9u32.to_le_bytes());
     let crc = crc32fast::hash(&b[..252]);
     b[252..256].copy_from_slice(&crc.to_le_bytes());
     std::fs::write(&bad, &b).unwrap();
     let e = Database::open(&bad).unwrap_err().to_string();
-    assert!(e.contains("version 8 is not supported"), "{e}");
+    assert!(e.contains("version 9 is not supported"), "{e}");
 }
 
 #[test]

@@ -181,7 +181,8 @@ fn bad_files_are_clear_errors() {
         ),
         (
             edited(d, "index.gltf", |doc| {
-                doc["accessors"][1]["count"] = serde_json::json!(3)
+                doc["accessors"][1]["count"] = serde_json::json!(3);
+                doc["accessors"][2]["count"] = serde_json::json!(3)
             }),
             "past its",
         ),

@@ -122,6 +122,7 @@ fn header(w: &mut dyn SceneSink) {
 const MATERIALS: [Material; 2] = [
     Material {
         pbr: None,
+        texture: None,
         color: [0.8, 0.5, 0.3],
         kd: 0.7,
         ks: 0.3,
@@ -131,6 +132,7 @@ const MATERIALS: [Material; 2] = [
     },
     Material {
         pbr: None,
+        texture: None,
         color: [0.3, 0.6, 0.9],
         kd: 0.5,
         ks: 0.2,
@@ -429,6 +431,7 @@ fn ties_between_instances_go_as_between_copies() {
         }
         w.material(&Material {
             pbr: None,
+            texture: None,
             color: [0.1, 0.9, 0.1],
             ..MATERIALS[0]
         })

@@ -90,7 +90,7 @@ fn measure<R: Real>(db: &Database, objs: &Objects, precision: Precision, eps_sca
     let h = db.scene();
     let eps = epsilon(&db.bbox(), precision) * eps_scale;
     let size = db.bbox().diagonal();
-    let sc = ShadeScene::new(h, 5, eps);
+    let sc = ShadeScene::new(h, 5, eps).unwrap();
     let cam = Camera::new(&h.view, SIDE, SIDE).unwrap();
     let mut tally = Tally::default();
     for row in 0..=SIDE {
