@@ -44,7 +44,7 @@ use crate::intersect::{Attrs, RayQ};
 use crate::math::{Real, Vec3, Vec3Ext};
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
-use crate::render::KindCounts;
+use crate::render::{Cutouts, KindCounts};
 use crate::sdb::{Block, Database, ObjectRef};
 use crate::shapes::{Prepared, Shape};
 use rayon::prelude::*;
@@ -1172,7 +1172,7 @@ fn scan_block<R: Real>(
 ) {
     scan_singles(sh, block, &found.singles, grids, models, per_pass, carry);
     if !found.aggregates.is_empty() {
-        scan_aggregates(sh, block, found, grids, carry, walk);
+        scan_aggregates(sh, block, found, grids, models.cutouts(), carry, walk);
     }
 }
 
@@ -1198,6 +1198,7 @@ fn scan_aggregates<R: Real>(
     block: &Block<'_>,
     found: &Found,
     grids: &VoxelGrids,
+    cutouts: Option<&Cutouts>,
     carry: bool,
     walk: &AggregateWalk,
 ) {
@@ -1266,9 +1267,10 @@ fn scan_aggregates<R: Real>(
                         }
                         let (ob, pr) = &objects[k];
                         counts.tests.add(ob.shape.kind());
-                        if let Some(t) =
-                            ob.shape
-                                .intersect(pr.as_ref(), &ob.bbox, q, s.t_min, s.upper)
+                        if let Some(t) = ob
+                            .shape
+                            .intersect(pr.as_ref(), &ob.bbox, q, s.t_min, s.upper)
+                            .filter(|_| keeps(cutouts, ob, q))
                         {
                             let t = t.to_f64();
                             offer(s, c, t, PrimId::object(m.index), m.rank, carry, |ray| {
@@ -1435,6 +1437,7 @@ fn scan_singles<R: Real>(
                 None => o
                     .shape
                     .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
+                    .filter(|_| keeps(models.cutouts(), o, q))
                     .map(|t| (t, prim)),
                 Some(pl) => {
                     let c = &sh.cold[slot as usize];
@@ -1466,6 +1469,13 @@ fn scan_singles<R: Real>(
             }
         }
     }
+}
+
+/// Whether object `o` is there where ray `q` meets it: not where an
+/// alpha-mask cut-out removes it (see [`Cutouts`]).
+#[inline(always)]
+fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> bool {
+    cutouts.is_none_or(|c| c.keeps(&o.shape, o.material, q))
 }
 
 /// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`, whose object

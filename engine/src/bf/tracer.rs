@@ -303,6 +303,11 @@ impl<'db, R: Real> Tracer<'db, R> {
         let spill = SpillDir::new(bf.spill_dir.as_deref())?;
         let eps = epsilon(&db.bbox(), opts.precision);
         let shade_scene = ShadeScene::new(db.scene(), opts.max_depth, eps)?;
+        let mut models = models;
+        models.set_cutouts(crate::render::Cutouts::new(
+            &models.material_table(&db.scene().materials),
+            shade_scene.textures.clone(),
+        ));
 
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");

@@ -25,7 +25,9 @@ use crate::intersect::{Surface, triangle};
 use crate::math::{Real, Vec3};
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
-use crate::render::{Camera, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon};
+use crate::render::{
+    Camera, Cutouts, Frame, GridRes, RenderOptions, RenderStats, ShadeScene, epsilon,
+};
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
 use crate::shapes::{KindCounts, Patch, Polygon, Prepared, Shape, ShapeKind};
@@ -165,6 +167,13 @@ impl Candidate<'_, '_> {
             Candidate::Instance(..) => None,
             Candidate::Face { v, .. } => triangle::intersect(v[0], v[1], v[2], ray, t_min, t_max),
             Candidate::Record(h) => match (h.bins, &h.shape) {
+                (_, shape @ Shape::Textured(_)) => {
+                    let t = shape.intersect(None, &h.bbox, ray, t_min, t_max)?;
+                    match s.models.cutouts() {
+                        Some(c) if !c.keeps(shape, h.material, ray) => None,
+                        _ => Some(t),
+                    }
+                }
                 (PLAIN, shape) => shape.intersect(s.prep(h), &h.bbox, ray, t_min, t_max),
                 (b, Shape::Polygon(p)) => {
                     s.edge_bins[b as usize].intersect(p.vertices, &h.bbox, ray, t_min, t_max)
@@ -310,14 +319,18 @@ impl<'t> DfScene<'t> {
             .iter()
             .map(|g| pyramid::BlockBounds::new(&g.spec, g.pyramid.height(), slack))
             .collect();
+        let materials = models.material_table(&header.materials);
+        let shade = ShadeScene::new(header, opts.max_depth, eps)?;
+        let mut models = models;
+        models.set_cutouts(Cutouts::new(&materials, shade.textures.clone()));
         Ok(DfScene {
             objects,
             records,
             preps,
             edge_bins,
-            materials: models.material_table(&header.materials),
+            materials,
             grids,
-            shade: ShadeScene::new(header, opts.max_depth, eps)?,
+            shade,
             camera: Camera::new(&header.view, opts.width, opts.height)?,
             slack,
             blocks,

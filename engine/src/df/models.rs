@@ -29,10 +29,12 @@ use crate::intersect::{RayQ, Surface, triangle};
 use crate::math::{Real, Vec3};
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
+use crate::render::Cutouts;
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
 use crate::shapes::{Instance, KindCounts, Patch, Polygon, Shape, ShapeKind, Textured};
 use glam::{DAffine3, DMat3, DVec3};
+use std::sync::Arc;
 
 /// How a model is placed: the transform, its inverse (to walk the
 /// model's grid) and the map of normals.
@@ -108,6 +110,8 @@ pub struct Model {
     material_base: u32,
     /// Margin around each triangle's box in the grid, in model units.
     pad: f64,
+    /// The render's alpha-mask cut-outs, if any material has one.
+    cutouts: Option<Arc<Cutouts>>,
 }
 
 /// A model's triangles' boxes, grown by its margin.
@@ -158,6 +162,8 @@ pub struct Models {
     aggregates: bool,
     /// Each model's triangles, from its header.
     triangles: Vec<u64>,
+    /// The render's alpha-mask cut-outs ([`Models::set_cutouts`]).
+    cutouts: Option<Arc<Cutouts>>,
 }
 
 impl Models {
@@ -190,6 +196,7 @@ impl Models {
             threads: threads.max(1),
             aggregates,
             triangles: Vec::with_capacity(n),
+            cutouts: None,
         };
         let world_materials = db.scene().materials.len();
         for m in 0..n {
@@ -253,7 +260,23 @@ impl Models {
             grid,
             material_base: self.bases[m],
             pad,
+            cutouts: self.cutouts.clone(),
         })
+    }
+
+    /// Sets the render's alpha-mask cut-outs (see
+    /// [`crate::render::Cutouts`]), for the models held and those read
+    /// later.
+    pub fn set_cutouts(&mut self, c: Option<Arc<Cutouts>>) {
+        for m in self.list.iter_mut().flatten() {
+            m.cutouts = c.clone();
+        }
+        self.cutouts = c;
+    }
+
+    /// The render's alpha-mask cut-outs, if any material has one.
+    pub fn cutouts(&self) -> Option<&Cutouts> {
+        self.cutouts.as_deref()
     }
 
     /// The models' materials, to follow the world's in the render's
@@ -543,7 +566,7 @@ impl Model {
         t_max: R,
         tests: &mut KindCounts,
     ) -> Option<R> {
-        let (v, kind) = match self.objects.slot(id) {
+        let (v, kind, masked) = match self.objects.slot(id) {
             Slot::Face(f) => (
                 self.objects.positions(&f),
                 if f.patch {
@@ -551,6 +574,7 @@ impl Model {
                 } else {
                     ShapeKind::Polygon
                 },
+                None,
             ),
             Slot::Record(_) => {
                 let tri = corners_of(&self.objects, id)?;
@@ -559,12 +583,30 @@ impl Model {
                     (None, Some(_)) => ShapeKind::Patch,
                     (None, None) => ShapeKind::Polygon,
                 };
-                (tri.v, kind)
+                let masked = match (&self.cutouts, tri.attrs) {
+                    (Some(c), Some(a)) => Some((c, a, tri.material)),
+                    _ => None,
+                };
+                (tri.v, kind, masked)
             }
         };
         tests.add(kind);
-        let [a, b, c] = v.map(|p| pl.point(p));
-        triangle::intersect(a, b, c, q, t_min, t_max)
+        let placed = v.map(|p| pl.point(p));
+        let [a, b, c] = placed;
+        let t = triangle::intersect(a, b, c, q, t_min, t_max)?;
+        // A cut-out sees the placed triangle, as it sees its copy.
+        if let Some((cut, (uvs, colors), material)) = masked {
+            let shape = Shape::Textured(Textured {
+                vertices: &placed,
+                normals: &[],
+                uvs,
+                colors,
+            });
+            if !cut.keeps(&shape, self.material_base + material, q) {
+                return None;
+            }
+        }
+        Some(t)
     }
 }
 

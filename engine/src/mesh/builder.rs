@@ -835,7 +835,7 @@ impl Bounds {
 /// Turns faces into objects, by the polygon policy.
 struct Emitter {
     materials: Vec<Material>,
-    last: Option<[u32; 23]>,
+    last: Option<[u32; 24]>,
     summary: MeshSummary,
     pos: Vec<[f32; 3]>,
     nrm: Vec<[f32; 3]>,

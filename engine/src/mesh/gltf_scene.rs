@@ -1024,10 +1024,24 @@ impl Emit<'_, '_> {
                 rotation: t.rotation(),
                 scale: t.scale(),
             });
+        let alpha = m.pbr_metallic_roughness().base_color_factor()[3];
+        let cutoff = match m.alpha_mode() {
+            gltf::material::AlphaMode::Mask => m.alpha_cutoff().unwrap_or(0.5),
+            gltf::material::AlphaMode::Blend => {
+                self.warnings.add(
+                    "alphaMode BLEND is rendered opaque (MASK cut-outs are honoured)",
+                    || format!("material {}", m.index().unwrap_or(0)),
+                );
+                0.0
+            }
+            gltf::material::AlphaMode::Opaque => 0.0,
+        };
         out.texture = Some(TextureBinding {
             image: idx,
             sampler,
             transform,
+            cutoff,
+            alpha,
         });
         Ok(out)
     }

@@ -336,6 +336,8 @@ pub fn read_obj_from<R: BufRead>(
                                 image,
                                 sampler: map.sampler,
                                 transform: map.transform,
+                                cutoff: 0.0,
+                                alpha: 1.0,
                             });
                         }
                         materials.insert(mname, b.add_material(m));

@@ -275,6 +275,8 @@ fn texture_material(
             image,
             sampler: Default::default(),
             transform: Default::default(),
+            cutoff: 0.0,
+            alpha: 1.0,
         }),
         ..super::NEUTRAL
     })

@@ -4,6 +4,7 @@
 //! they produce the same image and the same counts.
 
 mod camera;
+mod cutout;
 mod frame;
 mod options;
 mod sampling;
@@ -11,6 +12,7 @@ mod shade;
 mod stats;
 
 pub use camera::Camera;
+pub use cutout::Cutouts;
 pub use frame::{Contribution, FIXED_ONE, Frame, ImageFormat, to_fixed};
 pub use options::{Aggregates, GridRes, Mode, Precision, RenderOptions};
 pub use sampling::{EyeRays, MAX_SAMPLES, Sampling};

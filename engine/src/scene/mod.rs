@@ -62,11 +62,17 @@ pub struct TextureBinding {
     pub image: u32,
     pub sampler: Sampler,
     pub transform: UvTransform,
+    /// glTF's `alphaMode: MASK`: the surface is cut out where its alpha
+    /// (`alpha` times the texture's, times the vertex colour's) is below
+    /// this ([`crate::render::Cutouts`]); 0: opaque.
+    pub cutoff: f32,
+    /// The base colour factor's alpha.
+    pub alpha: f32,
 }
 
 impl TextureBinding {
     /// The binding's bits, to deduplicate materials exactly.
-    fn key(&self) -> [u32; 9] {
+    fn key(&self) -> [u32; 10] {
         let s = &self.sampler;
         let t = &self.transform;
         [
@@ -77,8 +83,9 @@ impl TextureBinding {
             t.rotation.to_bits(),
             t.scale[0].to_bits(),
             t.scale[1].to_bits(),
+            self.cutoff.to_bits(),
+            self.alpha.to_bits(),
             1,
-            0,
         ]
     }
 }
@@ -131,9 +138,9 @@ impl Material {
     };
 
     /// Bit pattern used to deduplicate materials exactly.
-    pub fn key(&self) -> [u32; 23] {
+    pub fn key(&self) -> [u32; 24] {
         let pbr = self.pbr.map_or([0; 5], |p| p.key());
-        let tex = self.texture.map_or([0; 9], |t| t.key());
+        let tex = self.texture.map_or([0; 10], |t| t.key());
         [
             self.color[0].to_bits(),
             self.color[1].to_bits(),
@@ -158,6 +165,7 @@ impl Material {
             tex[6],
             tex[7],
             tex[8],
+            tex[9],
         ]
     }
 }

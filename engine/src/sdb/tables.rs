@@ -277,7 +277,7 @@ fn decode_appearance(
 }
 
 /// Bytes of one material's texture entry.
-const TEXTURE_ENTRY: usize = 4 * 8;
+const TEXTURE_ENTRY: usize = 4 * 10;
 
 /// The texture part of the appearance table (version 8): each textured
 /// material's binding (image, sampler, transform), then the images, each
@@ -301,6 +301,8 @@ pub(super) fn encode_textures(materials: &[Material], images: &[TextureImage]) -
             t.transform.rotation,
             t.transform.scale[0],
             t.transform.scale[1],
+            t.cutoff,
+            t.alpha,
         ] {
             e.f32(x);
         }
@@ -340,13 +342,10 @@ fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<Te
                 _ => return None,
             },
         };
-        let v: [f32; 5] = [
-            finite(d.f32()?)?,
-            finite(d.f32()?)?,
-            finite(d.f32()?)?,
-            finite(d.f32()?)?,
-            finite(d.f32()?)?,
-        ];
+        let mut v = [0f32; 7];
+        for x in &mut v {
+            *x = finite(d.f32()?)?;
+        }
         materials.get_mut(i)?.texture = Some(TextureBinding {
             image,
             sampler,
@@ -355,6 +354,8 @@ fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<Te
                 rotation: v[2],
                 scale: [v[3], v[4]],
             },
+            cutoff: v[5],
+            alpha: v[6],
         });
         Some(())
     })?;

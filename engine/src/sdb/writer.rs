@@ -60,7 +60,7 @@ pub struct DbWriter {
     background: [f32; 3],
     lights: Vec<Light>,
     materials: Vec<Material>,
-    material_index: HashMap<[u32; 23], u32>,
+    material_index: HashMap<[u32; 24], u32>,
     /// The images materials bind (version 8).
     textures: Vec<TextureImage>,
     texture_bytes: u64,

@@ -292,3 +292,165 @@ fn vertex_colours_multiply_the_base_colour_and_interpolate() {
     let n = check(&img, on_quad, expect, 2e-3);
     assert!(n > 1500, "only {n} pixels checked");
 }
+
+/// A 2 x 1 PNG: a transparent red texel beside an opaque green one.
+fn half_transparent_png() -> Vec<u8> {
+    let mut img = image::RgbaImage::new(2, 1);
+    img.put_pixel(0, 0, image::Rgba([255, 0, 0, 0]));
+    img.put_pixel(1, 0, image::Rgba([0, 255, 0, 255]));
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    png
+}
+
+/// A leaf: the quad [-3, 3]^2 of z = 0 whose left half is cut out by its
+/// texture's alpha (`alphaMode: MASK`), in front of a white floor, the
+/// quad [-5.5, 5.5]^2 of z = -2, under a directional light down -z, seen
+/// from (0, 0, 10).
+fn leaf(dir: &Path, mode: &str) -> PathBuf {
+    let mut bin: Vec<u8> = Vec::new();
+    let push = |bin: &mut Vec<u8>, xs: &[f32]| {
+        for x in xs {
+            bin.extend_from_slice(&x.to_le_bytes());
+        }
+    };
+    for (h, z) in [(3.0f32, 0.0f32), (5.5, -2.0)] {
+        for c in [[-h, h], [h, h], [h, -h], [-h, -h]] {
+            push(&mut bin, &[c[0], c[1], z]);
+        }
+    }
+    for uv in [[0.0f32, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]] {
+        push(&mut bin, &uv);
+    }
+    for i in [0u16, 3, 2, 0, 2, 1] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let png = half_transparent_png();
+    let image_at = bin.len();
+    bin.extend_from_slice(&png);
+    std::fs::write(dir.join("leaf.bin"), &bin).unwrap();
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_lights_punctual"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"type": "directional", "intensity": 1.0, "color": [1.0, 1.0, 1.0]}]}},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1, 2, 3]}],
+        "nodes": [
+            {"mesh": 0},
+            {"mesh": 1},
+            {"camera": 0, "translation": [0.0, 0.0, 10.0]},
+            {"extensions": {"KHR_lights_punctual": {"light": 0}}}
+        ],
+        "cameras": [{"type": "perspective", "perspective": {
+            "yfov": 2.0 * (0.6f64).atan(), "aspectRatio": 1.0, "znear": 0.01}}],
+        "buffers": [{"uri": "leaf.bin", "byteLength": bin.len()}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 96, "byteLength": 32},
+            {"buffer": 0, "byteOffset": 128, "byteLength": 12},
+            {"buffer": 0, "byteOffset": image_at, "byteLength": png.len()}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-3.0, -3.0, 0.0], "max": [3.0, 3.0, 0.0]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-5.5, -5.5, -2.0], "max": [5.5, 5.5, -2.0]},
+            {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}
+        ],
+        "meshes": [
+            {"primitives": [{"attributes": {"POSITION": 0, "TEXCOORD_0": 2}, "indices": 3, "material": 0}]},
+            {"primitives": [{"attributes": {"POSITION": 1}, "indices": 3, "material": 1}]}
+        ],
+        "materials": [
+            {"alphaMode": mode, "alphaCutoff": 0.5, "pbrMetallicRoughness": {
+                "baseColorTexture": {"index": 0}, "metallicFactor": 0.0, "roughnessFactor": 1.0}},
+            {"pbrMetallicRoughness": {"baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+                "metallicFactor": 0.0, "roughnessFactor": 1.0}}
+        ],
+        "textures": [{"source": 0, "sampler": 0}],
+        "samplers": [{"magFilter": 9728, "wrapS": 33071, "wrapT": 33071}],
+        "images": [{"bufferView": 4, "mimeType": "image/png"}]
+    });
+    let path = dir.join("leaf.gltf");
+    std::fs::write(&path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+    path
+}
+
+/// The pixel whose corners straddle (x, y) of the plane z = 0.
+fn at(img: &[[f32; 3]], x: f64, y: f64) -> [f32; 3] {
+    let col = ((x + 6.0) / 12.0 * SIZE as f64).floor() as usize;
+    let row = ((6.0 - y) / 12.0 * SIZE as f64).floor() as usize;
+    img[row * SIZE as usize + col]
+}
+
+#[test]
+fn light_and_sight_pass_through_an_alpha_mask_cut_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let img = render(dir.path(), &leaf(dir.path(), "MASK"));
+    let opaque = at(&img, 1.5, 0.0);
+    let hole = at(&img, -1.5, 0.0);
+    let floor = at(&img, 4.3, 0.0);
+    // The opaque half is the green texel.
+    // (A grey glint of GGX on top.)
+    assert!(opaque[1] > 0.2 && opaque[0] < 0.02, "{opaque:?}");
+    // Through the hole: the white floor (not the red texel), lit, so its
+    // shadow rays passed the hole too, about as bright as the floor seen
+    // beside the leaf.
+    assert!(
+        (hole[0] - hole[1]).abs() < 1e-3 && (hole[0] - hole[2]).abs() < 1e-3,
+        "{hole:?}"
+    );
+    assert!(
+        (hole[0] / floor[0] - 1.0).abs() < 0.05,
+        "{hole:?} {floor:?}"
+    );
+    // Without the mask, the left half is the red texel and the floor
+    // behind it unseen.
+    let dir = tempfile::tempdir().unwrap();
+    let img = render(dir.path(), &leaf(dir.path(), "OPAQUE"));
+    let red = at(&img, -1.5, 0.0);
+    assert!(red[0] > 0.2 && red[1] < 0.02, "{red:?}");
+}
+
+#[test]
+fn a_cut_out_renders_the_same_in_both_tracers_precisions_and_budgets() {
+    use sray_engine::render::Precision;
+    let dir = tempfile::tempdir().unwrap();
+    let gltf = leaf(dir.path(), "MASK");
+    let db_path = dir.path().join("leaf.sdb");
+    let src = SceneSource::parse(gltf.to_str().unwrap()).unwrap();
+    write_converted(&src, &db_path, Compression::Zstd(3), true);
+    let db = Database::open(&db_path).unwrap();
+    for precision in [Precision::Double, Precision::Single] {
+        let o = RenderOptions {
+            precision,
+            ..options()
+        };
+        let df = common::df_render(&db, &o);
+        for memory in [1 << 20, 64 << 20] {
+            let bf = common::bf_render(&db, &o, StoreNumber::Adaptive, memory);
+            if df.0 != bf.0 {
+                let px = |img: &[u8], x: f64, y: f64| {
+                    let col = ((x + 6.0) / 12.0 * SIZE as f64).floor() as usize;
+                    let row = ((6.0 - y) / 12.0 * SIZE as f64).floor() as usize;
+                    let i = 3 * (row * SIZE as usize + col);
+                    [img[i], img[i + 1], img[i + 2]]
+                };
+                for (x, y) in [(-1.5, 0.0), (1.5, 0.0), (4.8, 0.0), (-4.5, 0.0)] {
+                    eprintln!(
+                        "({x},{y}) df {:?} bf {:?}",
+                        px(&df.0, x, y),
+                        px(&bf.0, x, y)
+                    );
+                }
+                eprintln!("df {:?}\nbf {:?}", df.1.rays, bf.1.rays);
+            }
+            assert!(df.0 == bf.0, "{precision:?}, {memory}: the tracers differ");
+            assert_eq!(df.1.rays, bf.1.rays);
+        }
+    }
+}
