@@ -218,7 +218,6 @@ pub(super) async fn check_round(
             intersect: iprints[i].clone(),
             shade: print_of(v1::Stage::Shade, out, key)?,
         };
-        let t0 = std::time::Instant::now();
         // A second opinion: another worker, which recomputes the shard's
         // lineage and runs it.
         let mut avoid: Vec<String> = vec![w.session.clone(), by[i].clone()];
@@ -274,7 +273,6 @@ pub(super) async fn check_round(
         let t1 = std::time::Instant::now();
         let here = here(stage, lineage, i, key, arbiter).await?;
         tot.verify_seconds += t1.elapsed().as_secs_f64();
-        let _ = t0;
         let v_tag = second.as_ref().map(|(v, _)| WorkerTag {
             session: v.clone(),
             name: shared.worker_name(v),
@@ -306,6 +304,14 @@ pub(super) async fn check_round(
             }
         }
         if !liars.is_empty() {
+            if second.is_none() {
+                // Found by the coordinator's own check.
+                tot.mismatches += 1;
+                shared
+                    .counters
+                    .mismatches
+                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
             break;
         }
     }

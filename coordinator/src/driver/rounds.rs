@@ -61,6 +61,7 @@ pub(super) async fn drive(
     // Records at the workers: the workers one of whose shards has been
     // checked in this run of the job (see `held.rs`).
     let mut checked = std::collections::HashSet::new();
+    let mut unchecked_said = false;
     let mut restarts = 0;
     // With records at the workers: each round's shards and what they
     // spawned, to recompute a lost worker's records.
@@ -245,7 +246,17 @@ pub(super) async fn drive(
                 }
                 start += len;
             }
-            if keep && shared.cfg.verify_fraction > 0.0 {
+            // A check reruns a shard's lineage from the eye rays: not that
+            // of a round resumed from a checkpoint (its earlier rounds
+            // ran before the restart; said once in the job's log).
+            let known = lineage.rounds.len() + 1 == round as usize;
+            if keep && shared.cfg.verify_fraction > 0.0 && !known && !unchecked_said {
+                unchecked_said = true;
+                entry.log(format!(
+                    "round {round}: this job was resumed from a checkpoint, and with records at the workers the shards of its rounds from there on are not verified (their checks would rerun the rounds before the checkpoint)"
+                ));
+            }
+            if keep && shared.cfg.verify_fraction > 0.0 && known {
                 // Shards checked before their colour goes to the frame.
                 let by: Vec<_> = outs.iter().map(|(_, w)| w.clone()).collect();
                 let picks = held::pick(shared.cfg.verify_fraction, &by, &mut checked);
