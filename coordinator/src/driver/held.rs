@@ -42,10 +42,10 @@
 //!
 //! The cost: a checked shard of round `r` makes about `2r` tasks on
 //! another worker, run after the round's shading and before the next
-//! round; with the default fraction (0.02) and depth 5 that is a few per
-//! cent of the tasks. A worker that lies on few of its shards is caught
-//! with the probability that one of them is checked; the default mode
-//! checks a sample of every shard.
+//! round, one check after another (docs/cluster.md has a measure). A
+//! worker that lies on few of its shards is caught with the probability
+//! that one of them is checked; the default mode checks a sample of
+//! every shard.
 
 use super::recover::{Lineage, LineageMismatch, ancestry, recompute, run_at};
 use super::stages::{RecordsLost, Stage, stage_name};
@@ -341,7 +341,8 @@ pub(super) async fn check_round(
 }
 
 /// Shard `i` of `stage`'s round run on worker `v`, with the rounds that
-/// led to it recomputed there first: its print.
+/// led to it recomputed there first: its print. The records `v` made
+/// for it (under a job id of their own) are let go once it is done.
 async fn on_worker(
     stage: &Stage<'_>,
     lineage: &Lineage,
@@ -358,8 +359,24 @@ async fn on_worker(
         sray_proto::ids::random_u64()
     );
     shared.add_alias(&alias, &stage.entry.id);
+    let r = run_on_worker(stage, lineage, i, v, &alias, key, tot, arbiter).await;
+    shared.drop_alias(&alias);
+    r
+}
+
+#[allow(clippy::too_many_arguments)]
+async fn run_on_worker(
+    stage: &Stage<'_>,
+    lineage: &Lineage,
+    i: usize,
+    v: &str,
+    alias: &str,
+    key: u64,
+    tot: &mut Totals,
+    arbiter: &mut Arbiter,
+) -> anyhow::Result<Print> {
     let shard = [stage.shards[i]];
-    let rec = recompute(stage, lineage, &shard, v, &alias, true, tot, arbiter).await?;
+    let rec = recompute(stage, lineage, &shard, v, alias, true, tot, arbiter).await?;
     let int_id = rec.intersections[0];
     let (_, shaded) = run_at(
         stage,
@@ -372,7 +389,7 @@ async fn on_worker(
             pinned: true,
             ..Held::default()
         },
-        (v, &alias),
+        (v, alias),
         tot,
         arbiter,
     )
