@@ -536,3 +536,68 @@ async fn pair_here(
     int.summary.kept_digest = digest;
     Ok((int, out))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::colour_print;
+    use sray_engine::bf::Contribution;
+    use sray_engine::spill::{MemoryShare, Records};
+
+    fn recs(v: Vec<Contribution>) -> Records<Contribution> {
+        Records::memory(v, MemoryShare::new(0).lease())
+    }
+
+    fn c(corner: u32, run: u32, rgb: [i64; 3]) -> Contribution {
+        Contribution { corner, run, rgb }
+    }
+
+    #[test]
+    fn the_colour_print_is_that_of_the_sums_per_slot() {
+        // One at a time, in some order (as a checked output comes) ...
+        let apart = recs(vec![
+            c(7, 0, [-3, 0, 1 << 40]),
+            c(5, 0, [1, 2, 3]),
+            c(6, 0, [7, 7, 7]),
+            c(5, 0, [4, 5, 6]),
+            c(8, 0, [7, 7, 7]),
+            c(7, 0, [10, 7, 6]),
+        ]);
+        // ... summed per slot and in runs (as a worker that keeps its
+        // records sends them): the same print.
+        let merged = recs(vec![
+            c(5, 0, [5, 7, 9]),
+            c(6, 0, [7, 7, 7]),
+            c(7, 0, [7, 7, 6 + (1 << 40)]),
+            c(8, 0, [7, 7, 7]),
+        ]);
+        let key = 0x5eed;
+        assert_eq!(
+            colour_print(Some(&apart), key).unwrap(),
+            colour_print(Some(&merged), key).unwrap()
+        );
+        // A run is its slots one by one.
+        let run = recs(vec![c(5, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])]);
+        let slots = recs(vec![
+            c(5, 0, [5, 7, 9]),
+            c(6, 0, [7, 7, 7]),
+            c(7, 0, [7, 7, 7]),
+            c(8, 0, [7, 7, 7]),
+        ]);
+        assert_eq!(
+            colour_print(Some(&run), key).unwrap(),
+            colour_print(Some(&slots), key).unwrap()
+        );
+        // Another colour, or the same colour in another slot, differs.
+        for other in [
+            vec![c(5, 0, [5, 7, 9]), c(6, 2, [7, 7, 8])],
+            vec![c(5, 0, [9, 7, 5]), c(6, 2, [7, 7, 7])],
+            vec![c(5, 0, [5, 7, 9]), c(6, 3, [7, 7, 7])],
+            vec![c(4, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])],
+        ] {
+            let p = colour_print(Some(&recs(other)), key).unwrap();
+            assert_ne!(p, colour_print(Some(&run), key).unwrap());
+        }
+        // Nothing is no colour.
+        assert_eq!(colour_print(None, key).unwrap(), [0; 3]);
+    }
+}
