@@ -162,7 +162,7 @@ pub struct WorkerArgs {
     /// network or a tunnel
     #[arg(long)]
     pub raw_records: bool,
-    /// A fault to play (`lie`, `stall-from-round=N`), for the tests of
+    /// A fault to play (`lie`, `wrong-digest`, `stall-from-round=N`), for the tests of
     /// the coordinator's defences only
     #[arg(long, hide = true)]
     pub fault: Option<sray_worker::node::Fault>,

@@ -300,6 +300,38 @@ fn records_at_workers_a_lying_worker_is_caught_and_the_image_is_right() {
     assert!(took < Duration::from_secs(120), "{took:?}");
 }
 
+/// The same for a worker whose kept records are not what it says
+/// (`--fault wrong-digest`: the digest of the records it keeps is wrong,
+/// its colour right): the digests differ, and the coordinator's own
+/// trace, whose digests are those of honest workers, finds it out.
+#[test]
+fn records_at_workers_a_wrong_digest_is_caught() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:1", "48");
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--records-at-workers"]);
+    let _liar = worker(d, &url, "liar", "token", &["--fault", "wrong-digest"]);
+    registered(&coord, "liar");
+    let _honest = worker(d, &url, "honest", "token", &[]);
+    registered(&coord, "honest");
+    ok(d, &render_args("spd:balls:1", &url, "token", "c.png", "48"));
+    let s = stats(d);
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "{s}");
+    // Each worker's first shard is checked: the liar's, or the honest
+    // one's by the liar; either way the liar is found.
+    assert!(
+        s["verification"]["mismatches"].as_u64().unwrap() >= 1,
+        "{s}"
+    );
+    assert_eq!(
+        s["verification"]["quarantined"],
+        serde_json::json!(["liar"]),
+        "{s}"
+    );
+    assert_eq!(s["job_restarts"], 1, "{s}");
+}
+
 /// Sends a shading output of `recs` contributions; the coordinator's
 /// answer (an error's message, or whether it accepted the output).
 async fn contribute(

@@ -52,6 +52,9 @@ pub enum Fault {
     /// channels rotated and its red halved. Its records (results and
     /// spawned rays) are right.
     Lie,
+    /// Reports a wrong digest of the records it keeps (as a worker
+    /// whose kept records went bad would); what it sends is right.
+    WrongDigest,
     /// Takes the tasks of round `N` on (of a job, not of a
     /// recomputation or a verification, whose ids have a dot) and never
     /// answers them, beating all the while.
@@ -63,19 +66,37 @@ impl std::str::FromStr for Fault {
     fn from_str(s: &str) -> Result<Fault, String> {
         match s.split_once('=') {
             None if s == "lie" => Ok(Fault::Lie),
+            None if s == "wrong-digest" => Ok(Fault::WrongDigest),
             Some(("stall-from-round", n)) => n
                 .parse()
                 .map(Fault::StallFromRound)
                 .map_err(|e| format!("{s}: {e}")),
-            _ => Err(format!("{s}: a fault is `lie` or `stall-from-round=N`")),
+            _ => Err(format!(
+                "{s}: a fault is `lie`, `wrong-digest` or `stall-from-round=N`"
+            )),
         }
     }
 }
 
-/// A shading output's contributions, made wrong ([`Fault::Lie`]).
-fn lie(m: v1::TaskOutput) -> v1::TaskOutput {
+/// An output made wrong as `fault` says: a shading's contributions
+/// ([`Fault::Lie`]), or the digest of what it keeps
+/// ([`Fault::WrongDigest`]).
+fn lie(fault: Option<Fault>, m: v1::TaskOutput) -> v1::TaskOutput {
     use sray_engine::bf::Contribution;
     use sray_proto::wire::{decode_chunk, encode, records_per_chunk};
+    if fault == Some(Fault::WrongDigest)
+        && let Some(Part::Summary(mut s)) = m.part
+    {
+        if let Some(b) = s.kept_digest.first_mut() {
+            *b ^= 1;
+        }
+        return v1::TaskOutput {
+            part: Some(Part::Summary(s)),
+        };
+    }
+    if fault != Some(Fault::Lie) {
+        return m;
+    }
     let Some(Part::Records(mut c)) = m.part else {
         return m;
     };
@@ -441,10 +462,10 @@ impl Node {
         .await
         .ok();
         let mut client = self.client.clone();
-        let liar = self.cfg.fault == Some(Fault::Lie);
+        let fault = self.cfg.fault;
         let call = tokio::spawn(async move {
             use tokio_stream::StreamExt;
-            let stream = ReceiverStream::new(rx).map(move |m| if liar { lie(m) } else { m });
+            let stream = ReceiverStream::new(rx).map(move |m| lie(fault, m));
             client.complete_task(stream).await
         });
         let (done, outcome) = oneshot::channel();
