@@ -42,7 +42,8 @@
 //!
 //! The cost: a checked shard of round `r` makes about `2r` tasks on
 //! another worker, run after the round's shading and before the next
-//! round, one check after another (docs/cluster.md has a measure). A
+//! round (a round's checks at once, each on a worker of its own while
+//! there are enough; docs/cluster.md has a measure). A
 //! worker that lies on few of its shards is caught with the probability
 //! that one of them is checked; the default mode checks a sample of
 //! every shard.
@@ -210,28 +211,99 @@ pub(super) async fn check_round(
     let shared = stage.shared;
     let round = stage.round;
     let mut liars: Vec<(WorkerTag, String)> = Vec::new();
-    for &i in picks {
+    let avoid_for = |i: usize| {
+        let mut avoid: Vec<String> = vec![outs[i].1.session.clone(), by[i].clone()];
+        avoid.extend(lineage.gone.iter().cloned());
+        avoid
+    };
+    // The second opinions, all at once, each on a worker of its own
+    // while there are enough (each check's tasks run one stage after
+    // another; checks on different workers overlap).
+    struct Check {
+        i: usize,
+        key: u64,
+        v: Option<String>,
+        scratch: Totals,
+        arbiter: Arbiter,
+    }
+    let mut taken: Vec<String> = Vec::new();
+    let mut checks: Vec<Check> = picks
+        .iter()
+        .map(|&i| {
+            let avoid = avoid_for(i);
+            let spread: Vec<String> = avoid.iter().chain(&taken).cloned().collect();
+            let v = shared
+                .recompute_worker(&spread)
+                .or_else(|| shared.recompute_worker(&avoid));
+            taken.extend(v.clone());
+            Check {
+                i,
+                key: sray_proto::ids::random_u64(),
+                v,
+                scratch: Totals::default(),
+                arbiter: Arbiter::new(shared, stage.job),
+            }
+        })
+        .collect();
+    let firsts = join_all(
+        checks
+            .iter_mut()
+            .map(|c| async move {
+                match &c.v {
+                    Some(v) => Some(
+                        on_worker(
+                            stage,
+                            lineage,
+                            c.i,
+                            v,
+                            c.key,
+                            &mut c.scratch,
+                            &mut c.arbiter,
+                        )
+                        .await,
+                    ),
+                    None => None,
+                }
+            })
+            .collect(),
+    )
+    .await;
+    for (c, first) in checks.into_iter().zip(firsts) {
+        let i = c.i;
+        let key = c.key;
         let shard = stage.shards[i];
         let (out, w) = &outs[i];
-        let key = sray_proto::ids::random_u64();
         let main = Print {
             intersect: iprints[i].clone(),
             shade: print_of(v1::Stage::Shade, out, key)?,
         };
         // A second opinion: another worker, which recomputes the shard's
-        // lineage and runs it.
-        let mut avoid: Vec<String> = vec![w.session.clone(), by[i].clone()];
-        avoid.extend(lineage.gone.iter().cloned());
+        // lineage and runs it (again, on yet another one, if the first
+        // was lost).
+        let mut avoid = avoid_for(i);
         let mut second = None;
-        let mut scratch = Totals::default();
-        while let Some(v) = shared.recompute_worker(&avoid) {
-            match on_worker(stage, lineage, i, &v, key, &mut scratch, arbiter).await {
+        let mut scratch = c.scratch;
+        let mut first = c.v.zip(first);
+        loop {
+            let (v, r) = match first.take() {
+                Some(f) => f,
+                None => match shared.recompute_worker(&avoid) {
+                    Some(v) => {
+                        let r = on_worker(stage, lineage, i, &v, key, &mut scratch, arbiter).await;
+                        (v, r)
+                    }
+                    None => break,
+                },
+            };
+            match r {
                 Ok(p) => {
                     second = Some((v, Ok(p)));
                     break;
                 }
                 // That worker was lost (or stuck): another one.
-                Err(e) if e.is::<RecordsLost>() => avoid.push(v),
+                Err(e) if e.is::<RecordsLost>() => {
+                    avoid.push(v);
+                }
                 Err(e) if e.is::<LineageMismatch>() => {
                     second = Some((v, Err(format!("{e:#}"))));
                     break;
@@ -338,6 +410,32 @@ pub(super) async fn check_round(
         stage_name(stage.stage),
         names.join(", ")
     ))))
+}
+
+/// Runs `futs` at once, to the end of each: their outputs, in order.
+async fn join_all<F: std::future::Future>(futs: Vec<F>) -> Vec<F::Output> {
+    let mut futs: Vec<std::pin::Pin<Box<F>>> = futs.into_iter().map(Box::pin).collect();
+    let mut outs: Vec<Option<F::Output>> = futs.iter().map(|_| None).collect();
+    std::future::poll_fn(|cx| {
+        let mut pending = false;
+        for (f, o) in futs.iter_mut().zip(outs.iter_mut()) {
+            if o.is_none() {
+                match f.as_mut().poll(cx) {
+                    std::task::Poll::Ready(v) => *o = Some(v),
+                    std::task::Poll::Pending => pending = true,
+                }
+            }
+        }
+        if pending {
+            std::task::Poll::Pending
+        } else {
+            std::task::Poll::Ready(())
+        }
+    })
+    .await;
+    outs.into_iter()
+        .map(|o| o.expect("every future ended"))
+        .collect()
 }
 
 /// Shard `i` of `stage`'s round run on worker `v`, with the rounds that
