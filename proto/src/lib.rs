@@ -34,4 +34,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// 9: scenes from files travel as object database version 6 (objects in
 /// spatial order, with their input ids), which a worker of protocol 8
 /// cannot read.
-pub const PROTOCOL_VERSION: u32 = 9;
+/// 10: the digest of kept records (`TaskSummary.kept_digest`), which
+/// verification with records at the workers compares.
+pub const PROTOCOL_VERSION: u32 = 10;

@@ -83,12 +83,14 @@ pub struct CoordinatorArgs {
     #[arg(long, default_value = "256MiB", value_parser = |s: &str| sray_engine::units::parse_bytes(s))]
     pub records_memory: u64,
     /// Leave the tasks' results and spawned rays at the workers that made
-    /// them: only counts and colour come here, so the wire carries a few
-    /// bytes per ray. Tasks then run only where their input is, there are
-    /// no checkpoints and no verification, and a job that loses a worker
-    /// recomputes the records it held (its shards' earlier rounds, on
-    /// another worker). For a cluster whose workers are
-    /// trusted and rarely lost
+    /// them: only counts, digests and colour come here, so the wire
+    /// carries a few bytes per ray. Tasks then run only where their input
+    /// is, there are no checkpoints, verification checks whole shards
+    /// (--verify-fraction of them, and each worker's first) by running
+    /// them and the rounds before them again on another worker, and a job
+    /// that loses a worker recomputes the records it held (its shards'
+    /// earlier rounds, on another worker); one that finds a liar starts
+    /// again without it. For a cluster whose workers are rarely lost
     #[arg(long)]
     pub records_at_workers: bool,
     /// Workers with less --memory are refused at registration
@@ -160,6 +162,10 @@ pub struct WorkerArgs {
     /// network or a tunnel
     #[arg(long)]
     pub raw_records: bool,
+    /// A fault to play (`lie`, `wrong-digest`, `stall-from-round=N`), for the tests of
+    /// the coordinator's defences only
+    #[arg(long, hide = true)]
+    pub fault: Option<sray_worker::node::Fault>,
 }
 
 fn init_logs() {
@@ -245,11 +251,7 @@ pub fn coordinator(a: CoordinatorArgs) -> anyhow::Result<()> {
         },
         data_dir: a.data_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
-        verify_fraction: if a.records_at_workers {
-            0.0
-        } else {
-            a.verify_fraction
-        },
+        verify_fraction: a.verify_fraction,
         checkpoints: !a.records_at_workers,
         records_at_workers: a.records_at_workers,
         deadline_factor: a.deadline_factor,
@@ -351,6 +353,7 @@ pub fn worker(a: WorkerArgs) -> anyhow::Result<()> {
         scene_dirs: a.scene_dir.clone(),
         tmp_dir: a.tmp_dir.clone(),
         raw_records: a.raw_records,
+        fault: a.fault,
     };
     runtime()?.block_on(sray_worker::run(cfg, stop_signal()))
 }

@@ -400,6 +400,79 @@ fn a_worker_that_never_answers_costs_one_backup() {
     drop(rt);
 }
 
+/// With records at the workers (`--records-at-workers`), a real worker
+/// that holds records of round 1 and then takes a task of round 2 and
+/// never answers it (`--fault stall-from-round=2`), beating all the
+/// while, costs a backup's deadline: it is taken to be stuck, the records
+/// it held are recomputed on the other worker (not the whole job), and
+/// the image and every count are the embedded render's.
+#[test]
+fn records_at_workers_a_worker_that_hangs_holding_records_costs_a_backup() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "64");
+    ok(
+        d,
+        &[
+            "render",
+            "spd:balls:2",
+            "-o",
+            "emb2.png",
+            "--mode",
+            "bf",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--stats",
+            "emb.json",
+        ],
+    );
+    let emb = json(&std::fs::read_to_string(d.join("emb.json")).unwrap());
+    let (coord, url) = coordinator(
+        d,
+        &[
+            "--token-file",
+            "token",
+            "--records-at-workers",
+            "--deadline-min",
+            "2",
+            "--deadline-factor",
+            "2",
+        ],
+    );
+    let _w0 = worker(d, &url, "w0", &[]);
+    registered(&coord, "w0");
+    let _stuck = worker(d, &url, "stuck", &["--fault", "stall-from-round=2"]);
+    registered(&coord, "stuck");
+    let t0 = Instant::now();
+    ok(d, &render_args("spd:balls:2", &url, "c.png", "64"));
+    let took = t0.elapsed();
+    let s = json(&std::fs::read_to_string(d.join("cluster.json")).unwrap());
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "{s}");
+    for k in [
+        "eye_rays",
+        "eye_hit_rays",
+        "reflect_rays",
+        "refract_rays",
+        "shadow_rays",
+        "intersection_tests",
+        "intersection_tests_by_kind",
+    ] {
+        assert_eq!(s[k], emb[k], "{k}: {s}");
+    }
+    assert_eq!(s["job_restarts"], 0, "{s}");
+    // It held records, and they were recomputed.
+    assert!(s["recomputations"].as_u64().unwrap() >= 1, "{s}");
+    let log = s["log"].to_string();
+    assert!(log.contains("ran past a backup's deadline"), "{log}");
+    assert!(log.contains("recomputed on worker w0"), "{log}");
+    // A hang guard only: the stall costs a few seconds (the deadline of
+    // a backup is 2 s here).
+    assert!(took < Duration::from_secs(120), "{took:?}");
+}
+
 /// A worker given SIGTERM hands its task back and leaves at once: the
 /// coordinator hears it (long before the worker's heartbeats would be
 /// missed) and the job ends well on the other worker. A worker killed

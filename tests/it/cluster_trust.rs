@@ -234,6 +234,104 @@ fn a_lying_worker_is_caught_and_the_image_is_right() {
     drop(rt);
 }
 
+/// Item 2 with records at the workers (`--records-at-workers`): a real
+/// worker that sends plausible wrong colours (`--fault lie`: every
+/// contribution's channels rotated; its results and spawned rays are
+/// right, and stay with it) spoils the image when nothing checks it; with
+/// verification, which runs whole shards (a quarter of them here) and
+/// the rounds before them again on another worker and, on a mismatch,
+/// traces them at the coordinator, the liar is quarantined and the job
+/// starts again without it; the image is the embedded one.
+#[test]
+fn records_at_workers_a_lying_worker_is_caught_and_the_image_is_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:2", "64");
+    let cluster = |verify: &str| {
+        let (coord, url) = coordinator(
+            d,
+            &[
+                "--token-file",
+                "token",
+                "--records-at-workers",
+                "--verify-fraction",
+                verify,
+            ],
+        );
+        let liar = worker(d, &url, "liar", "token", &["--fault", "lie"]);
+        registered(&coord, "liar");
+        let honest = worker(d, &url, "honest", "token", &[]);
+        registered(&coord, "honest");
+        (coord, url, [liar, honest])
+    };
+    // Unchecked, the lies reach the image.
+    {
+        let (_coord, url, _workers) = cluster("0");
+        ok(d, &render_args("spd:balls:2", &url, "token", "u.png", "64"));
+        assert!(
+            std::fs::read(d.join("u.png")).unwrap() != want,
+            "the liar's lies did not show"
+        );
+    }
+    let (_coord, url, _workers) = cluster("0.25");
+    let t0 = Instant::now();
+    ok(d, &render_args("spd:balls:2", &url, "token", "c.png", "64"));
+    let took = t0.elapsed();
+    let s = stats(d);
+    assert!(
+        std::fs::read(d.join("c.png")).unwrap() == want,
+        "wrong image: {s}"
+    );
+    assert!(
+        s["verification"]["mismatches"].as_u64().unwrap() >= 1,
+        "{s}"
+    );
+    assert_eq!(
+        s["verification"]["quarantined"],
+        serde_json::json!(["liar"]),
+        "{s}"
+    );
+    // The liar's colour was in the frame: the job started again without
+    // it, once.
+    assert_eq!(s["job_restarts"], 1, "{s}");
+    let log = s["log"].to_string();
+    assert!(log.contains("worker liar quarantined"), "{log}");
+    assert!(took < Duration::from_secs(120), "{took:?}");
+}
+
+/// The same for a worker whose kept records are not what it says
+/// (`--fault wrong-digest`: the digest of the records it keeps is wrong,
+/// its colour right): the digests differ, and the coordinator's own
+/// trace, whose digests are those of honest workers, finds it out.
+#[test]
+fn records_at_workers_a_wrong_digest_is_caught() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("token"), "s3cret\n").unwrap();
+    let want = embedded(d, "spd:balls:1", "48");
+    let (coord, url) = coordinator(d, &["--token-file", "token", "--records-at-workers"]);
+    let _liar = worker(d, &url, "liar", "token", &["--fault", "wrong-digest"]);
+    registered(&coord, "liar");
+    let _honest = worker(d, &url, "honest", "token", &[]);
+    registered(&coord, "honest");
+    ok(d, &render_args("spd:balls:1", &url, "token", "c.png", "48"));
+    let s = stats(d);
+    assert!(std::fs::read(d.join("c.png")).unwrap() == want, "{s}");
+    // Each worker's first shard is checked: the liar's, or the honest
+    // one's by the liar; either way the liar is found.
+    assert!(
+        s["verification"]["mismatches"].as_u64().unwrap() >= 1,
+        "{s}"
+    );
+    assert_eq!(
+        s["verification"]["quarantined"],
+        serde_json::json!(["liar"]),
+        "{s}"
+    );
+    assert_eq!(s["job_restarts"], 1, "{s}");
+}
+
 /// Sends a shading output of `recs` contributions; the coordinator's
 /// answer (an error's message, or whether it accepted the output).
 async fn contribute(

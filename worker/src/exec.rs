@@ -366,10 +366,12 @@ fn run_task<R: Real>(
                     .map_err(io)
             })?;
             let send = !task.keep_output;
-            let (kept_results, hits) = send_results(tracer, ctx, results, out, send)?;
+            let mut digest = blake3::Hasher::new();
+            let (kept_results, hits) = send_results(tracer, ctx, results, out, send, &mut digest)?;
             if !send {
                 summary.kept_records = n;
                 summary.kept_hits = hits;
+                summary.kept_digest = digest.finalize().as_bytes().to_vec();
             }
             if let Some(r) = kept_results {
                 kept = Some(Kept {
@@ -396,8 +398,10 @@ fn run_task<R: Real>(
             let mut buf: Vec<Contribution> = Vec::with_capacity(per);
             let mut send_err = None;
             let mut counts = RayCounts::default();
-            // With records kept here, verification is off and nothing
-            // compares contributions one by one: a contribution to the
+            // With records kept here, verification compares what the
+            // contributions add to each frame slot, not the contributions
+            // one by one (see the coordinator's `driver/held.rs`): a
+            // contribution to the
             // same frame slot as the one before (a hit's shadow rays, one
             // per light) is added to it instead of sent on its own, and
             // one of the same colour to the next slot (a row of eye rays
@@ -454,6 +458,9 @@ fn run_task<R: Real>(
             let per = records_per_chunk::<RayRec>();
             let send = !task.keep_output;
             let mut keys = KeyRange::default();
+            // What is kept instead of sent is hashed, for verification
+            // to compare (see `TaskSummary.kept_digest`).
+            let mut digest = blake3::Hasher::new();
             let kept_rays = match next.into_vec() {
                 // Sorted in memory: sent from where they lie, and kept
                 // there if the share allows (else the buffer goes back to
@@ -461,6 +468,9 @@ fn run_task<R: Real>(
                 Ok(v) => {
                     for chunk in v.chunks(per).filter(|_| send) {
                         out.records(RecordKind::Rays, chunk)?;
+                    }
+                    if !send {
+                        digest.update(bytemuck::cast_slice(&v));
                     }
                     // Sorted: the first and last keys are the range.
                     keys = KeyRange {
@@ -485,6 +495,9 @@ fn run_task<R: Real>(
                         let r = sorted.next()?;
                         if let Some(r) = &r {
                             keys.add(r.key);
+                            if !send {
+                                digest.update(bytemuck::bytes_of(r));
+                            }
                         }
                         Ok(r)
                     },
@@ -495,6 +508,7 @@ fn run_task<R: Real>(
                 summary.kept_records = keys.count;
                 summary.kept_first_key = keys.first;
                 summary.kept_last_key = keys.last;
+                summary.kept_digest = digest.finalize().as_bytes().to_vec();
             }
             if let Some(r) = kept_rays {
                 kept = Some(Kept {
@@ -555,13 +569,15 @@ fn with_rays<T>(
 
 /// Sends an intersection's results as they travel (ray, object, distance)
 /// and returns what the executor keeps of them: in memory with their
-/// surfaces while the share allows, else bare in a file.
+/// surfaces while the share allows, else bare in a file. Results not sent
+/// are hashed into `digest` as they would have travelled.
 fn send_results<R: Real>(
     tracer: &mut Tracer<R>,
     ctx: &mut TaskCtx<'_>,
     mut results: ResultReader,
     out: &Output<'_>,
     send: bool,
+    digest: &mut blake3::Hasher,
 ) -> Result<(Option<ResultSlice>, u64), String> {
     let per = records_per_chunk::<ResultRec>();
     let mut buf = Vec::with_capacity(per);
@@ -571,10 +587,14 @@ fn send_results<R: Real>(
             buf.extend(chunk.iter().map(|o| o.res));
             out.records(RecordKind::Results, &buf)?;
         }
-        // Counted for the coordinator only when it does not see them.
+        // Counted (and hashed) for the coordinator only when it does not
+        // see them.
         let hits = if send {
             0
         } else {
+            for o in &v {
+                digest.update(bytemuck::bytes_of(&o.res));
+            }
             v.iter().filter(|o| !o.res.prim.is_none()).count() as u64
         };
         if !ctx.keep {
@@ -594,6 +614,9 @@ fn send_results<R: Real>(
         || {
             let r = results.next_result()?;
             hits += r.is_some_and(|r| !r.prim.is_none()) as u64;
+            if let (Some(r), false) = (&r, send) {
+                digest.update(bytemuck::bytes_of(r));
+            }
             Ok(r)
         },
     )?;

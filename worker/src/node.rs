@@ -40,6 +40,79 @@ pub struct WorkerConfig {
     /// Send records as they lie in memory, not encoded (a coordinator on
     /// this machine).
     pub raw_records: bool,
+    /// A fault to play, for the tests of the coordinator's defences
+    /// (`sray worker --fault`, hidden): never set in use.
+    pub fault: Option<Fault>,
+}
+
+/// A fault a worker plays for the tests (see [`WorkerConfig::fault`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// Sends plausible wrong colours: every shading contribution's
+    /// channels rotated and its red halved. Its records (results and
+    /// spawned rays) are right.
+    Lie,
+    /// Reports a wrong digest of the records it keeps (as a worker
+    /// whose kept records went bad would); what it sends is right.
+    WrongDigest,
+    /// Takes the tasks of round `N` on (of a job, not of a
+    /// recomputation or a verification, whose ids have a dot) and never
+    /// answers them, beating all the while.
+    StallFromRound(u32),
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Fault, String> {
+        match s.split_once('=') {
+            None if s == "lie" => Ok(Fault::Lie),
+            None if s == "wrong-digest" => Ok(Fault::WrongDigest),
+            Some(("stall-from-round", n)) => n
+                .parse()
+                .map(Fault::StallFromRound)
+                .map_err(|e| format!("{s}: {e}")),
+            _ => Err(format!(
+                "{s}: a fault is `lie`, `wrong-digest` or `stall-from-round=N`"
+            )),
+        }
+    }
+}
+
+/// An output made wrong as `fault` says: a shading's contributions
+/// ([`Fault::Lie`]), or the digest of what it keeps
+/// ([`Fault::WrongDigest`]).
+fn lie(fault: Option<Fault>, m: v1::TaskOutput) -> v1::TaskOutput {
+    use sray_engine::bf::Contribution;
+    use sray_proto::wire::{decode_chunk, encode, records_per_chunk};
+    if fault == Some(Fault::WrongDigest)
+        && let Some(Part::Summary(mut s)) = m.part
+    {
+        if let Some(b) = s.kept_digest.first_mut() {
+            *b ^= 1;
+        }
+        return v1::TaskOutput {
+            part: Some(Part::Summary(s)),
+        };
+    }
+    if fault != Some(Fault::Lie) {
+        return m;
+    }
+    let Some(Part::Records(mut c)) = m.part else {
+        return m;
+    };
+    if c.kind == v1::RecordKind::Contributions as i32
+        && let Ok(mut v) =
+            decode_chunk::<Contribution>(&c.data, c.raw, records_per_chunk::<Contribution>())
+    {
+        for x in &mut v {
+            x.rgb = [x.rgb[1] / 2, x.rgb[2], x.rgb[0]];
+        }
+        c.data = encode(&v);
+        c.raw = false;
+    }
+    v1::TaskOutput {
+        part: Some(Part::Records(c)),
+    }
 }
 
 /// Runs a worker until `shutdown` completes, or a fatal error (a refused
@@ -283,6 +356,17 @@ impl Node {
     }
 
     async fn try_task(&mut self, tref: &v1::TaskRef, task: v1::Task) -> anyhow::Result<()> {
+        if let Some(Fault::StallFromRound(n)) = self.cfg.fault
+            && task.round >= n
+            && !task.job_id.contains('.')
+        {
+            tracing::warn!(
+                task = tref.task_id,
+                round = task.round,
+                "fault: this task is never answered"
+            );
+            std::future::pending::<()>().await;
+        }
         let hash = task
             .scene
             .as_ref()
@@ -378,7 +462,12 @@ impl Node {
         .await
         .ok();
         let mut client = self.client.clone();
-        let call = tokio::spawn(async move { client.complete_task(ReceiverStream::new(rx)).await });
+        let fault = self.cfg.fault;
+        let call = tokio::spawn(async move {
+            use tokio_stream::StreamExt;
+            let stream = ReceiverStream::new(rx).map(move |m| lie(fault, m));
+            client.complete_task(stream).await
+        });
         let (done, outcome) = oneshot::channel();
         let work = Work {
             task,

@@ -30,7 +30,13 @@
 //! **Records at the workers.** Where results and spawned rays stay at
 //! the workers that made them, a worker lost with some costs only the
 //! shards whose records it held: they are recomputed from the rounds that
-//! led to them, on another worker (`recover.rs`).
+//! led to them, on another worker (`recover.rs`). Verification there
+//! checks whole shards, picked at random after each round (and each
+//! worker's first): the shard and the rounds that led to it run again on
+//! another worker, and the counts, the digests of the records each kept
+//! and the colour each adds to the frame must agree; on a mismatch the
+//! coordinator traces them itself, and a worker found lying is
+//! quarantined and the job starts again without it (`held.rs`).
 //!
 //! **Checkpoints.** At the end of every round the next round's rays, the
 //! frame and the totals are journaled (see [`crate::jobs`]); a restarted
@@ -38,11 +44,12 @@
 //!
 //! The rooms: `submit.rs` (jobs in, resumed, run to their end), `job.rs`
 //! (a request checked), `rounds.rs` (the round loop), `recover.rs`
-//! (lost records recomputed), `shards.rs` (a
+//! (lost records recomputed), `held.rs` (their verification), `shards.rs` (a
 //! round cut into shards), `stages.rs` (a stage's tasks and their
 //! verification), `verify.rs` (comparing samples, the coordinator's own
 //! tracer) and `stats.rs` (totals and statistics).
 
+mod held;
 mod job;
 mod recover;
 mod rounds;

@@ -36,7 +36,24 @@ const MAX_RECOMPUTATIONS: u32 = 4;
 pub(super) struct RoundLog {
     pub(super) shards: Vec<(u64, u64)>,
     pub(super) spawned: Vec<Option<(u64, u64)>>,
+    /// The worker whose shading of each shard was taken.
+    pub(super) by: Vec<WorkerTag>,
 }
+
+/// A recomputed shard spawned another count of rays than the first
+/// time: the worker that recomputed it, or the one whose output was
+/// taken the first time, is wrong (verification decides which, see
+/// `held.rs`).
+#[derive(Debug)]
+pub(super) struct LineageMismatch(pub(super) String);
+
+impl std::fmt::Display for LineageMismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for LineageMismatch {}
 
 /// A job's lineage: its rounds so far, and the workers whose records it
 /// no longer counts on.
@@ -52,10 +69,12 @@ pub(super) struct Lineage {
 
 /// The records a recomputation left on its worker: the current round's
 /// rays (as segments), and for a shading stage, the lost shards'
-/// intersections (task ids, in the order of the shards asked for).
-struct Recomputed {
-    segments: Vec<Segment>,
-    intersections: Vec<u64>,
+/// intersections (task ids, in the order of the shards asked for, and
+/// their outputs).
+pub(super) struct Recomputed {
+    pub(super) segments: Vec<Segment>,
+    pub(super) intersections: Vec<u64>,
+    pub(super) intersect_outs: Vec<TaskOutput>,
 }
 
 /// Runs a stage to its end: its outputs, every one there (see
@@ -254,7 +273,7 @@ fn input_like(i: &TaskInput) -> TaskInput {
 /// shards of the rounds before `stage`'s that led to its rays `ranges`
 /// (and, for a shading stage, those rays' intersections).
 #[allow(clippy::too_many_arguments)]
-async fn recompute(
+pub(super) async fn recompute(
     stage: &Stage<'_>,
     lineage: &Lineage,
     ranges: &[(u64, u64)],
@@ -264,26 +283,7 @@ async fn recompute(
     tot: &mut Totals,
     arbiter: &mut Arbiter,
 ) -> anyhow::Result<Recomputed> {
-    let r = stage.round as usize;
-    anyhow::ensure!(
-        lineage.rounds.len() + 1 >= r,
-        "internal: the lineage of round {r} is not known"
-    );
-    // The shards of each earlier round that spawned rays wanted in the
-    // round after it, from the last back.
-    let mut need: Vec<Vec<usize>> = vec![Vec::new(); r - 1];
-    let mut want = ranges.to_vec();
-    for j in (0..r - 1).rev() {
-        let log = &lineage.rounds[j];
-        let ks: Vec<usize> = (0..log.shards.len())
-            .filter(|&k| {
-                log.spawned[k]
-                    .is_some_and(|(s, l)| want.iter().any(|&(a, n)| s < a + n && a < s + l))
-            })
-            .collect();
-        want = ks.iter().map(|&k| log.shards[k]).collect();
-        need[j] = ks;
-    }
+    let need = ancestry(lineage, stage.round, ranges)?;
     let pinned = |rays: &Arc<Vec<Segment>>, round: u32, first: u64| Held {
         rays: rays.clone(),
         intersect: None,
@@ -333,12 +333,13 @@ async fn recompute(
         for (k, o) in outs.iter().enumerate() {
             let len = o.rays.as_ref().map_or(o.kept_rays, |r| r.len());
             let first = log.spawned[ks[k]];
-            anyhow::ensure!(
-                len == first.map_or(0, |f| f.1),
-                "round {round} shard {} recomputed spawned {len} rays, not {} as the first time",
-                ks[k],
-                first.map_or(0, |f| f.1)
-            );
+            if len != first.map_or(0, |f| f.1) {
+                return Err(anyhow::Error::new(LineageMismatch(format!(
+                    "round {round} shard {} recomputed spawned {len} rays, not {} as the first time",
+                    ks[k],
+                    first.map_or(0, |f| f.1)
+                ))));
+            }
             if let Some((start, len)) = first {
                 segs.push(Segment {
                     start,
@@ -350,10 +351,11 @@ async fn recompute(
         }
     }
     let mut intersections = Vec::new();
+    let mut intersect_outs = Vec::new();
     if shade {
         let rays = Arc::new(segs.clone());
         let round = stage.round;
-        intersections = run_at(
+        (intersections, intersect_outs) = run_at(
             stage,
             round,
             v1::Stage::Intersect,
@@ -363,13 +365,42 @@ async fn recompute(
             tot,
             arbiter,
         )
-        .await?
-        .0;
+        .await?;
     }
     Ok(Recomputed {
         segments: segs,
         intersections,
+        intersect_outs,
     })
+}
+
+/// The shards of each round before `round` that led to its rays
+/// `ranges` (spawned rays wanted in the round after them), from the
+/// last round back: `need[j]` are shards of round `j + 1`.
+pub(super) fn ancestry(
+    lineage: &Lineage,
+    round: u32,
+    ranges: &[(u64, u64)],
+) -> anyhow::Result<Vec<Vec<usize>>> {
+    let r = round as usize;
+    anyhow::ensure!(
+        lineage.rounds.len() + 1 >= r,
+        "internal: the lineage of round {r} is not known"
+    );
+    let mut need: Vec<Vec<usize>> = vec![Vec::new(); r - 1];
+    let mut want = ranges.to_vec();
+    for j in (0..r - 1).rev() {
+        let log = &lineage.rounds[j];
+        let ks: Vec<usize> = (0..log.shards.len())
+            .filter(|&k| {
+                log.spawned[k]
+                    .is_some_and(|(s, l)| want.iter().any(|&(a, n)| s < a + n && a < s + l))
+            })
+            .collect();
+        want = ks.iter().map(|&k| log.shards[k]).collect();
+        need[j] = ks;
+    }
+    Ok(need)
 }
 
 /// Runs a stage of `shards` of round `round` with the inputs `held`
@@ -377,7 +408,7 @@ async fn recompute(
 /// its tasks and outputs. Fails with [`RecordsLost`] if that worker is
 /// lost.
 #[allow(clippy::too_many_arguments)]
-async fn run_at(
+pub(super) async fn run_at(
     like: &Stage<'_>,
     round: u32,
     which: v1::Stage,

@@ -2,6 +2,7 @@
 //! shaded, merged into the frame and the next round's rays, and
 //! checkpointed; then the image and the statistics.
 
+use super::held;
 use super::job::Job;
 use super::recover::{Lineage, RoundLog, run_stage};
 use super::shards::{Fleet, cut, shard_size};
@@ -54,10 +55,13 @@ pub(super) async fn drive(
     let mut arbiter = Arbiter::new(shared, job);
     // Which workers hold the round's rays (none after a restart).
     let mut segments: Arc<Vec<Segment>> = Arc::default();
-    // (Checkpoints and verification need the records here.)
-    let keep = shared.cfg.records_at_workers
-        && !shared.cfg.checkpoints
-        && shared.cfg.verify_fraction == 0.0;
+    // (Checkpoints need the records here; verification does not, see
+    // `held.rs`.)
+    let keep = shared.cfg.records_at_workers && !shared.cfg.checkpoints;
+    // Records at the workers: the workers one of whose shards has been
+    // checked in this run of the job (see `held.rs`).
+    let mut checked = std::collections::HashSet::new();
+    let mut unchecked_said = false;
     let mut restarts = 0;
     // With records at the workers: each round's shards and what they
     // spawned, to recompute a lost worker's records.
@@ -78,9 +82,17 @@ pub(super) async fn drive(
                         restarts,
                         recomputations: tot.recomputations,
                         recomputed_tasks: tot.recomputed_tasks,
+                        // What verification found stays said.
+                        samples: tot.samples,
+                        sample_rays: tot.sample_rays,
+                        local_samples: tot.local_samples,
+                        mismatches: tot.mismatches,
+                        quarantined: std::mem::take(&mut tot.quarantined),
+                        verify_seconds: tot.verify_seconds,
                         ..Totals::default()
                     };
                     lineage = Lineage::default();
+                    checked.clear();
                     traffic0 = shared.traffic.snapshot();
                     rays = None;
                     n = opts.eye_rays();
@@ -153,11 +165,17 @@ pub(super) async fn drive(
             let intersect_ids = stage.main_ids.clone();
             let mut round_passes = Vec::new();
             let mut winners = Vec::new();
+            // What verification compares of the intersections kept at
+            // the workers.
+            let mut iprints = Vec::new();
             let results: Vec<Option<Arc<Records<ResultRec>>>> = outs
                 .into_iter()
                 .map(|(o, w)| {
                     round_passes.push(passes_of(&o.summary.stats_json));
                     winners.push(w.session);
+                    if keep {
+                        iprints.push(held::print_of(v1::Stage::Intersect, &o, 0)?);
+                    }
                     match (o.results, keep) {
                         (Some(r), _) => Ok(Some(Arc::new(r))),
                         // Kept by the worker (the receiver checked the count).
@@ -228,10 +246,40 @@ pub(super) async fn drive(
                 }
                 start += len;
             }
+            // A check reruns a shard's lineage from the eye rays: not that
+            // of a round resumed from a checkpoint (its earlier rounds
+            // ran before the restart; said once in the job's log).
+            let known = lineage.rounds.len() + 1 == round as usize;
+            if keep && shared.cfg.verify_fraction > 0.0 && !known && !unchecked_said {
+                unchecked_said = true;
+                entry.log(format!(
+                    "round {round}: this job was resumed from a checkpoint, and with records at the workers the shards of its rounds from there on are not verified (their checks would rerun the rounds before the checkpoint)"
+                ));
+            }
+            if keep && shared.cfg.verify_fraction > 0.0 && known {
+                // Shards checked before their colour goes to the frame.
+                let by: Vec<_> = outs.iter().map(|(_, w)| w.clone()).collect();
+                let picks = held::pick(shared.cfg.verify_fraction, &by, &mut checked);
+                or_restart!(
+                    held::check_round(
+                        &stage,
+                        &lineage,
+                        &picks,
+                        &iprints,
+                        &winners,
+                        &outs,
+                        &mut tot,
+                        &mut arbiter
+                    )
+                    .await,
+                    frame
+                );
+            }
             if keep {
                 lineage.rounds.push(RoundLog {
                     shards: shards.clone(),
                     spawned,
+                    by: outs.iter().map(|(_, w)| w.clone()).collect(),
                 });
             }
             let outs: Vec<TaskOutput> = outs.into_iter().map(|(o, _)| o).collect();

@@ -189,7 +189,10 @@ impl Stage<'_> {
                 shared.forget_tasks(&[main_ids[i]]);
             }
         }
-        let verify = cfg.verify_fraction > 0.0;
+        // Records at the workers: no sample of a shard can be traced
+        // elsewhere; whole shards are checked after the round
+        // (`held.rs`).
+        let verify = cfg.verify_fraction > 0.0 && !self.keep;
         let mut local_said = false;
         let progress = |st: &[ShardState]| v1::JobProgress {
             round: self.round,
@@ -270,6 +273,22 @@ impl Stage<'_> {
                             if let Some(h) = self.inputs[i].held.preferred(first, count)
                                 && !self.lost_holders.contains(&h)
                             {
+                                // The other tasks pinned to that worker
+                                // are lost with it: it is gone, or stuck
+                                // and given nothing more, so they would
+                                // wait for it for ever.
+                                for j in 0..total {
+                                    let (f, c) = self.shards[j];
+                                    let inp = &self.inputs[j].held;
+                                    if !lost[j]
+                                        && st[j].out.is_none()
+                                        && inp.pinned
+                                        && inp.preferred(f, c).as_ref() == Some(&h)
+                                    {
+                                        lost[j] = true;
+                                        shared.forget_tasks(&[self.main_ids[j]]);
+                                    }
+                                }
                                 self.lost_holders.push(h);
                             }
                             self.entry.log(format!(

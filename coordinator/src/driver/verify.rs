@@ -67,8 +67,35 @@ impl Arbiter {
         purpose: Purpose,
         tx: &mpsc::UnboundedSender<Local>,
     ) {
-        let exec = self
-            .exec
+        let exec = self.executor();
+        let shared = self.shared.clone();
+        let tx = tx.clone();
+        tokio::spawn(async move {
+            let result = trace_here(&shared, &exec, task, input).await;
+            let _ = tx.send(Local {
+                shard: i,
+                sample,
+                purpose,
+                result,
+            });
+        });
+    }
+
+    /// Runs `task` here on the input records `inputs` (the task's own,
+    /// whole), its output checked against the bounds of `bounds`.
+    pub(super) async fn run(
+        &mut self,
+        task: v1::Task,
+        bounds: &TaskInput,
+        inputs: sray_worker::exec::Inputs,
+    ) -> anyhow::Result<TaskOutput> {
+        let exec = self.executor();
+        run_here(&self.shared, &exec, task, bounds, inputs).await
+    }
+
+    /// The coordinator's executor for the job, started the first time.
+    fn executor(&mut self) -> Arc<sray_worker::exec::Executor> {
+        self.exec
             .get_or_insert_with(|| {
                 Arc::new(sray_worker::exec::Executor::start(
                     sray_worker::exec::JobSetup {
@@ -93,18 +120,7 @@ impl Arbiter {
                     tokio::runtime::Handle::current(),
                 ))
             })
-            .clone();
-        let shared = self.shared.clone();
-        let tx = tx.clone();
-        tokio::spawn(async move {
-            let result = trace_here(&shared, &exec, task, input).await;
-            let _ = tx.send(Local {
-                shard: i,
-                sample,
-                purpose,
-                result,
-            });
-        });
+            .clone()
     }
 }
 
@@ -117,7 +133,7 @@ async fn trace_here(
     input: Arc<TaskInput>,
 ) -> anyhow::Result<TaskOutput> {
     use sray_engine::spill::Records;
-    use sray_worker::exec::{Input, Inputs, ResultSlice, Slice, Work};
+    use sray_worker::exec::{Inputs, ResultSlice, Slice};
     // The sample's input records, copied out of the round's files.
     let (t2, i2, spill) = (task.clone(), input.clone(), shared.spill.clone());
     let files = tokio::task::spawn_blocking(move || -> anyhow::Result<Inputs> {
@@ -141,6 +157,20 @@ async fn trace_here(
         Ok(inputs)
     })
     .await??;
+    run_here(shared, exec, task, &input, files).await
+}
+
+/// Runs one task on the coordinator's own executor from the input
+/// records `files`, checking its output as a worker's is checked
+/// (against the bounds of `input`).
+async fn run_here(
+    shared: &Arc<Shared>,
+    exec: &sray_worker::exec::Executor,
+    task: v1::Task,
+    input: &TaskInput,
+    files: sray_worker::exec::Inputs,
+) -> anyhow::Result<TaskOutput> {
+    use sray_worker::exec::{Input, Work};
     let (out_tx, mut out_rx) = mpsc::channel::<v1::TaskOutput>(4);
     let (done_tx, done_rx) = tokio::sync::oneshot::channel();
     let work = Work {
@@ -153,7 +183,7 @@ async fn trace_here(
     if !exec.submit(work) {
         bail!("the coordinator's tracer has stopped");
     }
-    let mut rx = Receiver::new(shared, &task, &input);
+    let mut rx = Receiver::new(shared, &task, input);
     let mut summary = None;
     while let Some(m) = out_rx.recv().await {
         match m.part {

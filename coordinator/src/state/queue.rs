@@ -109,6 +109,16 @@ impl Shared {
             .insert(alias.to_string(), job.to_string());
     }
 
+    /// Drops the alias `alias` and its counters: workers let go of the
+    /// records they keep under it (a verification's, once it is done).
+    pub fn drop_alias(&self, alias: &str) {
+        let mut g = self.lock();
+        g.aliases.remove(alias);
+        g.requeued.remove(alias);
+        g.backups.remove(alias);
+        g.last_given.remove(alias);
+    }
+
     /// Drops job `job`'s aliases and their counters.
     pub fn drop_aliases(&self, job: &str) {
         let mut g = self.lock();
