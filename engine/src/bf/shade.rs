@@ -100,7 +100,7 @@ pub fn shade_round(
                 // order, so the spawned rays come out in key order.
                 carried.push(Carried { ray, id, out });
                 if carried.len() >= setup.set_cap.clamp(1, CARRY_BATCH) {
-                    shade_carried(setup, pool, &mut carried, next, counts)?;
+                    shade_carried(setup, pool, &mut carried, next, contribute, counts)?;
                 }
             } else {
                 set.push(HitRec {
@@ -110,7 +110,7 @@ pub fn shade_round(
                     prim: res.prim,
                 });
                 if set.len() >= setup.set_cap.max(1) {
-                    shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+                    shade_set(setup, pool, &mut set, next, contribute, counts, &mut st)?;
                 }
             }
         }
@@ -119,10 +119,10 @@ pub fn shade_round(
         return Err(Error::Invalid("more intersection results than rays".into()));
     }
     if !carried.is_empty() {
-        shade_carried(setup, pool, &mut carried, next, counts)?;
+        shade_carried(setup, pool, &mut carried, next, contribute, counts)?;
     }
     if !set.is_empty() {
-        shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+        shade_set(setup, pool, &mut set, next, contribute, counts, &mut st)?;
     }
     *setup.set = set;
     *setup.carried = carried;
@@ -135,6 +135,8 @@ pub fn shade_round(
 #[derive(Default)]
 pub struct SetOutput {
     pub rays: Vec<RayRec>,
+    /// Light the shaded surfaces give off (pixel corner, colour).
+    pub contributions: Vec<(u32, [i64; 3])>,
     pub counts: RayCounts,
 }
 
@@ -244,6 +246,7 @@ pub fn shade_indexed(
                                 shade_scene,
                                 &h,
                                 &mut out.rays,
+                                &mut out.contributions,
                                 &mut out.counts,
                             );
                         } else {
@@ -275,14 +278,14 @@ pub fn shade_indexed(
             for h in &out.joins {
                 set.push(*h);
                 if set.len() >= setup.set_cap.max(1) {
-                    shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+                    shade_set(setup, pool, &mut set, next, contribute, counts, &mut st)?;
                 }
             }
         }
         start = end;
     }
     if !set.is_empty() {
-        shade_set(setup, pool, &mut set, next, counts, &mut st)?;
+        shade_set(setup, pool, &mut set, next, contribute, counts, &mut st)?;
     }
     *setup.set = set;
     Ok(st)
@@ -309,6 +312,7 @@ fn shade_carried(
     pool: &rayon::ThreadPool,
     carried: &mut Vec<Carried>,
     next: &mut NextRays,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
     counts: &mut RayCounts,
 ) -> Result<(), Error> {
     let (materials, shade_scene) = (setup.materials, setup.shade);
@@ -325,20 +329,42 @@ fn shade_carried(
             .zip(outputs.par_iter_mut())
             .for_each(|(hits, o)| {
                 o.rays.clear();
+                o.contributions.clear();
                 o.counts = RayCounts::default();
                 for h in hits {
-                    shade_one_carried(materials, shade_scene, h, &mut o.rays, &mut o.counts);
+                    shade_one_carried(
+                        materials,
+                        shade_scene,
+                        h,
+                        &mut o.rays,
+                        &mut o.contributions,
+                        &mut o.counts,
+                    );
                 }
             })
     });
-    let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
-    for SetOutput { rays, counts: c } in setup.outputs[..n_chunks].iter() {
-        *counts += *c;
-        parts.push(rays);
-    }
+    let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
     pool.install(|| next.extend_from_slices(&parts))?;
     carried.clear();
     Ok(())
+}
+
+/// The chunks' spawned rays, in order, after adding their counts to
+/// `counts` and handing their light on to `contribute`.
+fn gather<'o>(
+    outputs: &'o [SetOutput],
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
+    counts: &mut RayCounts,
+) -> Vec<&'o [RayRec]> {
+    let mut parts: Vec<&[RayRec]> = Vec::with_capacity(outputs.len());
+    for o in outputs {
+        *counts += o.counts;
+        for &(corner, c) in &o.contributions {
+            contribute(corner, c);
+        }
+        parts.push(&o.rays);
+    }
+    parts
 }
 
 /// Shades one hit whose surface came with it.
@@ -347,6 +373,7 @@ fn shade_one_carried(
     shade_scene: &ShadeScene,
     h: &Carried,
     out: &mut Vec<RayRec>,
+    emitted: &mut Vec<(u32, [i64; 3])>,
     c: &mut RayCounts,
 ) {
     let r = &h.ray;
@@ -361,7 +388,7 @@ fn shade_one_carried(
         attrs: crate::intersect::Attrs::NONE,
     };
     let mat = &materials[h.out.material as usize];
-    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
+    shade_surface(shade_scene, r, h.id, &surf, mat, out, emitted, c);
 }
 
 /// Sorts a set of hits by object and shades it in one scan of the objects.
@@ -370,6 +397,7 @@ fn shade_set(
     pool: &rayon::ThreadPool,
     set: &mut Vec<HitRec>,
     next: &mut NextRays,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
     counts: &mut RayCounts,
     st: &mut ShadeStats,
 ) -> Result<(), Error> {
@@ -449,6 +477,7 @@ fn shade_set(
                 .zip(outputs.par_iter_mut())
                 .for_each(|(hits, o)| {
                     o.rays.clear();
+                    o.contributions.clear();
                     o.counts = RayCounts::default();
                     for h in hits {
                         let obj = &objs[(key(h) - first) as usize];
@@ -458,17 +487,13 @@ fn shade_set(
                             models,
                             h,
                             obj,
-                            &mut o.rays,
+                            (&mut o.rays, &mut o.contributions),
                             &mut o.counts,
                         );
                     }
                 })
         });
-        let mut parts: Vec<&[RayRec]> = Vec::with_capacity(n_chunks);
-        for SetOutput { rays, counts: c } in setup.outputs[..n_chunks].iter() {
-            *counts += *c;
-            parts.push(rays);
-        }
+        let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
         pool.install(|| next.extend_from_slices(&parts))?;
         at = stop;
     }
@@ -476,7 +501,7 @@ fn shade_set(
     st.db_bytes_read += scan.stats().bytes_read;
     st.db_blocks_skipped += scan.stats().blocks_skipped;
     if !deferred.is_empty() {
-        shade_deferred(setup, set, &mut deferred, next, counts, st)?;
+        shade_deferred(setup, set, &mut deferred, next, contribute, counts, st)?;
     }
     set.clear();
     Ok(())
@@ -489,11 +514,13 @@ fn shade_deferred(
     set: &[HitRec],
     deferred: &mut [(u32, Placement)],
     next: &mut NextRays,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
     counts: &mut RayCounts,
     st: &mut ShadeStats,
 ) -> Result<(), Error> {
     deferred.sort_by_key(|(k, pl)| (pl.model, *k));
     let mut rays = Vec::new();
+    let mut emitted = Vec::new();
     let mut from = 0;
     while from < deferred.len() {
         let m = deferred[from].1.model;
@@ -511,10 +538,22 @@ fn shade_deferred(
             let ray = RayQ::from_vec3(Vec3::from_array(r.o), Vec3::from_array(r.d));
             if let Some((surf, material)) = model.surface(pl, p, &ray, h.t) {
                 let mat = &setup.materials[material as usize];
-                shade_surface(setup.shade, r, h.id, &surf, mat, &mut rays, counts);
+                shade_surface(
+                    setup.shade,
+                    r,
+                    h.id,
+                    &surf,
+                    mat,
+                    &mut rays,
+                    &mut emitted,
+                    counts,
+                );
             }
         }
         from = to;
+    }
+    for (corner, c) in emitted {
+        contribute(corner, c);
     }
     next.extend_from_slices(&[&rays])?;
     Ok(())
@@ -528,7 +567,7 @@ fn shade_hit(
     models: &Models,
     h: &HitRec,
     obj: &ObjectRef<'_>,
-    out: &mut Vec<RayRec>,
+    (out, emitted): (&mut Vec<RayRec>, &mut Vec<(u32, [i64; 3])>),
     c: &mut RayCounts,
 ) {
     let r = &h.ray;
@@ -548,7 +587,7 @@ fn shade_hit(
         _ => (obj.shape.surface(&ray, h.t), obj.material),
     };
     let mat = &materials[material as usize];
-    shade_surface(shade_scene, r, h.id, &surf, mat, out, c);
+    shade_surface(shade_scene, r, h.id, &surf, mat, out, emitted, c);
 }
 
 /// Shades ray `id` of the round, `r`, at surface `surf` of material `mat`
@@ -560,6 +599,7 @@ fn shade_surface(
     surf: &Surface,
     mat: &Material,
     out: &mut Vec<RayRec>,
+    emitted: &mut Vec<(u32, [i64; 3])>,
     c: &mut RayCounts,
 ) {
     let d = Vec3::from_array(r.d);
@@ -607,6 +647,7 @@ fn shade_surface(
                     _pad: [0; 6],
                 });
             }
+            Spawn::Emit { color } => emitted.push((r.corner, to_fixed(color))),
             Spawn::Refract { dir, weight } => {
                 c.refract_rays += 1;
                 out.push(RayRec {

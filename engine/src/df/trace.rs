@@ -362,6 +362,7 @@ fn trace_packet<R: Elem>(
                         reflect_carry.slot[j] = slot;
                         reflect_carry.weight[j] = weight;
                     }
+                    Spawn::Emit { color } => add(out, slot, color),
                     Spawn::Refract { dir, weight } => {
                         sc.rays.refract_rays += 1;
                         let j = refract.push(surf.p, dir, eps, f64::INFINITY);

@@ -277,13 +277,14 @@ fn glb_chunks(
 }
 
 /// Extensions read here (the gltf crate's validation knows only some).
-const READ: [&str; 6] = [
+const READ: [&str; 7] = [
     "EXT_mesh_gpu_instancing",
     "KHR_mesh_quantization",
     "KHR_lights_punctual",
     "KHR_materials_transmission",
     "KHR_materials_ior",
     "KHR_texture_transform",
+    "KHR_materials_emissive_strength",
 ];
 
 /// Extensions without which a file's geometry cannot be read.

@@ -29,8 +29,16 @@
 //!   exponent `2 / a^2 - 2`, `a = roughness^2` (at least 1), kept for an
 //!   NFF output; `KHR_materials_transmission` -> transmission, which
 //!   takes its share from the diffuse; `KHR_materials_ior` -> index of
-//!   refraction (1.5 by default). The emissive factor is stored but not
-//!   yet added to the image. Textures are ignored, with one warning.
+//!   refraction (1.5 by default). The emissive factor (times
+//!   `KHR_materials_emissive_strength`) is added to every ray that hits
+//!   the surface.
+//! - **Textures**: the base colour texture (through its sampler and
+//!   `KHR_texture_transform`) at the primitive's `TEXCOORD_n`, and
+//!   `COLOR_0`, multiply the base colour; such primitives become textured
+//!   triangles. `alphaMode: MASK` cuts the surface out where the alpha is
+//!   below `alphaCutoff` (`BLEND` is rendered opaque, with a warning).
+//!   Metallic-roughness, normal, occlusion and emissive textures are not
+//!   applied yet (one warning).
 //!   A primitive without a material is the meshes' neutral grey.
 //!
 //! The file is read within the memory budget ([`super::gltf_data`]): the
@@ -1081,7 +1089,9 @@ fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
         pbr: Some(Pbr {
             metallic,
             roughness,
-            emissive: m.emissive_factor(),
+            emissive: m
+                .emissive_factor()
+                .map(|e| e * m.emissive_strength().unwrap_or(1.0)),
         }),
         texture: None,
     }

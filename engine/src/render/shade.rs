@@ -88,7 +88,7 @@ impl ShadeScene {
     }
 }
 
-/// A ray a hit spawns, in the order they are spawned: one shadow ray per
+/// What a hit gives, in this order: its own emission, one shadow ray per
 /// light the surface faces, then reflection, then refraction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Spawn {
@@ -107,6 +107,11 @@ pub enum Spawn {
     Refract {
         dir: Vec3,
         weight: f32,
+    },
+    /// Light the surface gives off itself (a glTF material's emissive
+    /// colour, already weighted): added to the ray's pixel as it is.
+    Emit {
+        color: [f32; 3],
     },
 }
 
@@ -134,6 +139,13 @@ pub fn shade(
 ) {
     let looked = sc.look(m, s);
     let m = looked.as_ref().unwrap_or(m);
+    if let Some(p) = &m.pbr
+        && p.emissive != [0.0; 3]
+    {
+        emit(Spawn::Emit {
+            color: p.emissive.map(|e| e * weight),
+        });
+    }
     let n = if s.ns.dot(d) > 0.0 { -s.ns } else { s.ns };
     let dn = d.dot(n);
     let mirror = (d - n * (2.0 * dn)).try_normalize();

@@ -454,3 +454,25 @@ fn a_cut_out_renders_the_same_in_both_tracers_precisions_and_budgets() {
         }
     }
 }
+
+#[test]
+fn an_emissive_surface_adds_its_light_in_both_tracers() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = quad(dir.path(), Look::Colors);
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    doc["materials"][0]["emissiveFactor"] = json!([0.5, 0.25, 0.0]);
+    doc["materials"][0]["extensions"] =
+        json!({"KHR_materials_emissive_strength": {"emissiveStrength": 2.0}});
+    doc["extensionsUsed"] = json!(["KHR_lights_punctual", "KHR_materials_emissive_strength"]);
+    std::fs::write(&path, serde_json::to_string(&doc).unwrap()).unwrap();
+    let img = render(dir.path(), &path);
+    // What the light gives the vertex colours, plus (1, 0.5, 0).
+    let expect = |x: f64, y: f64| {
+        let red = ((x + HALF) / (2.0 * HALF)) as f32;
+        let l = lit(x, y, [red, 0.5, 0.25]);
+        [l[0] + 1.0, l[1] + 0.5, l[2]]
+    };
+    let n = check(&img, on_quad, expect, 2e-3);
+    assert!(n > 1500, "only {n} pixels checked");
+}

@@ -109,6 +109,7 @@ fn measure<R: Real>(db: &Database, objs: &Objects, precision: Precision, eps_sca
                 Spawn::Reflect { dir, .. } | Spawn::Refract { dir, .. } => {
                     spawned.push((dir, f64::INFINITY, false))
                 }
+                Spawn::Emit { .. } => {}
             });
             for (dir, dist, is_shadow) in spawned {
                 let ray = RayQ::from_vec3(surf.p, dir);

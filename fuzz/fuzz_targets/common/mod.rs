@@ -5,7 +5,8 @@ use sray_engine::intersect::RayQ;
 use sray_engine::math::Vec3;
 use sray_engine::mesh::MeshOptions;
 use sray_engine::progress::Progress;
-use sray_engine::scene::{Light, Material, MeshFacts, SceneSink, View};
+use sray_engine::scene::{Light, Material, MeshFacts, SceneSink, TextureImage, View};
+use sray_engine::texture::Encoding;
 use sray_engine::shapes::{Shape, intersect};
 
 /// Discards the scene but tests each object against a few rays.
@@ -31,6 +32,12 @@ impl SceneSink for Sink {
     fn mesh(&mut self, _: &MeshFacts) -> Result<(), sray_engine::Error> {
         Ok(())
     }
+    fn texture(&mut self, image: &TextureImage) -> Result<u32, sray_engine::Error> {
+        // What a render does with an image a reader accepted: decode it.
+        sray_engine::texture::Texture::decode(&image.bytes, &image.name, Encoding::Srgb)
+            .expect("a reader accepted an image that does not decode");
+        Ok(0)
+    }
     fn object(&mut self, s: &Shape<'_>) -> Result<(), sray_engine::Error> {
         s.validate().expect("a mesh reader emitted an invalid shape");
         let b = s.bounds();
@@ -41,7 +48,11 @@ impl SceneSink for Sink {
         );
         for d in [Vec3::new(0.0, 0.0, 1.0), Vec3::new(0.3, -0.5, 0.8)] {
             let ray = RayQ::from_vec3(c - d * 10.0, d);
-            let _ = intersect::<f64>(s, &b, &ray, 0.0, f64::INFINITY);
+            // A hit's surface, as shading takes it (a textured
+            // triangle's attributes interpolated).
+            if let Some(t) = intersect::<f64>(s, &b, &ray, 0.0, f64::INFINITY) {
+                let _ = s.surface(&ray, t);
+            }
             let _ = intersect::<f32>(s, &b, &ray.cast(), 0.0, f32::INFINITY);
         }
         Ok(())
