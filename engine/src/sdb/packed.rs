@@ -3,16 +3,21 @@
 //!
 //! A block is still built as records (see the module documentation of
 //! [`super`]), but before it is stored every stretch of consecutive
-//! triangles of one material, or of triangular patches (a normal per
-//! vertex), becomes a *run*, as GPU meshlets are:
+//! triangles of one material, of triangular patches (a normal per
+//! vertex), or of textured triangles carrying the same attributes (version
+//! 8), becomes a *run*, as GPU meshlets are:
 //!
 //! ```text
-//! word 0   RUN (triangles) or RUN_PATCH | faces << 8
+//! word 0   RUN (triangles), RUN_PATCH or RUN_TEXTURED + mask | faces << 8
 //! word 1   material
 //! word 2   corners (1..=256): distinct vertices, with their normals
 //! word 3   bit widths of x | y << 8 | z << 16 (patches: one more word,
-//!          the normals' widths)
-//! ...      base keys: x, y, z (patches: and the normal's three)
+//!          the normals' widths; textured triangles: three more, for
+//!          normals, texture coordinates and colours, each 0 where the
+//!          mask has none)
+//! ...      base keys: x, y, z (patches: and the normal's three; textured
+//!          triangles: and the normal's, the coordinates' and the colour
+//!          words')
 //! ...      the corners, each number as (key - base) in its width,
 //!          packed low bit first into words
 //! ...      three one-byte corner indices per face, padded to a word
@@ -34,7 +39,12 @@ use crate::shapes::ShapeKind;
 /// has them.
 pub const RUN: u32 = 0xff;
 pub const RUN_PATCH: u32 = 0xfe;
-const _: () = assert!(crate::shapes::KINDS < RUN_PATCH as usize);
+/// Textured triangles: this plus their count field's mask (1 to 7).
+pub const RUN_TEXTURED: u32 = 0xf0;
+const _: () = assert!(crate::shapes::KINDS < RUN_TEXTURED as usize);
+/// Numbers a corner may have: position, normal, texture coordinates and
+/// the two words of a colour.
+const CORNER_NUMBERS: usize = 10;
 /// Corner indices are one byte.
 pub const MAX_RUN_VERTICES: usize = 256;
 const RECORD_HEADER_WORDS: usize = super::format::RECORD_HEADER_WORDS;
@@ -45,6 +55,9 @@ const RECORD_HEADER_WORDS: usize = super::format::RECORD_HEADER_WORDS;
 enum Face {
     Triangle,
     Patch,
+    /// A textured triangle, with its count field's mask
+    /// ([`crate::shapes::Textured`]).
+    Textured(u32),
 }
 
 impl Face {
@@ -53,6 +66,8 @@ impl Face {
             Some(Face::Triangle)
         } else if head == ShapeKind::Patch as u32 | 3 << 8 {
             Some(Face::Patch)
+        } else if head & 0xff == ShapeKind::Textured as u32 && (1..8).contains(&(head >> 8)) {
+            Some(Face::Textured(head >> 8))
         } else {
             None
         }
@@ -62,6 +77,9 @@ impl Face {
         match code {
             RUN => Some(Face::Triangle),
             RUN_PATCH => Some(Face::Patch),
+            c if (RUN_TEXTURED + 1..RUN_TEXTURED + 8).contains(&c) => {
+                Some(Face::Textured(c - RUN_TEXTURED))
+            }
             _ => None,
         }
     }
@@ -70,41 +88,77 @@ impl Face {
         match self {
             Face::Triangle => RUN,
             Face::Patch => RUN_PATCH,
+            Face::Textured(mask) => RUN_TEXTURED + mask,
         }
     }
 
     /// The first word of the face's record.
     fn head(self) -> u32 {
-        let kind = match self {
-            Face::Triangle => ShapeKind::Polygon,
-            Face::Patch => ShapeKind::Patch,
-        };
-        kind as u32 | 3 << 8
+        match self {
+            Face::Triangle => ShapeKind::Polygon as u32 | 3 << 8,
+            Face::Patch => ShapeKind::Patch as u32 | 3 << 8,
+            Face::Textured(mask) => ShapeKind::Textured as u32 | mask << 8,
+        }
     }
 
-    /// Numbers per corner: a position, and a normal for a patch.
+    /// Numbers per corner: a position, a normal for a patch; all ten for
+    /// a textured triangle (those its mask leaves out are zeros, which
+    /// take no bits).
     fn numbers(self) -> usize {
         match self {
             Face::Triangle => 3,
             Face::Patch => 6,
+            Face::Textured(_) => CORNER_NUMBERS,
         }
     }
 
     /// Words of the face's record.
     fn record_words(self) -> usize {
-        RECORD_HEADER_WORDS + 3 * self.numbers()
+        match self {
+            Face::Textured(mask) => {
+                RECORD_HEADER_WORDS
+                    + ShapeKind::Textured
+                        .payload_words(mask)
+                        .expect("a mask of 1 to 7")
+            }
+            _ => RECORD_HEADER_WORDS + 3 * self.numbers(),
+        }
     }
 
     /// Words before a run's corners: code and count, material, corners,
     /// widths (a word per three numbers), base keys.
     fn run_header_words(self) -> usize {
-        3 + self.numbers() / 3 + self.numbers()
+        3 + self.numbers().div_ceil(3) + self.numbers()
+    }
+
+    /// Where each part of a corner lies in the face's record geometry, as
+    /// (first number of the corner, numbers, first word of the part in
+    /// the geometry): positions, then what the face has of normals,
+    /// texture coordinates and colours.
+    fn parts(self) -> impl Iterator<Item = (usize, usize, usize)> {
+        let mask = match self {
+            Face::Triangle => 0,
+            Face::Patch => crate::shapes::NORMALS,
+            Face::Textured(mask) => mask,
+        };
+        let all = [
+            (0, 3, true),
+            (3, 3, mask & crate::shapes::NORMALS != 0),
+            (6, 2, mask & crate::shapes::UVS != 0),
+            (8, 2, mask & crate::shapes::COLORS != 0),
+        ];
+        let mut at = 0;
+        all.into_iter().filter(|p| p.2).map(move |(first, n, _)| {
+            let part = (first, n, at);
+            at += 3 * n;
+            part
+        })
     }
 }
 
-/// A corner's numbers as bits: position, then normal (zeros for a
-/// triangle).
-type Corner = [u32; 6];
+/// A corner's numbers as bits: position, normal, texture coordinates,
+/// colour words (zeros for what a face does not have).
+type Corner = [u32; CORNER_NUMBERS];
 
 /// The order-preserving integer of a finite `f32`'s bits (negative
 /// numbers reversed below the positive ones).
@@ -151,14 +205,23 @@ fn write_record(rec: &mut [u32], face: Face, material: u32, c: &[Corner; 3]) {
     rec[1] = material;
     rec[2..RECORD_HEADER_WORDS].copy_from_slice(&face_box(c));
     let g = &mut rec[RECORD_HEADER_WORDS..];
-    for (i, p) in c.iter().enumerate() {
-        g[3 * i..3 * i + 3].copy_from_slice(&p[..3]);
-    }
-    if face == Face::Patch {
+    for (first, n, at) in face.parts() {
         for (i, p) in c.iter().enumerate() {
-            g[9 + 3 * i..12 + 3 * i].copy_from_slice(&p[3..]);
+            g[at + n * i..at + n * (i + 1)].copy_from_slice(&p[first..first + n]);
         }
     }
+}
+
+/// The corners of the face whose record geometry is `g`.
+#[inline(always)]
+fn read_corners(face: Face, g: &[u32]) -> [Corner; 3] {
+    let mut corners = [[0u32; CORNER_NUMBERS]; 3];
+    for (first, n, at) in face.parts() {
+        for (i, c) in corners.iter_mut().enumerate() {
+            c[first..first + n].copy_from_slice(&g[at + n * i..at + n * (i + 1)]);
+        }
+    }
+    corners
 }
 
 /// Appends bits to words, low bit first.
@@ -374,6 +437,9 @@ pub struct RunGather<const MOST: usize> {
     corners: Vec<Corner>,
     local: CornerIndex,
     faces: Vec<[u16; 3]>,
+    /// Whether textured triangles are gathered too (a writer's runs; the
+    /// depth-first tracer holds them as records).
+    textured: bool,
 }
 
 impl<const MOST: usize> Default for RunGather<MOST> {
@@ -386,6 +452,7 @@ impl<const MOST: usize> Default for RunGather<MOST> {
             corners: Vec::new(),
             local: CornerIndex::new(),
             faces: Vec::new(),
+            textured: false,
         }
     }
 }
@@ -412,8 +479,8 @@ impl<const MOST: usize> RunGather<MOST> {
     }
 
     /// The distinct corners as bits: position, then normal (zeros for a
-    /// triangle).
-    pub fn corners(&self) -> &[[u32; 6]] {
+    /// triangle), then (zeros) what only textured triangles have.
+    pub fn corners(&self) -> &[[u32; CORNER_NUMBERS]] {
         &self.corners
     }
 
@@ -430,14 +497,10 @@ impl<const MOST: usize> RunGather<MOST> {
         let Some(face) = Face::of_head(r[0]) else {
             return false;
         };
-        let g = &r[RECORD_HEADER_WORDS..];
-        let mut corners = [[0u32; 6]; 3];
-        for (i, c) in corners.iter_mut().enumerate() {
-            c[..3].copy_from_slice(&g[3 * i..3 * i + 3]);
-            if face == Face::Patch {
-                c[3..].copy_from_slice(&g[9 + 3 * i..12 + 3 * i]);
-            }
+        if matches!(face, Face::Textured(_)) && !self.textured {
+            return false;
         }
+        let corners = read_corners(face, &r[RECORD_HEADER_WORDS..]);
         if face_box(&corners)[..] != r[2..RECORD_HEADER_WORDS] {
             return false;
         }
@@ -484,10 +547,21 @@ impl<const MOST: usize> RunGather<MOST> {
 }
 
 /// Builds runs from a block's records; reused across blocks.
-#[derive(Default)]
 pub struct Packer {
     run: RunGather<MAX_RUN_VERTICES>,
     pub counts: PackCounts,
+}
+
+impl Default for Packer {
+    fn default() -> Self {
+        Packer {
+            run: RunGather {
+                textured: true,
+                ..Default::default()
+            },
+            counts: PackCounts::default(),
+        }
+    }
 }
 
 impl Packer {
@@ -526,8 +600,8 @@ impl Packer {
             out.extend_from_slice(&records[self.run.first..self.run.first + face.record_words()]);
         } else {
             let numbers = face.numbers();
-            let mut lo = [u32::MAX; 6];
-            let mut hi = [0u32; 6];
+            let mut lo = [u32::MAX; CORNER_NUMBERS];
+            let mut hi = [0u32; CORNER_NUMBERS];
             for c in &self.run.corners {
                 for a in 0..numbers {
                     lo[a] = lo[a].min(key(c[a]));
@@ -535,7 +609,7 @@ impl Packer {
                 }
             }
             // Numbers a face does not have (a triangle's normal) take none.
-            let width: [u32; 6] = std::array::from_fn(|a| {
+            let width: [u32; CORNER_NUMBERS] = std::array::from_fn(|a| {
                 if a < numbers {
                     32 - (hi[a] - lo[a]).leading_zeros()
                 } else {
@@ -546,7 +620,8 @@ impl Packer {
             out.push(self.run.material);
             out.push(self.run.corners.len() as u32);
             for w in width[..numbers].chunks(3) {
-                out.push(w[0] | w[1] << 8 | w[2] << 16);
+                let w = |i: usize| w.get(i).copied().unwrap_or(0);
+                out.push(w(0) | w(1) << 8 | w(2) << 16);
             }
             out.extend_from_slice(&lo[..numbers]);
             let mut w = BitWriter {
@@ -587,7 +662,7 @@ pub fn unpack(
     out.clear();
     let mut pos = 0usize;
     let mut seen = 0u64;
-    let mut corners = [[0u32; 6]; MAX_RUN_VERTICES];
+    let mut corners = [[0u32; CORNER_NUMBERS]; MAX_RUN_VERTICES];
     while pos < packed.len() {
         let head = packed[pos];
         let Some(face) = Face::of_code(head & 0xff) else {
@@ -617,18 +692,19 @@ pub fn unpack(
             .get(pos..pos + header)
             .ok_or_else(|| format!("the run at object {seen} is cut off"))?;
         let (material, nv) = (h[1], h[2] as usize);
-        let width: [u32; 6] = std::array::from_fn(|a| match h.get(3 + a / 3) {
+        let width: [u32; CORNER_NUMBERS] = std::array::from_fn(|a| match h.get(3 + a / 3) {
             Some(w) if a < numbers => w >> (8 * (a % 3)) & 0xff,
             _ => 0,
         });
         if n < 2
             || !(1..=MAX_RUN_VERTICES).contains(&nv)
             || width.iter().any(|&w| w > 32)
-            || h[3..3 + numbers / 3].iter().any(|w| w >> 24 != 0)
+            || h[3..3 + numbers.div_ceil(3)].iter().any(|w| w >> 24 != 0)
+            || (numbers % 3 != 0 && h[2 + numbers.div_ceil(3)] >> (8 * (numbers % 3)) != 0)
         {
             return Err(format!("the run at object {seen} has an invalid header"));
         }
-        let base = &h[3 + numbers / 3..];
+        let base = &h[3 + numbers.div_ceil(3)..];
         let corner_words = (nv * width.iter().sum::<u32>() as usize).div_ceil(32);
         let index_words = (3 * n).div_ceil(4);
         let start = pos + header;
@@ -652,7 +728,7 @@ pub fn unpack(
         let index: &[u8] = bytemuck::cast_slice(&body[corner_words..]);
         let words = face.record_words();
         out.reserve(n * words);
-        let mut rec = [0u32; RECORD_HEADER_WORDS + 18];
+        let mut rec = [0u32; RECORD_HEADER_WORDS + 30];
         for t in index[..3 * n].chunks_exact(3) {
             if t.iter().any(|&i| i as usize >= nv) {
                 return Err(format!(
@@ -686,7 +762,7 @@ mod tests {
 
     fn triangle(out: &mut Vec<u32>, material: u32, v: [[f32; 3]; 3]) {
         let c = v.map(|p| {
-            let mut c = [0; 6];
+            let mut c = [0; CORNER_NUMBERS];
             c[..3].copy_from_slice(&p.map(f32::to_bits));
             c
         });
@@ -696,9 +772,9 @@ mod tests {
     /// A patch with the normals `n`.
     fn patch(out: &mut Vec<u32>, material: u32, v: [[f32; 3]; 3], n: [[f32; 3]; 3]) {
         let c: [Corner; 3] = std::array::from_fn(|i| {
-            let mut c = [0; 6];
+            let mut c = [0; CORNER_NUMBERS];
             c[..3].copy_from_slice(&v[i].map(f32::to_bits));
-            c[3..].copy_from_slice(&n[i].map(f32::to_bits));
+            c[3..6].copy_from_slice(&n[i].map(f32::to_bits));
             c
         });
         push_record(out, Face::Patch, material, &c);
@@ -757,6 +833,7 @@ mod tests {
                 Face::Triangle => triangle(out, material, v),
                 // Normals as awkward as the vertices, and shared less.
                 Face::Patch => patch(out, material, v, [p(1), p(3), p(i % 4)]),
+                Face::Textured(mask) => textured(out, material, mask, i),
             }
         }
     }
@@ -787,6 +864,66 @@ mod tests {
             packed.len(),
             r.len()
         );
+    }
+
+    /// A textured triangle of `mask` (see [`crate::shapes::Textured`])
+    /// whose attributes are as awkward as `strip`'s numbers.
+    fn textured(out: &mut Vec<u32>, material: u32, mask: u32, k: usize) {
+        use crate::shapes::{COLORS, NORMALS, Shape, Textured, UVS, pack_color};
+        let p = |j: usize| [(k + j) as f32 * 0.5, -((k * j) as f32), 1e-45 * j as f32];
+        let v = [p(0), p(1), p(2)];
+        let n = [p(2), p(1), [0.0, -0.0, 1.0]];
+        let uv = [[0.1, -7.5], [(k % 3) as f32, 1e30], [0.0, -0.0]];
+        let c = [
+            pack_color([1.0, 0.5, 0.0, 1.0]),
+            pack_color([0.25, (k % 5) as f32 / 5.0, 1.0, 0.0]),
+            [u32::MAX, 0x7f80_0001],
+        ];
+        let t = Textured {
+            vertices: &v,
+            normals: if mask & NORMALS != 0 { &n } else { &[] },
+            uvs: if mask & UVS != 0 { &uv } else { &[] },
+            colors: if mask & COLORS != 0 { &c } else { &[] },
+        };
+        let shape = Shape::Textured(t);
+        out.push(ShapeKind::Textured as u32 | shape.count() << 8);
+        out.push(material);
+        let c3 = v.map(|q| {
+            let mut c = [0; CORNER_NUMBERS];
+            c[..3].copy_from_slice(&q.map(f32::to_bits));
+            c
+        });
+        out.extend(face_box(&c3));
+        shape.encode(out);
+    }
+
+    #[test]
+    fn textured_runs_give_back_their_records_bit_for_bit() {
+        let mut r = Vec::new();
+        let mut n = 0;
+        for mask in 1..8 {
+            for k in 0..20 {
+                textured(&mut r, mask % 3, mask, k);
+                n += 1;
+            }
+            strip(3, 0, &mut r);
+            n += 3;
+        }
+        // A lone one stays a record.
+        textured(&mut r, 0, 2, 99);
+        n += 1;
+        let (packed, counts) = round_trip(&r, n);
+        assert_eq!(counts.runs, 14, "{counts:?}");
+        // Few corners are shared here: a real mesh's runs save more.
+        assert!(
+            packed.len() < r.len(),
+            "{} of {} words",
+            packed.len(),
+            r.len()
+        );
+        // The depth-first tracer's gathering leaves them records.
+        let mut g = RunGather::<MAX_RUN_VERTICES>::default();
+        assert!(!g.take(&r, 0));
     }
 
     #[test]
