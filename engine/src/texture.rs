@@ -127,12 +127,16 @@ pub enum Encoding {
     Linear,
 }
 
-/// A decoded texture: linear RGBA, row by row from the top.
+/// A decoded texture, row by row from the top: its texels kept as the
+/// image's 8-bit RGBA (4 bytes a texel, not 16), turned into linear values
+/// as they are read.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Texture {
     pub width: u32,
     pub height: u32,
-    texels: Vec<[f32; 4]>,
+    texels: Vec<[u8; 4]>,
+    /// Each 8-bit colour value's linear value (alpha is always linear).
+    linear: Box<[f32; 256]>,
 }
 
 /// The KTX2 file identifier.
@@ -149,16 +153,29 @@ fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// The linear value of each 8-bit value of `encoding`.
+fn lut(encoding: Encoding) -> Box<[f32; 256]> {
+    Box::new(std::array::from_fn(|v| {
+        let c = v as f32 / 255.0;
+        match encoding {
+            Encoding::Srgb => srgb_to_linear(c),
+            Encoding::Linear => c,
+        }
+    }))
+}
+
 impl Texture {
-    /// A texture of `width` x `height` linear RGBA texels, row by row from
-    /// the top.
+    /// A texture of `width` x `height` linear RGBA texels in [0, 1], row by
+    /// row from the top, kept as 8-bit values (rounded).
     pub fn from_texels(width: u32, height: u32, texels: Vec<[f32; 4]>) -> Texture {
         assert_eq!(texels.len(), width as usize * height as usize);
         assert!(width > 0 && height > 0);
+        let q = |c: f32| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
         Texture {
             width,
             height,
-            texels,
+            texels: texels.iter().map(|t| t.map(q)).collect(),
+            linear: lut(Encoding::Linear),
         }
     }
 
@@ -185,37 +202,29 @@ impl Texture {
         if width == 0 || height == 0 {
             return Err(Error::Scene(format!("{what}: the image is empty")));
         }
-        let lut: Vec<f32> = (0..256)
-            .map(|v| {
-                let c = v as f32 / 255.0;
-                match encoding {
-                    Encoding::Srgb => srgb_to_linear(c),
-                    Encoding::Linear => c,
-                }
-            })
-            .collect();
-        let texels = img
-            .pixels()
-            .map(|p| {
-                [
-                    lut[p[0] as usize],
-                    lut[p[1] as usize],
-                    lut[p[2] as usize],
-                    p[3] as f32 / 255.0,
-                ]
-            })
-            .collect();
         Ok(Texture {
             width,
             height,
-            texels,
+            texels: img.pixels().map(|p| p.0).collect(),
+            linear: lut(encoding),
         })
     }
 
     /// Texel `(i, j)`: column `i`, row `j` from the top.
     #[inline]
     pub fn texel(&self, i: u32, j: u32) -> [f32; 4] {
-        self.texels[j as usize * self.width as usize + i as usize]
+        let p = self.texels[j as usize * self.width as usize + i as usize];
+        [
+            self.linear[p[0] as usize],
+            self.linear[p[1] as usize],
+            self.linear[p[2] as usize],
+            p[3] as f32 / 255.0,
+        ]
+    }
+
+    /// Bytes its texels take.
+    pub fn bytes(&self) -> usize {
+        4 * self.texels.len()
     }
 
     /// The texture at coordinates `uv` as `s` samples it.
