@@ -48,134 +48,22 @@
 //! that one of them is checked; the default mode checks a sample of
 //! every shard.
 
+use super::prints::{TaskPrint, digest_of, print_of};
 use super::recover::{Lineage, LineageMismatch, ancestry, recompute, run_at};
 use super::stages::{RecordsLost, Stage, stage_name};
 use super::stats::Totals;
 use super::verify::Arbiter;
 use crate::task::{Held, TaskInput, TaskOutput, WorkerTag};
-use sray_engine::bf::{Contribution, RayRec};
+use sray_engine::bf::RayRec;
 use sray_engine::spill::{RecordWriter, Records};
 use sray_proto::v1;
 use std::collections::HashSet;
-
-/// What verification compares of one task's output.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub(super) struct TaskPrint {
-    /// Intersection: results, hits. Shading: eye rays that hit, reflected,
-    /// refracted and shadow rays, spawned rays and their first and last
-    /// keys.
-    counts: [u64; 7],
-    /// The digest of the records it made (results, or spawned rays).
-    digest: Vec<u8>,
-    /// The fingerprint of the colour it adds to each frame slot.
-    colour: [u64; 3],
-}
 
 /// A shard's intersection and shading, as verification compares them.
 #[derive(Clone, Debug, PartialEq, Eq)]
 struct Print {
     intersect: TaskPrint,
     shade: TaskPrint,
-}
-
-/// The print of a task's output, kept at its worker or sent; `key`
-/// keys the colour's fingerprint.
-pub(super) fn print_of(stage: v1::Stage, o: &TaskOutput, key: u64) -> anyhow::Result<TaskPrint> {
-    let s = &o.summary;
-    if stage == v1::Stage::Intersect {
-        let (n, digest) = match &o.results {
-            Some(r) => (r.len(), digest_of(r)?),
-            None => (s.kept_records, s.kept_digest.clone()),
-        };
-        return Ok(TaskPrint {
-            counts: [n, o.hits, 0, 0, 0, 0, 0],
-            digest,
-            colour: [0; 3],
-        });
-    }
-    let (n, first, last, digest) = match &o.rays {
-        Some(r) => {
-            let first = r.get(0)?.map_or(0, |x| x.key);
-            let last = match r.len() {
-                0 => 0,
-                n => r.get(n - 1)?.map_or(0, |x| x.key),
-            };
-            (r.len(), first, last, digest_of(r)?)
-        }
-        None if o.kept_rays == 0 && s.kept_digest.is_empty() => {
-            (0, 0, 0, blake3::hash(&[]).as_bytes().to_vec())
-        }
-        None => (
-            o.kept_rays,
-            s.kept_first_key,
-            s.kept_last_key,
-            s.kept_digest.clone(),
-        ),
-    };
-    Ok(TaskPrint {
-        counts: [
-            s.eye_hit_rays,
-            s.reflect_rays,
-            s.refract_rays,
-            s.shadow_rays,
-            n,
-            first,
-            last,
-        ],
-        digest,
-        colour: colour_print(o.contributions.as_ref(), key)?,
-    })
-}
-
-/// BLAKE3 of records as they travel, in order (what a worker that keeps
-/// them reports as `kept_digest`).
-fn digest_of<T: bytemuck::Pod>(r: &Records<T>) -> anyhow::Result<Vec<u8>> {
-    let mut h = blake3::Hasher::new();
-    r.for_each_slice(&mut |s| {
-        h.update(bytemuck::cast_slice(s));
-        Ok(())
-    })?;
-    Ok(h.finalize().as_bytes().to_vec())
-}
-
-/// 2^61 - 1, a prime.
-const P: u64 = (1 << 61) - 1;
-
-fn mod_p(x: u128) -> u64 {
-    let p = P as u128;
-    let x = (x & p) + (x >> 61);
-    let x = (x & p) + (x >> 61);
-    (x % p) as u64
-}
-
-/// The fingerprint of the colour contributions add to each frame slot:
-/// per channel, the sum over slots of the slot's colour sum times a
-/// pseudo-random weight of the slot (keyed by `key`), modulo `P`. Linear
-/// in the contributions, so contributions to one slot added together
-/// first (or sent in runs) give the same fingerprint.
-fn colour_print(c: Option<&Records<Contribution>>, key: u64) -> anyhow::Result<[u64; 3]> {
-    let mut acc = [0u64; 3];
-    let Some(c) = c else { return Ok(acc) };
-    c.for_each_slice(&mut |s| {
-        for x in s {
-            for slot in x.corner as u64..x.end() {
-                let w = splitmix(slot ^ key) % P;
-                for (a, v) in acc.iter_mut().zip(x.rgb) {
-                    let v = v.rem_euclid(P as i64) as u128;
-                    *a = mod_p(*a as u128 + v * w as u128);
-                }
-            }
-        }
-        Ok(())
-    })?;
-    Ok(acc)
-}
-
-fn splitmix(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
 }
 
 /// The shards of a round to check: each with probability
@@ -633,69 +521,4 @@ async fn pair_here(
     int.summary.kept_records = count;
     int.summary.kept_digest = digest;
     Ok((int, out))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::colour_print;
-    use sray_engine::bf::Contribution;
-    use sray_engine::spill::{MemoryShare, Records};
-
-    fn recs(v: Vec<Contribution>) -> Records<Contribution> {
-        Records::memory(v, MemoryShare::new(0).lease())
-    }
-
-    fn c(corner: u32, run: u32, rgb: [i64; 3]) -> Contribution {
-        Contribution { corner, run, rgb }
-    }
-
-    #[test]
-    fn the_colour_print_is_that_of_the_sums_per_slot() {
-        // One at a time, in some order (as a checked output comes) ...
-        let apart = recs(vec![
-            c(7, 0, [-3, 0, 1 << 40]),
-            c(5, 0, [1, 2, 3]),
-            c(6, 0, [7, 7, 7]),
-            c(5, 0, [4, 5, 6]),
-            c(8, 0, [7, 7, 7]),
-            c(7, 0, [10, 7, 6]),
-        ]);
-        // ... summed per slot and in runs (as a worker that keeps its
-        // records sends them): the same print.
-        let merged = recs(vec![
-            c(5, 0, [5, 7, 9]),
-            c(6, 0, [7, 7, 7]),
-            c(7, 0, [7, 7, 6 + (1 << 40)]),
-            c(8, 0, [7, 7, 7]),
-        ]);
-        let key = 0x5eed;
-        assert_eq!(
-            colour_print(Some(&apart), key).unwrap(),
-            colour_print(Some(&merged), key).unwrap()
-        );
-        // A run is its slots one by one.
-        let run = recs(vec![c(5, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])]);
-        let slots = recs(vec![
-            c(5, 0, [5, 7, 9]),
-            c(6, 0, [7, 7, 7]),
-            c(7, 0, [7, 7, 7]),
-            c(8, 0, [7, 7, 7]),
-        ]);
-        assert_eq!(
-            colour_print(Some(&run), key).unwrap(),
-            colour_print(Some(&slots), key).unwrap()
-        );
-        // Another colour, or the same colour in another slot, differs.
-        for other in [
-            vec![c(5, 0, [5, 7, 9]), c(6, 2, [7, 7, 8])],
-            vec![c(5, 0, [9, 7, 5]), c(6, 2, [7, 7, 7])],
-            vec![c(5, 0, [5, 7, 9]), c(6, 3, [7, 7, 7])],
-            vec![c(4, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])],
-        ] {
-            let p = colour_print(Some(&recs(other)), key).unwrap();
-            assert_ne!(p, colour_print(Some(&run), key).unwrap());
-        }
-        // Nothing is no colour.
-        assert_eq!(colour_print(None, key).unwrap(), [0; 3]);
-    }
 }

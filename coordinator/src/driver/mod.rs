@@ -51,6 +51,7 @@
 
 mod held;
 mod job;
+mod prints;
 mod recover;
 mod rounds;
 mod shards;

@@ -4,6 +4,7 @@
 
 use super::held;
 use super::job::Job;
+use super::prints;
 use super::recover::{Lineage, RoundLog, run_stage};
 use super::shards::{Fleet, cut, shard_size};
 use super::stages::{RecordsLost, Stage};
@@ -174,7 +175,7 @@ pub(super) async fn drive(
                     round_passes.push(passes_of(&o.summary.stats_json));
                     winners.push(w.session);
                     if keep {
-                        iprints.push(held::print_of(v1::Stage::Intersect, &o, 0)?);
+                        iprints.push(prints::print_of(v1::Stage::Intersect, &o, 0)?);
                     }
                     match (o.results, keep) {
                         (Some(r), _) => Ok(Some(Arc::new(r))),
