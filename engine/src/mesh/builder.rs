@@ -689,58 +689,38 @@ impl<'a> MeshBuilder<'a> {
         // merged with the normal table.
         if separate_normals {
             progress.set_message("joining corners with normals");
-            progress.set_total(ncorners);
-            let mut sorted = next.finish()?;
+            let sorted = next.finish()?;
             next = ExternalSorter::new(&dir, "mesh-sort", cap, after_normals);
-            let mut nr = normals.reader()?;
-            let mut at = 0u64;
-            let mut cur = [0.0f32; 3];
-            let mut done = 0u64;
-            while let Some(mut j) = sorted.next()? {
-                if j.n != NO_INDEX {
-                    while at <= j.n {
-                        cur = nr.next()?.ok_or_else(|| truncated_table(&self.name))?;
-                        at += 1;
-                    }
-                    j.normal = cur;
+            join_table(
+                sorted,
+                &mut next,
+                normals.reader()?,
+                |j| j.n,
+                |j, n| {
+                    j.normal = n;
                     j.flags |= HAS_NORMAL;
-                }
-                next.push(j)?;
-                done += 1;
-                if done.is_multiple_of(1 << 16) {
-                    progress.inc(1 << 16);
-                }
-            }
-            progress.inc(done % (1 << 16));
+                },
+                (&self.name, progress, ncorners),
+            )?;
         }
 
         // 3. Sorted by texture coordinates' index (corners without one
         // last) and merged with their table.
         if has_uvs {
             progress.set_message("joining corners with texture coordinates");
-            progress.set_total(ncorners);
-            let mut sorted = next.finish()?;
+            let sorted = next.finish()?;
             next = ExternalSorter::new(&dir, "mesh-sort", cap, by_seq);
-            let mut tr = uvs.reader()?;
-            let mut at = 0u64;
-            let mut cur = [0.0f32; 2];
-            let mut done = 0u64;
-            while let Some(mut j) = sorted.next()? {
-                if j.t != NO_INDEX {
-                    while at <= j.t {
-                        cur = tr.next()?.ok_or_else(|| truncated_table(&self.name))?;
-                        at += 1;
-                    }
-                    j.uv = cur;
+            join_table(
+                sorted,
+                &mut next,
+                uvs.reader()?,
+                |j| j.t,
+                |j, uv| {
+                    j.uv = uv;
                     j.flags |= HAS_UV;
-                }
-                next.push(j)?;
-                done += 1;
-                if done.is_multiple_of(1 << 16) {
-                    progress.inc(1 << 16);
-                }
-            }
-            progress.inc(done % (1 << 16));
+                },
+                (&self.name, progress, ncorners),
+            )?;
         }
 
         // 4. Back into file order, and out.
@@ -772,6 +752,41 @@ impl<'a> MeshBuilder<'a> {
         progress.inc(done % (1 << 16));
         Ok(em.summary)
     }
+}
+
+/// Merges corners sorted by their index into `table` (`index`; corners
+/// without one, [`NO_INDEX`], come last) with the table read front to
+/// back, `set` giving each its entry, into `next`; progress counts the
+/// `total` corners.
+fn join_table<T: Pod + Default>(
+    mut sorted: crate::spill::Sorted<Joined, u64, fn(&Joined) -> u64>,
+    next: &mut ExternalSorter<Joined, u64, fn(&Joined) -> u64>,
+    mut table: TableReader<'_, T>,
+    index: impl Fn(&Joined) -> u64,
+    set: impl Fn(&mut Joined, T),
+    (name, progress, total): (&Path, &dyn Progress, u64),
+) -> Result<(), Error> {
+    progress.set_total(total);
+    let mut at = 0u64;
+    let mut cur = T::default();
+    let mut done = 0u64;
+    while let Some(mut j) = sorted.next()? {
+        let i = index(&j);
+        if i != NO_INDEX {
+            while at <= i {
+                cur = table.next()?.ok_or_else(|| truncated_table(name))?;
+                at += 1;
+            }
+            set(&mut j, cur);
+        }
+        next.push(j)?;
+        done += 1;
+        if done.is_multiple_of(1 << 16) {
+            progress.inc(1 << 16);
+        }
+    }
+    progress.inc(done % (1 << 16));
+    Ok(())
 }
 
 /// The origin of a mesh whose vertices span `lo..hi`: the world's own
