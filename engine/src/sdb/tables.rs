@@ -95,6 +95,12 @@ pub(super) fn decode_tables(
         c.count = count;
         c.bounds = Aabb::from_array(b);
     }
+    // Counts that do not add up in a u64 are corrupt (the sum is checked
+    // against the header's object count later).
+    sizes
+        .classes
+        .iter()
+        .try_fold(0u64, |a, c| a.checked_add(c.count))?;
     let density = if density {
         let level = d.u32()? as i32;
         let origin = [d.u64()? as i64, d.u64()? as i64, d.u64()? as i64];
