@@ -355,7 +355,7 @@ pub fn render(req: &RenderRequest, stages: &dyn Stages) -> Result<RenderResult, 
                 }
                 on
             };
-            let out = df::render(&scene.db, &req.options, &*progress)?;
+            let out = df::render_within(&scene.db, &req.options, memory, &*progress)?;
             let mut stats = out.stats;
             if paged {
                 stats.details = Some(serde_json::json!({

@@ -13,6 +13,7 @@ use sray_engine::shapes::intersect;
 use sray_engine::math::Vec3;
 use sray_engine::models::{Models, Placement};
 use sray_engine::progress::NoProgress;
+use sray_engine::render::Cutouts;
 use sray_engine::sdb::Database;
 use sray_engine::shapes::{KindCounts, Shape};
 use std::io::Write;
@@ -23,12 +24,20 @@ fuzz_target!(|data: &[u8]| {
     let Ok(db) = Database::open(f.path()) else {
         return;
     };
-    // A version 8 file's images decode or are refused, and shading's
+    // A version 8 file's images decode or are refused; a version 9
+    // file's tiles are read (a corrupt one is an error kept for the
+    // render, not a panic), at every level of every chain; shading's
     // look-ups and cut-outs stay in bounds whatever the bindings say.
-    if let Ok(sc) = sray_engine::render::ShadeScene::new(db.scene(), 2, 1e-6)
-        && let Some(cut) = sray_engine::render::Cutouts::new(&db.scene().materials, sc.textures.clone())
-    {
-        let _ = cut;
+    if let Ok((sc, _)) = sray_engine::render::ShadeScene::open(&db, 2, 1e-6, 1 << 20) {
+        let s = sray_engine::texture::Sampler::default();
+        for t in sc.textures.iter() {
+            for level in 0..t.levels() {
+                let _ = t.sample_level(&s, [0.3, 0.7], level);
+                let _ = t.sample_level(&s, [-1.3, 2.5], level);
+            }
+        }
+        let _ = sc.texture_error();
+        let _ = Cutouts::new(&db.scene().materials, sc.textures.clone());
     }
     let _ = db.bbox();
     let Ok(mut scan) = db.scan() else { return };

@@ -30,6 +30,7 @@ mod cli_progress;
 mod cli_render;
 mod cli_scene;
 mod cli_spatial;
+mod cli_textures;
 mod cluster;
 mod cluster_faults;
 mod cluster_observe;

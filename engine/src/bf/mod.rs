@@ -361,6 +361,9 @@ pub struct BfStats {
     pub memory_budget_bytes: u64,
     pub budget: Option<Budget>,
     pub store_number: String,
+    /// Texture tiles the shading and the cut-outs read.
+    #[serde(skip)]
+    pub textures: Option<crate::texture::TileReads>,
 }
 
 /// A round's rays.
@@ -593,6 +596,7 @@ fn render_in<R: Real>(
         intersect_seconds: Some(tr.intersect_seconds),
         shade_seconds: Some(tr.shade_seconds),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
+        textures: st.textures,
         details: Some(serde_json::to_value(&st).map_err(|e| Error::Invalid(e.to_string()))?),
         ..Default::default()
     };

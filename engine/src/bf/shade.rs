@@ -138,6 +138,18 @@ pub struct SetOutput {
     /// Light the shaded surfaces give off (pixel corner, colour).
     pub contributions: Vec<(u32, [i64; 3])>,
     pub counts: RayCounts,
+    /// Hits whose shading reads a texture, left for [`shade_textured`].
+    pending: Vec<Pending>,
+}
+
+/// A hit of a shading set whose shading reads a texture: its place in
+/// the set, the (texture, tile) its lookup starts in, and its surface.
+#[derive(Clone, Copy, Debug)]
+struct Pending {
+    at: u32,
+    key: u64,
+    material: u32,
+    surf: Surface,
 }
 
 /// What one thread's chunk of a batch gives back (see [`shade_indexed`]).
@@ -411,6 +423,9 @@ fn shade_set(
     // Hits on instances of models not held: shaded once the world's
     // objects are done, each model read once for the set.
     let mut deferred: Vec<(u32, Placement)> = Vec::new();
+    // Hits whose shading reads a texture: shaded after the scan, in the
+    // order of the tiles they read.
+    let mut pending: Vec<Pending> = Vec::new();
     while at < set.len() {
         // A block holding none of the hit objects is passed over unread.
         if let Some(end) = scan.next_block_end()
@@ -475,27 +490,49 @@ fn shade_set(
             set[at..stop]
                 .par_chunks(chunk)
                 .zip(outputs.par_iter_mut())
-                .for_each(|(hits, o)| {
+                .enumerate()
+                .for_each(|(c, (hits, o))| {
                     o.rays.clear();
                     o.contributions.clear();
+                    o.pending.clear();
                     o.counts = RayCounts::default();
-                    for h in hits {
+                    for (k, h) in hits.iter().enumerate() {
                         let obj = &objs[(key(h) - first) as usize];
-                        shade_hit(
-                            materials,
+                        let Some((surf, material)) = surface_of(models, h, obj) else {
+                            continue;
+                        };
+                        let mat = &materials[material as usize];
+                        if let Some((image, tile)) = shade_scene.tile_key(mat, &surf) {
+                            o.pending.push(Pending {
+                                at: (at + c * chunk + k) as u32,
+                                key: (image as u64) << 32 | tile as u64,
+                                material,
+                                surf,
+                            });
+                            continue;
+                        }
+                        shade_surface(
                             shade_scene,
-                            models,
-                            h,
-                            obj,
-                            (&mut o.rays, &mut o.contributions),
+                            &h.ray,
+                            h.id,
+                            &surf,
+                            mat,
+                            &mut o.rays,
+                            &mut o.contributions,
                             &mut o.counts,
                         );
                     }
                 })
         });
+        for o in &mut setup.outputs[..n_chunks] {
+            pending.append(&mut o.pending);
+        }
         let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
         pool.install(|| next.extend_from_slices(&parts))?;
         at = stop;
+    }
+    if !pending.is_empty() {
+        shade_textured(setup, pool, set, &mut pending, next, contribute, counts)?;
     }
     st.db_scans += 1;
     st.db_bytes_read += scan.stats().bytes_read;
@@ -559,35 +596,74 @@ fn shade_deferred(
     Ok(())
 }
 
-/// Shades one hit found by the join: the surface from the object (or,
-/// for an instance, from its model's primitive, placed).
-fn shade_hit(
-    materials: &[Material],
-    shade_scene: &ShadeScene,
-    models: &Models,
-    h: &HitRec,
-    obj: &ObjectRef<'_>,
-    (out, emitted): (&mut Vec<RayRec>, &mut Vec<(u32, [i64; 3])>),
-    c: &mut RayCounts,
-) {
+/// The surface of a hit found by the join and its material's index: from
+/// the object (or, for an instance, from its model's primitive, placed);
+/// `None` for an instance whose model is not held (shaded later, see
+/// [`shade_deferred`]).
+fn surface_of(models: &Models, h: &HitRec, obj: &ObjectRef<'_>) -> Option<(Surface, u32)> {
     let r = &h.ray;
-    let o = Vec3::from_array(r.o);
-    let d = Vec3::from_array(r.d);
-    let ray = RayQ::from_vec3(o, d);
-    let (surf, material) = match (&obj.shape, h.prim.instance_parts()) {
-        (Shape::Instance(i), Some((_, p))) => {
-            match models.surface(&Placement::of(i), p, &ray, h.t) {
-                Some(found) => found,
-                // A model not held (shaded later, see `shade_deferred`),
-                // or a primitive past its model, which results checked
-                // against the database do not name.
-                None => return,
-            }
-        }
-        _ => (obj.shape.surface(&ray, h.t), obj.material),
-    };
-    let mat = &materials[material as usize];
-    shade_surface(shade_scene, r, h.id, &surf, mat, out, emitted, c);
+    let ray = RayQ::from_vec3(Vec3::from_array(r.o), Vec3::from_array(r.d));
+    match (&obj.shape, h.prim.instance_parts()) {
+        // A model not held, or a primitive past its model, which results
+        // checked against the database do not name: `None`.
+        (Shape::Instance(i), Some((_, p))) => models.surface(&Placement::of(i), p, &ray, h.t),
+        _ => Some((obj.shape.surface(&ray, h.t), obj.material)),
+    }
+}
+
+/// Shades the hits of a set whose shading reads a texture, sorted by the
+/// (texture, tile) their lookups start in (Eisenacher et al.'s sorted
+/// deferred shading, the paper's sorted join carried on to the texture
+/// tiles): a texture far larger than the tile cache is read nearly once
+/// per set, tile after tile, instead of at random. Colour sums and the
+/// next round's sort do not depend on the order, so neither does the
+/// image.
+fn shade_textured(
+    setup: &mut ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    set: &[HitRec],
+    pending: &mut Vec<Pending>,
+    next: &mut NextRays,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
+    counts: &mut RayCounts,
+) -> Result<(), Error> {
+    pending.sort_unstable_by_key(|p| (p.key, p.at));
+    let (materials, shade_scene) = (setup.materials, setup.shade);
+    // Chunks in tile order: each thread reads its own run of tiles.
+    let chunks = pool.current_num_threads().max(1) * 4;
+    let chunk = pending.len().div_ceil(chunks).max(64);
+    let n_chunks = pending.len().div_ceil(chunk);
+    if setup.outputs.len() < n_chunks {
+        setup.outputs.resize_with(n_chunks, Default::default);
+    }
+    let outputs = &mut setup.outputs[..n_chunks];
+    pool.install(|| {
+        pending
+            .par_chunks(chunk)
+            .zip(outputs.par_iter_mut())
+            .for_each(|(ps, o)| {
+                o.rays.clear();
+                o.contributions.clear();
+                o.counts = RayCounts::default();
+                for p in ps {
+                    let h = &set[p.at as usize];
+                    shade_surface(
+                        shade_scene,
+                        &h.ray,
+                        h.id,
+                        &p.surf,
+                        &materials[p.material as usize],
+                        &mut o.rays,
+                        &mut o.contributions,
+                        &mut o.counts,
+                    );
+                }
+            })
+    });
+    let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
+    pool.install(|| next.extend_from_slices(&parts))?;
+    pending.clear();
+    Ok(())
 }
 
 /// Shades ray `id` of the round, `r`, at surface `surf` of material `mat`

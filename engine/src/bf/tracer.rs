@@ -278,6 +278,15 @@ impl<'db, R: Real> Tracer<'db, R> {
             + db.block_count()
                 * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64);
         let store = StorePlan::new(bf.store, &specs);
+        // Textures: held, or read through a cache, within the budget.
+        let eps = epsilon(&db.bbox(), opts.precision);
+        let (mut shade_scene, texture_bytes) =
+            ShadeScene::open(db, opts.max_depth, eps, bf.memory)?;
+        shade_scene.footprint = Some(crate::render::Footprint::of(
+            &db.scene().view,
+            opts.width,
+            opts.height,
+        ));
         // A reader thread needs a core beside the shards' and a few block
         // buffers: worth it when they are a small part of the budget.
         let read_ahead =
@@ -286,7 +295,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             bf.memory,
             super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
-            models_bytes,
+            models_bytes + texture_bytes,
             db.scan_buffer_bytes() as u64
                 + if read_ahead {
                     crate::sdb::read_ahead_bytes(db)
@@ -301,8 +310,6 @@ impl<'db, R: Real> Tracer<'db, R> {
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
         let spill = SpillDir::new(bf.spill_dir.as_deref())?;
-        let eps = epsilon(&db.bbox(), opts.precision);
-        let shade_scene = ShadeScene::new(db.scene(), opts.max_depth, eps)?;
         let mut models = models;
         models.set_cutouts(crate::render::Cutouts::new(
             &models.material_table(&db.scene().materials),
@@ -634,6 +641,9 @@ impl<'db, R: Real> Tracer<'db, R> {
                 )?
             }
         };
+        if let Some(e) = self.shade_scene.texture_error() {
+            return Err(e);
+        }
         self.stats.db_scans += sst.db_scans;
         self.stats.db_bytes_read += sst.db_bytes_read;
         self.stats.db_blocks_skipped += sst.db_blocks_skipped;
@@ -689,6 +699,7 @@ impl<'db, R: Real> Tracer<'db, R> {
     /// The statistics so far, with the spill total brought up to date.
     pub fn finish_stats(&mut self) -> BfStats {
         self.stats.spill_bytes_written = self.spill.bytes_written();
+        self.stats.textures = self.shade_scene.tile_reads();
         self.stats.clone()
     }
 }

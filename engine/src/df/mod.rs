@@ -216,12 +216,15 @@ fn estimate_one(db: &Database) -> u64 {
 }
 
 impl<'t> DfScene<'t> {
-    /// Decodes the records and builds the grids (the preprocess).
+    /// Decodes the records and builds the grids (the preprocess); opens
+    /// the textures with a cache sized from `memory` (see
+    /// [`ShadeScene::open`]).
     pub fn new(
         db: &Database,
         objects: &'t ObjectStore,
         models: Models,
         opts: &RenderOptions,
+        memory: u64,
     ) -> Result<DfScene<'t>, Error> {
         opts.validate()?;
         let n = objects.len();
@@ -320,7 +323,12 @@ impl<'t> DfScene<'t> {
             .map(|g| pyramid::BlockBounds::new(&g.spec, g.pyramid.height(), slack))
             .collect();
         let materials = models.material_table(&header.materials);
-        let shade = ShadeScene::new(header, opts.max_depth, eps)?;
+        let (mut shade, _) = ShadeScene::open(db, opts.max_depth, eps, memory)?;
+        shade.footprint = Some(crate::render::Footprint::of(
+            &header.view,
+            opts.width,
+            opts.height,
+        ));
         let mut models = models;
         models.set_cutouts(Cutouts::new(&materials, shade.textures.clone()));
         Ok(DfScene {
@@ -496,10 +504,26 @@ pub struct DfOutput {
     pub stats: RenderStats,
 }
 
+/// Memory a depth-first render's texture tiles may take when no budget
+/// is given ([`render`]).
+pub const TEXTURE_MEMORY: u64 = 256 << 20;
+
 /// Renders `db` depth-first.
 pub fn render(
     db: &Database,
     opts: &RenderOptions,
+    progress: &dyn Progress,
+) -> Result<DfOutput, Error> {
+    render_within(db, opts, TEXTURE_MEMORY, progress)
+}
+
+/// Renders `db` depth-first within a budget of `memory` bytes: the
+/// objects are held whole (the caller chose this tracer because they
+/// fit), the textures' tiles read through a cache sized from it.
+pub fn render_within(
+    db: &Database,
+    opts: &RenderOptions,
+    memory: u64,
     progress: &dyn Progress,
 ) -> Result<DfOutput, Error> {
     let t0 = Instant::now();
@@ -511,10 +535,14 @@ pub fn render(
         opts.aggregates.depth_first(),
         progress,
     )?;
-    let scene = DfScene::new(db, &objects, models, opts)?;
+    let scene = DfScene::new(db, &objects, models, opts, memory)?;
     let preprocess = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let (frame, rays, tests, intersect) = trace::render(&scene, opts, progress)?;
+    // A texture tile that could not be read gave zero texels: no image.
+    if let Some(e) = scene.shade.texture_error() {
+        return Err(e);
+    }
     let trace_seconds = t1.elapsed().as_secs_f64();
     let grids = scene.grid_stats();
     let stats = RenderStats {
@@ -537,6 +565,7 @@ pub fn render(
         intersect_seconds: opts.profile.then_some(intersect),
         shade_seconds: opts.profile.then_some((trace_seconds - intersect).max(0.0)),
         peak_rss_bytes: crate::sys::peak_rss_bytes(),
+        textures: scene.shade.tile_reads(),
         ..Default::default()
     };
     Ok(DfOutput { frame, stats })
@@ -605,9 +634,11 @@ mod tests {
                 precision,
                 ..Default::default()
             };
-            let plain = DfScene::new(&db, &objects, Models::default(), &opts).unwrap();
+            let plain =
+                DfScene::new(&db, &objects, Models::default(), &opts, TEXTURE_MEMORY).unwrap();
             let (want, ..) = trace::render(&plain, &opts, &NoProgress).unwrap();
-            let mut s = DfScene::new(&db, &objects, Models::default(), &opts).unwrap();
+            let mut s =
+                DfScene::new(&db, &objects, Models::default(), &opts, TEXTURE_MEMORY).unwrap();
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(1)
                 .build()

@@ -21,12 +21,18 @@ pub struct Surface {
 pub struct Attrs {
     pub uv: Option<[f32; 2]>,
     pub color: Option<[f32; 4]>,
+    /// How fast the texture coordinates change across the surface: the
+    /// square root of the triangle's area in texture coordinates over its
+    /// area in space (zero without coordinates). Shading turns it into a
+    /// footprint in texels to pick a mip level.
+    pub uv_per_length: f32,
 }
 
 impl Attrs {
     pub const NONE: Attrs = Attrs {
         uv: None,
         color: None,
+        uv_per_length: 0.0,
     };
 }
 

@@ -988,6 +988,11 @@ impl Corners {
             };
             for (k, x) in o.iter_mut().enumerate() {
                 *x = if k < self.dims { v[k] } else { 1.0 };
+                if !x.is_finite() {
+                    return Err(format!(
+                        "vertex {i} has a texture coordinate or colour that is not a finite number"
+                    ));
+                }
             }
         }
         Ok(out)
@@ -1014,7 +1019,7 @@ impl Emit<'_, '_> {
                 // Checked now, so that a render does not fail on it.
                 let what = (self.bad)(name.clone()).to_string();
                 Texture::decode(&bytes, &what, Encoding::Srgb)?;
-                let i = self.sink.texture(&TextureImage { name: what, bytes })?;
+                let i = self.sink.texture(&TextureImage::encoded(what, bytes))?;
                 self.images.insert(image.index(), i);
                 i
             }

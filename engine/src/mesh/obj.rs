@@ -100,7 +100,7 @@ fn read_image(path: &Path, b: &mut MeshBuilder<'_>, warnings: &mut Warnings) -> 
         );
         return None;
     }
-    Some(b.add_image(TextureImage { name: what, bytes }))
+    Some(b.add_image(TextureImage::encoded(what, bytes)))
 }
 
 /// Reads OBJ text from `src`; `name` is used in messages. Material

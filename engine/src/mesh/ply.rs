@@ -268,7 +268,7 @@ fn texture_material(
         );
         return NO_MATERIAL;
     }
-    let image = b.add_image(TextureImage { name: what, bytes });
+    let image = b.add_image(TextureImage::encoded(what, bytes));
     b.add_material(Material {
         color: [1.0; 3],
         texture: Some(TextureBinding {

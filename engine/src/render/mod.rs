@@ -16,7 +16,7 @@ pub use cutout::Cutouts;
 pub use frame::{Contribution, FIXED_ONE, Frame, ImageFormat, to_fixed};
 pub use options::{Aggregates, GridRes, Mode, Precision, RenderOptions};
 pub use sampling::{EyeRays, MAX_SAMPLES, Sampling};
-pub use shade::{ShadeLight, ShadeScene, Spawn, brdf, shade};
+pub use shade::{Footprint, ShadeLight, ShadeScene, Spawn, brdf, shade};
 pub use stats::{KindCounts, RayCounts, RenderStats};
 
 use crate::scene::{Aabb, SceneHeader};

@@ -5,7 +5,9 @@
 use crate::error::Error;
 use crate::intersect::Surface;
 use crate::math::Vec3;
-use crate::scene::{LightKind, Material, Pbr, Photometric, SceneHeader};
+use crate::scene::{ImageData, LightKind, Material, Pbr, Photometric, SceneHeader, TextureBinding};
+use crate::sdb::Database;
+use crate::texture::mip::TILE_BYTES;
 use crate::texture::{Encoding, Texture};
 use std::sync::Arc;
 
@@ -27,21 +29,110 @@ pub struct ShadeScene {
     pub max_depth: u8,
     /// Secondary and shadow rays ignore hits closer than this.
     pub eps: f64,
-    /// The scene's images, decoded (base colour textures: sRGB).
+    /// The scene's images (base colour textures: sRGB).
     pub textures: Arc<[Texture]>,
+    /// Where the eye is and how wide a pixel is, to pick mip levels;
+    /// without it every lookup reads the finest level.
+    pub footprint: Option<Footprint>,
+}
+
+/// What the camera says of the width of a ray's footprint: `spread`
+/// times the distance from `eye`, the width of the eye ray's pixel there
+/// (a lower bound for any ray whose path started at the eye, since a path
+/// is no shorter than the straight line back to the eye).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footprint {
+    pub eye: Vec3,
+    /// A pixel's width at unit distance.
+    pub spread: f64,
+}
+
+impl Footprint {
+    /// The footprint of `camera`'s pixels: the view angle spans the
+    /// image's longer side.
+    pub fn of(view: &crate::scene::View, width: u32, height: u32) -> Footprint {
+        let long = width.max(height).max(1) as f64;
+        Footprint {
+            eye: Vec3::from_array(view.from),
+            spread: 2.0 * (view.angle.to_radians() / 2.0).tan() / long,
+        }
+    }
 }
 
 impl ShadeScene {
     /// What shading needs of `h`; its images are decoded here (an image
-    /// that does not decode is an error naming it).
+    /// that does not decode is an error naming it). A database's tiled
+    /// images are read from it: see [`ShadeScene::with_textures`].
     pub fn new(h: &SceneHeader, max_depth: u8, eps: f64) -> Result<ShadeScene, Error> {
-        let n = h.lights.len();
         let textures = h
             .textures
             .iter()
-            .map(|t| Texture::decode(&t.bytes, &t.name, Encoding::Srgb))
+            .map(|t| match &t.data {
+                ImageData::Encoded(bytes) => Texture::decode(bytes, &t.name, Encoding::Srgb),
+                ImageData::Tiled(_) => Err(Error::Scene(format!(
+                    "{}: a tiled image is read from its database",
+                    t.name
+                ))),
+            })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(ShadeScene {
+        Ok(Self::with_textures(h, max_depth, eps, textures.into()))
+    }
+
+    /// What shading needs of database `db` for a render within `memory`
+    /// bytes, and the bytes its textures may hold: images stored whole
+    /// (version 8) decoded, tiled ones (version 9) read through a cache
+    /// of an eighth of the memory (no more than they take), so that
+    /// textures larger than the memory are read a tile at a time.
+    pub fn open(
+        db: &Database,
+        max_depth: u8,
+        eps: f64,
+        memory: u64,
+    ) -> Result<(ShadeScene, u64), Error> {
+        let tiled: u64 = db
+            .scene()
+            .textures
+            .iter()
+            .map(|t| match &t.data {
+                ImageData::Tiled(t) => t.tiles.len() as u64 * TILE_BYTES as u64,
+                ImageData::Encoded(_) => 0,
+            })
+            .sum();
+        let cache = tiled.min((memory / 8).max(16 * TILE_BYTES as u64));
+        let textures = db.textures(cache)?;
+        let held: u64 = textures.iter().map(|t| t.bytes() as u64).sum();
+        let sc = Self::with_textures(db.scene(), max_depth, eps, textures);
+        Ok((
+            sc,
+            held + if tiled > 0 {
+                cache.max(16 * TILE_BYTES as u64)
+            } else {
+                0
+            },
+        ))
+    }
+
+    /// The first texture tile a render could not read, if any: shading
+    /// went on with zero texels, so the render must fail with it.
+    pub fn texture_error(&self) -> Option<Error> {
+        self.textures.iter().find_map(|t| t.store_error())
+    }
+
+    /// Tiles read so far by every texture (they share one store); `None`
+    /// when no texture is read from a database.
+    pub fn tile_reads(&self) -> Option<crate::texture::TileReads> {
+        self.textures.iter().find_map(|t| t.store_reads())
+    }
+
+    /// What shading needs of `h`, whose images are `textures`.
+    pub fn with_textures(
+        h: &SceneHeader,
+        max_depth: u8,
+        eps: f64,
+        textures: Arc<[Texture]>,
+    ) -> ShadeScene {
+        let n = h.lights.len();
+        ShadeScene {
             lights: h
                 .lights
                 .iter()
@@ -54,8 +145,38 @@ impl ShadeScene {
             background: h.background,
             max_depth,
             eps,
-            textures: textures.into(),
-        })
+            textures,
+            footprint: None,
+        }
+    }
+
+    /// The mip level of `tex` a lookup at surface `s` through binding `b`
+    /// reads: the level whose texels match the pixel's footprint there.
+    #[inline]
+    pub fn level(&self, tex: &Texture, b: &TextureBinding, s: &Surface) -> usize {
+        let Some(f) = self.footprint else {
+            return 0;
+        };
+        let scale = b.transform.scale[0].abs().max(b.transform.scale[1].abs()) as f64;
+        let texels = f.spread
+            * (s.p - f.eye).length()
+            * s.attrs.uv_per_length as f64
+            * scale
+            * tex.width.max(tex.height) as f64;
+        tex.level_for(texels)
+    }
+
+    /// The texture a lookup at `s` with material `m` reads, and the tile
+    /// it starts in (`None` when it reads none): hits are shaded in this
+    /// order so that textures larger than memory are read tile by tile.
+    pub fn tile_key(&self, m: &Material, s: &Surface) -> Option<(u32, u32)> {
+        let (b, uv) = (m.texture?, s.attrs.uv?);
+        let tex = self.textures.get(b.image as usize)?;
+        let level = self.level(tex, &b, s);
+        Some((
+            b.image,
+            tex.tile_of(&b.sampler, b.transform.apply(uv), level),
+        ))
     }
 
     /// Material `m` as it looks at surface `s`: its colour times the base
@@ -68,7 +189,7 @@ impl ShadeScene {
             (Some(b), Some(uv)) => self
                 .textures
                 .get(b.image as usize)
-                .map(|t| t.sample(&b.sampler, b.transform.apply(uv))),
+                .map(|t| t.sample_level(&b.sampler, b.transform.apply(uv), self.level(t, &b, s))),
             _ => None,
         };
         if tex.is_none() && s.attrs.color.is_none() {

@@ -58,6 +58,9 @@ pub struct RenderStats {
     pub shade_seconds: Option<f64>,
     pub total_seconds: f64,
     pub peak_rss_bytes: u64,
+    /// Texture tiles read from the database (scenes with tiled textures).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub textures: Option<crate::texture::TileReads>,
     /// Statistics of one tracer (breadth-first passes, the cluster's
     /// traffic, depth-first paging), flattened into the same object.
     #[serde(flatten)]

@@ -90,15 +90,53 @@ impl TextureBinding {
     }
 }
 
-/// An image a scene's materials sample, as the file gave it (PNG or
-/// JPEG bytes): decoded when a render starts
-/// ([`crate::texture::Texture::decode`]).
+/// An image a scene's materials sample: as the file gave it (PNG or JPEG
+/// bytes: a scene being read, or a version 8 database), decoded when a
+/// render starts ([`crate::texture::Texture::decode`]); or, in a database
+/// of version 9, its mip chain's tiles, read as shading needs them.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TextureImage {
     /// Where it came from (a file name, or the glTF image's index), for
     /// messages.
     pub name: String,
-    pub bytes: Vec<u8>,
+    pub data: ImageData,
+}
+
+/// What a [`TextureImage`] holds.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ImageData {
+    /// The file's bytes, PNG or JPEG.
+    Encoded(Vec<u8>),
+    /// Where its tiles lie in the database.
+    Tiled(TiledImage),
+}
+
+/// An image stored as tiles ([`crate::texture::mip`]): its size, how its
+/// colour values are encoded, and where each tile of its chain lies.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TiledImage {
+    pub width: u32,
+    pub height: u32,
+    pub encoding: crate::texture::Encoding,
+    pub tiles: Vec<crate::texture::TileRef>,
+}
+
+impl TextureImage {
+    /// An image as a file gives it.
+    pub fn encoded(name: String, bytes: Vec<u8>) -> TextureImage {
+        TextureImage {
+            name,
+            data: ImageData::Encoded(bytes),
+        }
+    }
+
+    /// Bytes it holds in memory with the tables.
+    pub fn held_bytes(&self) -> u64 {
+        match &self.data {
+            ImageData::Encoded(b) => b.len() as u64,
+            ImageData::Tiled(t) => 16 * t.tiles.len() as u64,
+        }
+    }
 }
 
 /// glTF 2.0's metallic-roughness material (Appendix B of the

@@ -5,8 +5,9 @@
 use super::format::*;
 use super::packed::PackCounts;
 use crate::error::Error;
-use crate::scene::{Aabb, DensitySummary, Light, SceneHeader, SizeSummary, View};
+use crate::scene::{Aabb, DensitySummary, ImageData, Light, SceneHeader, SizeSummary, View};
 use crate::shapes::{KindCounts, ShapeKind};
+use crate::texture::{Encoding, Texture, TileRef, TileStore};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, OnceLock};
@@ -31,7 +32,9 @@ pub struct Database {
     pub(super) compression: Compression,
     pub(super) block_count: u64,
     pub(super) material_statements: u64,
-    pub(super) tables_offset: u64,
+    /// Where the blocks end: the tables, or the texture tiles before them
+    /// (version 9).
+    pub(super) blocks_end: u64,
     pub(super) raw_bytes: u64,
     pub(super) decoded_bytes: u64,
     /// Blocks store triangles as runs (version 4).
@@ -273,7 +276,47 @@ impl Database {
 
     /// Bytes of the blocks, headers and payloads: what a full scan reads.
     pub fn blocks_bytes(&self) -> u64 {
-        self.tables_offset - HEADER_BYTES as u64
+        self.blocks_end - HEADER_BYTES as u64
+    }
+
+    /// The scene's images as textures: tiled images (version 9) read from
+    /// this file as shading needs them, through a cache of `cache_bytes`;
+    /// images stored whole (version 8) decoded into memory now.
+    pub fn textures(&self, cache_bytes: u64) -> Result<Arc<[Texture]>, Error> {
+        let images = &self.scene.textures;
+        let store = if images.iter().any(|i| matches!(i.data, ImageData::Tiled(_))) {
+            Some(Arc::new(TileStore::open(
+                &self.path,
+                self.compression != Compression::None,
+                cache_bytes,
+            )?))
+        } else {
+            None
+        };
+        images
+            .iter()
+            .enumerate()
+            .map(|(i, im)| match (&im.data, &store) {
+                (ImageData::Encoded(bytes), _) => Texture::decode(bytes, &im.name, Encoding::Srgb),
+                (ImageData::Tiled(t), Some(store)) => {
+                    let refs = t
+                        .tiles
+                        .iter()
+                        .map(|r| TileRef {
+                            offset: r.offset + self.base,
+                            ..*r
+                        })
+                        .collect();
+                    Texture::stored(t.width, t.height, t.encoding, store.clone(), i as u32, refs)
+                        .map_err(|message| Error::Database {
+                            file: self.path.clone(),
+                            location: "tables".into(),
+                            message,
+                        })
+                }
+                (ImageData::Tiled(_), None) => unreachable!("a store is open for tiled images"),
+            })
+            .collect()
     }
 
     /// Triangle runs and the triangles they hold (zero before version 4).

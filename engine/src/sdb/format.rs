@@ -46,8 +46,15 @@ pub const VERSION_APPEARANCE: u32 = 7;
 /// be textured triangles ([`crate::shapes::Textured`]). Written only when
 /// a scene has either, so every other database stays as it was.
 pub const VERSION_TEXTURES: u32 = 8;
+/// Version 9: as version 8, with the images stored as tiles of their mip
+/// chains ([`crate::texture::mip`]) in a section between the last block
+/// and the tables, which list where each tile lies instead of holding the
+/// images' bytes: a render reads the tiles it needs, through a cache, so
+/// textures may be larger than memory. Written for every scene with
+/// textures or corner attributes (version 8 is still read).
+pub const VERSION_TILED: u32 = 9;
 /// The newest version read.
-pub const VERSION_NEWEST: u32 = VERSION_TEXTURES;
+pub const VERSION_NEWEST: u32 = VERSION_TILED;
 /// Limits on a database's images: how many, and how many bytes in all
 /// (they are held in memory with the tables).
 pub const MAX_IMAGES: usize = 1 << 16;

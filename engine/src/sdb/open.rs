@@ -7,7 +7,7 @@
 use super::database::{Database, ModelEntry, VERIFY_CHECKSUMS};
 use super::format::*;
 use super::packed::PackCounts;
-use super::tables::{Tables, decode_tables};
+use super::tables::{Tables, TilesSection, decode_tables};
 use crate::error::{Error, IoContext};
 use crate::scene::{Aabb, Material, SceneHeader};
 use crate::shapes::{KINDS, KindCounts, ShapeKind};
@@ -74,7 +74,18 @@ impl Database {
         };
         let h = read_header(&mut f, &at)?;
         let layout = check_header(&h, file_bytes, &at)?;
-        let (mut scene, sizes, density, models) = read_tables(&mut f, &h, &layout, &at)?;
+        let (mut scene, sizes, density, models, tiles) = read_tables(&mut f, &h, &layout, &at)?;
+        // Blocks end where the tiles begin (version 9), else at the tables.
+        let blocks_end = if tiles == TilesSection::default() {
+            h.tables_offset
+        } else {
+            tiles.offset
+        };
+        let in_place = tiles == TilesSection::default()
+            || tiles.offset.checked_add(tiles.bytes) == Some(h.tables_offset);
+        if blocks_end < HEADER_BYTES as u64 || !in_place {
+            return Err(at.err("tables", "the texture tiles are out of place".into()));
+        }
         check_models(&h, &models, layout.has_models, file_bytes, &at)?;
         // A model's materials bind the world's images (checked when the
         // world opens it); the world's, its own.
@@ -109,7 +120,7 @@ impl Database {
             compression: layout.compression,
             block_count: h.block_count,
             material_statements: h.material_statements,
-            tables_offset: h.tables_offset,
+            blocks_end,
             raw_bytes: h.raw_bytes,
             decoded_bytes: storage.decoded_bytes,
             runs: storage.runs,
@@ -258,6 +269,7 @@ fn read_tables(f: &mut File, h: &RawHeader, layout: &Layout, at: &At) -> Result<
         h.version >= VERSION_DENSITY,
         h.version >= VERSION_APPEARANCE,
         h.version >= VERSION_TEXTURES,
+        h.version >= VERSION_TILED,
         layout.has_models,
     )
     .ok_or_else(|| at.err("tables", "malformed tables".into()))

@@ -195,10 +195,10 @@ impl Scan<'_> {
     /// The next block, or `None` after the last one.
     pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
         if self.next_index == self.db.block_count {
-            if self.next_object != self.db.object_count || self.offset != self.db.tables_offset {
+            if self.next_object != self.db.object_count || self.offset != self.db.blocks_end {
                 return Err(self.err(format!(
                     "blocks hold {} objects ending at byte {}, the header says {} objects ending at byte {}",
-                    self.next_object, self.offset, self.db.object_count, self.db.tables_offset
+                    self.next_object, self.offset, self.db.object_count, self.db.blocks_end
                 )));
             }
             if self.verify
@@ -218,7 +218,7 @@ impl Scan<'_> {
             }
             return Ok(None);
         }
-        if self.offset + BLOCK_HEADER_BYTES as u64 > self.db.tables_offset {
+        if self.offset + BLOCK_HEADER_BYTES as u64 > self.db.blocks_end {
             return Err(self.err("block runs into the tables (corrupt block count)"));
         }
         let mut hb = [0u8; BLOCK_HEADER_BYTES];
@@ -242,7 +242,7 @@ impl Scan<'_> {
             return Err(self.err("block lengths are out of range: the block is corrupt"));
         }
         let end = self.offset + (BLOCK_HEADER_BYTES + stored_len) as u64;
-        if end > self.db.tables_offset {
+        if end > self.db.blocks_end {
             return Err(self.err("block runs into the tables: the block is corrupt"));
         }
         let runs = self.db.runs;

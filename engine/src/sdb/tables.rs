@@ -3,12 +3,14 @@
 
 use super::database::ModelEntry;
 use super::format::*;
+use crate::scene::ImageData;
 use crate::scene::density::MAX_ENTRIES as MAX_DENSITY_ENTRIES;
 use crate::scene::{
     Aabb, DENSITY_CELLS, DensitySummary, Light, LightKind, Material, Pbr, Photometric,
-    SIZE_CLASSES, SceneHeader, SizeClass, SizeSummary, TextureBinding, TextureImage, View,
+    SIZE_CLASSES, SceneHeader, SizeClass, SizeSummary, TextureBinding, TextureImage, TiledImage,
+    View,
 };
-use crate::texture::{Filter, Sampler, UvTransform, Wrap};
+use crate::texture::{Encoding, Filter, Sampler, TileRef, UvTransform, Wrap};
 
 /// What the tables hold, decoded.
 pub(super) type Tables = (
@@ -16,17 +18,29 @@ pub(super) type Tables = (
     SizeSummary,
     Option<DensitySummary>,
     Vec<ModelEntry>,
+    TilesSection,
 );
+
+/// Where a version 9 database's texture tiles lie: from `offset`, `bytes`
+/// long, between the last block and the tables (both zero when it has
+/// none).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(super) struct TilesSection {
+    pub offset: u64,
+    pub bytes: u64,
+}
 
 /// The tables: the scene's header, the size summary, (`density`: from
 /// version 3 on) the density summary, (`appearance`: version 7) the glTF
 /// materials and lights (`textures`: version 8, then the materials'
-/// textures and their images), and (`with_models`) the models.
+/// textures and their images; `tiled`: version 9, the images as tiles),
+/// and (`with_models`) the models.
 pub(super) fn decode_tables(
     buf: &[u8],
     density: bool,
     appearance: bool,
     textures: bool,
+    tiled: bool,
     with_models: bool,
 ) -> Option<Tables> {
     let mut d = Dec { buf, pos: 0 };
@@ -147,10 +161,16 @@ pub(super) fn decode_tables(
         None
     };
     let mut images = Vec::new();
+    let mut section = TilesSection::default();
     if appearance {
         decode_appearance(&mut d, &mut lights, &mut materials)?;
         if textures {
-            images = decode_textures(&mut d, &mut materials)?;
+            decode_bindings(&mut d, &mut materials)?;
+            if tiled {
+                (images, section) = decode_tiled_images(&mut d)?;
+            } else {
+                images = decode_images(&mut d)?;
+            }
         }
         if !with_models && d.remaining() != 0 {
             return None;
@@ -183,6 +203,7 @@ pub(super) fn decode_tables(
         sizes,
         density,
         models,
+        section,
     ))
 }
 
@@ -287,8 +308,9 @@ const TEXTURE_ENTRY: usize = 4 * 10;
 
 /// The texture part of the appearance table (version 8): each textured
 /// material's binding (image, sampler, transform), then the images, each
-/// its name and its bytes as the file gave them (PNG or JPEG).
-pub(super) fn encode_textures(materials: &[Material], images: &[TextureImage]) -> Vec<u8> {
+/// its name and its bytes as the file gave them (PNG or JPEG). Version 9
+/// ([`encode_tiled_images`]) lists tiles instead of bytes.
+pub(super) fn encode_bindings(materials: &[Material]) -> Vec<u8> {
     let mut e = Enc::default();
     let bound: Vec<(usize, &TextureBinding)> = materials
         .iter()
@@ -313,19 +335,103 @@ pub(super) fn encode_textures(materials: &[Material], images: &[TextureImage]) -
             e.f32(x);
         }
     }
+    e.0
+}
+
+/// Bytes of one tile's entry: its offset, stored size and CRC-32.
+const TILE_ENTRY: usize = 16;
+/// Bytes of an image's entry besides its name and tiles.
+const TILED_IMAGE_ENTRY: usize = 4 * 5;
+/// The widest and tallest image a database holds.
+pub const MAX_IMAGE_SIDE: u32 = 1 << 17;
+
+/// The images of a version 9 database: where the tiles' section lies,
+/// then each image's name, size, encoding and tiles.
+pub(super) fn encode_tiled_images(section: TilesSection, images: &[TextureImage]) -> Vec<u8> {
+    let mut e = Enc::default();
+    e.u64(section.offset);
+    e.u64(section.bytes);
     e.u32(images.len() as u32);
     for im in images {
+        let ImageData::Tiled(t) = &im.data else {
+            unreachable!("the writer tiles every image before the tables");
+        };
         e.u32(im.name.len() as u32);
         e.0.extend_from_slice(im.name.as_bytes());
-        e.u64(im.bytes.len() as u64);
-        e.0.extend_from_slice(&im.bytes);
+        e.u32(t.width);
+        e.u32(t.height);
+        e.u32(t.encoding as u32);
+        e.u32(t.tiles.len() as u32);
+        for r in &t.tiles {
+            e.u64(r.offset);
+            e.u32(r.stored);
+            e.u32(r.crc);
+        }
     }
     e.0
 }
 
-/// Reads the texture part of the appearance table into the materials it
-/// names; returns the images.
-fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<TextureImage>> {
+/// Reads the images of a version 9 database: every tile inside the
+/// tiles' section, as many as the image's mip chain has.
+fn decode_tiled_images(d: &mut Dec<'_>) -> Option<(Vec<TextureImage>, TilesSection)> {
+    let section = TilesSection {
+        offset: d.u64()?,
+        bytes: d.u64()?,
+    };
+    let end = section.offset.checked_add(section.bytes)?;
+    let n = d.u32()? as usize;
+    if n > MAX_IMAGES || n * (4 + TILED_IMAGE_ENTRY) > d.remaining() {
+        return None;
+    }
+    let mut images = Vec::with_capacity(n);
+    for _ in 0..n {
+        let len = d.u32()? as usize;
+        let name = String::from_utf8(d.bytes(len)?.to_vec()).ok()?;
+        let (width, height) = (d.u32()?, d.u32()?);
+        let encoding = match d.u32()? {
+            0 => Encoding::Srgb,
+            1 => Encoding::Linear,
+            _ => return None,
+        };
+        let count = d.u32()? as usize;
+        if width > MAX_IMAGE_SIDE
+            || height > MAX_IMAGE_SIDE
+            || crate::texture::mip::levels(width, height)?.1 as usize != count
+            || count * TILE_ENTRY > d.remaining()
+        {
+            return None;
+        }
+        let mut tiles = Vec::with_capacity(count);
+        for _ in 0..count {
+            let r = TileRef {
+                offset: d.u64()?,
+                stored: d.u32()?,
+                crc: d.u32()?,
+            };
+            let tile_end = r.offset.checked_add(r.stored as u64)?;
+            if r.offset < section.offset
+                || tile_end > end
+                || r.stored as usize > max_stored(crate::texture::mip::TILE_BYTES)
+            {
+                return None;
+            }
+            tiles.push(r);
+        }
+        images.push(TextureImage {
+            name,
+            data: ImageData::Tiled(TiledImage {
+                width,
+                height,
+                encoding,
+                tiles,
+            }),
+        });
+    }
+    Some((images, section))
+}
+
+/// Reads the materials' texture bindings into the materials they name.
+fn decode_bindings(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<()> {
     let wrap = |c: u32| match c {
         0 => Some(Wrap::Repeat),
         1 => Some(Wrap::ClampToEdge),
@@ -364,7 +470,11 @@ fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<Te
             alpha: v[6],
         });
         Some(())
-    })?;
+    })
+}
+
+/// Reads the images of a version 8 database (names and bytes).
+fn decode_images(d: &mut Dec<'_>) -> Option<Vec<TextureImage>> {
     let n = d.u32()? as usize;
     if n > MAX_IMAGES || n * 12 > d.remaining() {
         return None;
@@ -380,7 +490,7 @@ fn decode_textures(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<Vec<Te
             return None;
         }
         let bytes = d.bytes(usize::try_from(len).ok()?)?.to_vec();
-        images.push(TextureImage { name, bytes });
+        images.push(TextureImage::encoded(name, bytes));
     }
     // Bindings are checked against the images by the database that holds
     // them (a model's materials bind the world's images).

@@ -4,12 +4,15 @@
 use super::format::*;
 use super::packed::{PackCounts, Packer};
 use super::spatial::SpatialSorter;
+use super::tables::TilesSection;
 use crate::error::{Error, IoContext};
 use crate::scene::{
-    Aabb, DensitySummary, Light, Material, MeshFacts, ModelRef, SceneHeader, SceneSink,
-    SizeSummary, TextureImage, View,
+    Aabb, DensitySummary, ImageData, Light, Material, MeshFacts, ModelRef, SceneHeader, SceneSink,
+    SizeSummary, TextureImage, TiledImage, View,
 };
 use crate::shapes::{KindCounts, Shape, ShapeKind};
+use crate::texture::mip::for_each_tile;
+use crate::texture::{Encoding, TileRef};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -405,16 +408,16 @@ impl DbWriter {
         // The appearance (version 7), before the models' table: only a
         // scene with glTF materials or lights has it.
         let appearance = super::tables::encode_appearance(&self.lights, &self.materials);
-        // Textures (version 8) go on after the rest of the appearance
-        // (empty lists when the scene has none of it).
+        // Textures (version 9) go on after the rest of the appearance
+        // (empty lists when the scene has none of it): the images' tiles
+        // are written after the last block, and the tables list them.
         let textured = !self.textures.is_empty() || self.counts.get(ShapeKind::Textured) > 0;
         let appearance = match (appearance, textured) {
             (a, true) => {
+                let (images, section) = self.write_tiles()?;
                 let mut a = a.unwrap_or_else(|| vec![0; 8]);
-                a.extend(super::tables::encode_textures(
-                    &self.materials,
-                    &self.textures,
-                ));
+                a.extend(super::tables::encode_bindings(&self.materials));
+                a.extend(super::tables::encode_tiled_images(section, &images));
                 Some(a)
             }
             (a, false) => a,
@@ -469,7 +472,7 @@ impl DbWriter {
         let mut h = RawHeader {
             magic: MAGIC,
             version: if textured {
-                VERSION_TEXTURES
+                VERSION_TILED
             } else if appearance.is_some() {
                 VERSION_APPEARANCE
             } else if self.ids {
@@ -557,6 +560,63 @@ impl DbWriter {
                 runs: self.run_counts(),
             },
         ))
+    }
+
+    /// Writes each image's mip chain as tiles after the last block (each
+    /// compressed as the blocks are), one image decoded at a time; returns
+    /// the images as the tables list them and where the tiles lie.
+    fn write_tiles(&mut self) -> Result<(Vec<TextureImage>, TilesSection), Error> {
+        let start = self.offset;
+        let images = std::mem::take(&mut self.textures);
+        let mut tiled = Vec::with_capacity(images.len());
+        let level = match self.compression {
+            Compression::None => None,
+            Compression::Zstd(l) => Some(l),
+        };
+        let path = self.path.clone();
+        for im in &images {
+            let ImageData::Encoded(bytes) = &im.data else {
+                unreachable!("the writer takes encoded images only");
+            };
+            let (width, height, texels) = crate::texture::decode_rgba8(bytes, &im.name)?;
+            let mut tiles = Vec::new();
+            let encoding = Encoding::Srgb;
+            for_each_tile(texels, width, height, encoding, |t| -> Result<(), Error> {
+                let raw: &[u8] = bytemuck::cast_slice(&t[..]);
+                let packed;
+                let stored = match level {
+                    Some(l) => {
+                        packed = zstd::bulk::compress(raw, l)
+                            .map_err(|e| Error::Scene(format!("{}: {e}", im.name)))?;
+                        &packed[..]
+                    }
+                    None => raw,
+                };
+                tiles.push(TileRef {
+                    offset: self.offset,
+                    stored: stored.len() as u32,
+                    crc: crc32fast::hash(stored),
+                });
+                self.out().write_all(stored).at(&path)?;
+                self.offset += stored.len() as u64;
+                Ok(())
+            })?;
+            tiled.push(TextureImage {
+                name: im.name.clone(),
+                data: ImageData::Tiled(TiledImage {
+                    width,
+                    height,
+                    encoding,
+                    tiles,
+                }),
+            });
+        }
+        self.textures = images;
+        let section = TilesSection {
+            offset: start,
+            bytes: self.offset - start,
+        };
+        Ok((tiled, section))
     }
 
     /// The scene header as it stands (for callers that render what they
@@ -694,7 +754,13 @@ impl SceneSink for DbWriter {
         if self.textures.len() >= MAX_IMAGES {
             return Err(Error::Scene(format!("more than {MAX_IMAGES} textures")));
         }
-        self.texture_bytes += image.bytes.len() as u64;
+        if !matches!(image.data, ImageData::Encoded(_)) {
+            return Err(Error::Scene(format!(
+                "{}: a database's tiled image cannot be copied into another",
+                image.name
+            )));
+        }
+        self.texture_bytes += image.held_bytes();
         if self.texture_bytes > MAX_IMAGE_BYTES {
             return Err(Error::Scene(format!(
                 "the scene's textures take more than {} MiB, the most a database holds",

@@ -163,9 +163,24 @@ impl Kind for TexturedKind {
             _ => ng,
         };
         let mix = |a: f32, b: f32, c: f32| (a as f64 * w[0] + b as f64 * w[1] + c as f64 * w[2]) as f32;
-        let uv = match s.uvs {
-            [a, b, c] => Some([mix(a[0], b[0], c[0]), mix(a[1], b[1], c[1])]),
-            _ => None,
+        let (uv, uv_per_length) = match s.uvs {
+            [a, b, c] => {
+                let uv_area = ((b[0] as f64 - a[0] as f64) * (c[1] as f64 - a[1] as f64)
+                    - (c[0] as f64 - a[0] as f64) * (b[1] as f64 - a[1] as f64))
+                    .abs();
+                let (p0, p1, p2) = (
+                    Vec3::from_f32(v[0]),
+                    Vec3::from_f32(v[1]),
+                    Vec3::from_f32(v[2]),
+                );
+                let area = (p1 - p0).cross(p2 - p0).length();
+                let ratio = if area > 0.0 { (uv_area / area).sqrt() } else { 0.0 };
+                (
+                    Some([mix(a[0], b[0], c[0]), mix(a[1], b[1], c[1])]),
+                    ratio as f32,
+                )
+            }
+            _ => (None, 0.0),
         };
         let color = match s.colors {
             [a, b, c] => {
@@ -178,7 +193,11 @@ impl Kind for TexturedKind {
             p,
             ng,
             ns,
-            attrs: Attrs { uv, color },
+            attrs: Attrs {
+                uv,
+                color,
+                uv_per_length,
+            },
         }
     }
 

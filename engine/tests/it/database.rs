@@ -217,14 +217,14 @@ fn wrong_magic_and_wrong_version() {
     // whose geometry is relative to an origin, 3 one with a density
     // summary, 4 one with triangle runs, 5 one with models, 6 one in
     // spatial order, 7 one with glTF materials and lights, 8 one with
-    // textures).
+    // textures, 9 one with tiled textures).
     let mut b = good.clone();
-    b[8..12].copy_from_slice(&9u32.to_le_bytes());
+    b[8..12].copy_from_slice(&10u32.to_le_bytes());
     let crc = crc32fast::hash(&b[..252]);
     b[252..256].copy_from_slice(&crc.to_le_bytes());
     std::fs::write(&bad, &b).unwrap();
     let e = Database::open(&bad).unwrap_err().to_string();
-    assert!(e.contains("version 9 is not supported"), "{e}");
+    assert!(e.contains("version 10 is not supported"), "{e}");
 }
 
 #[test]

@@ -59,8 +59,14 @@ fn meshes_take_few_bytes_per_triangle_in_memory() {
                 height: 16,
                 ..Default::default()
             };
-            let scene =
-                DfScene::new(&db, &store, sray_engine::models::Models::default(), &opts).unwrap();
+            let scene = DfScene::new(
+                &db,
+                &store,
+                sray_engine::models::Models::default(),
+                &opts,
+                sray_engine::df::TEXTURE_MEMORY,
+            )
+            .unwrap();
             let grids: u64 = scene.grids.iter().map(|g| g.bytes()).sum();
             let triangles = db.triangles().unwrap() as f64;
             let per = (store.bytes() + grids) as f64 / triangles;

@@ -40,7 +40,9 @@ fn pattern_png() -> Vec<u8> {
 }
 
 /// How the quad gets its colour.
-enum Look {
+pub(crate) enum Look {
+    /// A PNG of the caller's as a file beside the glTF, sampled bilinearly.
+    Png(Vec<u8>),
     /// The pattern as a file beside the glTF, sampled by `filter`.
     ImageFile(u32),
     /// The pattern inside the binary buffer, sampled by `filter`.
@@ -53,7 +55,7 @@ enum Look {
 /// with texture coordinates (0, 0), (1, 0), (1, 1), (0, 1) (the image's
 /// upper-left corner at the quad's), a camera at (0, 0, 10) and one
 /// directional light of 1 lux shining down -z.
-fn quad(dir: &Path, look: Look) -> PathBuf {
+pub(crate) fn quad(dir: &Path, look: Look) -> PathBuf {
     let h = HALF as f32;
     let corners = [[-h, h], [h, h], [h, -h], [-h, -h]];
     let mut bin: Vec<u8> = Vec::new();
@@ -75,7 +77,10 @@ fn quad(dir: &Path, look: Look) -> PathBuf {
     for i in [0u16, 3, 2, 0, 2, 1] {
         bin.extend_from_slice(&i.to_le_bytes());
     }
-    let png = pattern_png();
+    let png = match &look {
+        Look::Png(png) => png.clone(),
+        _ => pattern_png(),
+    };
     let image_at = bin.len();
     if let Look::ImageInBuffer(_) = look {
         bin.extend_from_slice(&png);
@@ -125,6 +130,10 @@ fn quad(dir: &Path, look: Look) -> PathBuf {
         Look::ImageFile(filter) => {
             std::fs::write(dir.join("pattern.png"), &png).unwrap();
             textured(filter, json!({"uri": "pattern.png"}));
+        }
+        Look::Png(_) => {
+            std::fs::write(dir.join("pattern.png"), &png).unwrap();
+            textured(9729, json!({"uri": "pattern.png"}));
         }
         Look::ImageInBuffer(filter) => {
             textured(filter, json!({"bufferView": 4, "mimeType": "image/png"}));

@@ -31,3 +31,4 @@ mod nff_reader;
 mod render_contract;
 mod self_intersection;
 mod spd_reference;
+mod texture_tiles;

@@ -5,7 +5,7 @@ use sray_engine::intersect::RayQ;
 use sray_engine::math::Vec3;
 use sray_engine::mesh::MeshOptions;
 use sray_engine::progress::Progress;
-use sray_engine::scene::{Light, Material, MeshFacts, SceneSink, TextureImage, View};
+use sray_engine::scene::{ImageData, Light, Material, MeshFacts, SceneSink, TextureImage, View};
 use sray_engine::texture::Encoding;
 use sray_engine::shapes::{Shape, intersect};
 
@@ -34,7 +34,10 @@ impl SceneSink for Sink {
     }
     fn texture(&mut self, image: &TextureImage) -> Result<u32, sray_engine::Error> {
         // What a render does with an image a reader accepted: decode it.
-        sray_engine::texture::Texture::decode(&image.bytes, &image.name, Encoding::Srgb)
+        let ImageData::Encoded(bytes) = &image.data else {
+            panic!("a reader gave a tiled image");
+        };
+        sray_engine::texture::Texture::decode(bytes, &image.name, Encoding::Srgb)
             .expect("a reader accepted an image that does not decode");
         Ok(0)
     }
