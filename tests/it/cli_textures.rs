@@ -9,6 +9,7 @@ use crate::common;
 
 use common::{json, ok, run};
 use serde_json::json;
+use std::f64::consts::FRAC_1_SQRT_2;
 use std::path::Path;
 
 /// Texels a side: 6144^2 x 4 bytes = 144 MiB.
@@ -59,7 +60,7 @@ fn floor_gltf(d: &Path) {
             {"mesh": 0},
             {"camera": 0, "translation": [0.0, 0.5, 45.0], "rotation": [-0.0998, 0.0, 0.0, 0.995]},
             {"extensions": {"KHR_lights_punctual": {"light": 0}},
-             "rotation": [-0.7071, 0.0, 0.0, 0.7071]}
+             "rotation": [-FRAC_1_SQRT_2, 0.0, 0.0, FRAC_1_SQRT_2]}
         ],
         "cameras": [{"type": "perspective", "perspective": {
             "yfov": 1.0, "aspectRatio": 1.0, "znear": 0.01}}],
