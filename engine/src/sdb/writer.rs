@@ -11,7 +11,7 @@ use crate::scene::{
     SizeSummary, TextureImage, TiledImage, View,
 };
 use crate::shapes::{KindCounts, Shape, ShapeKind};
-use crate::texture::mip::for_each_tile;
+use crate::texture::mip::{TileTexels, for_each_tile, pack};
 use crate::texture::{Encoding, TileRef};
 use std::collections::HashMap;
 use std::io::{BufWriter, Seek, SeekFrom, Write};
@@ -581,16 +581,16 @@ impl DbWriter {
             let (width, height, texels) = crate::texture::decode_rgba8(bytes, &im.name)?;
             let mut tiles = Vec::new();
             let encoding = Encoding::Srgb;
-            for_each_tile(texels, width, height, encoding, |t| -> Result<(), Error> {
-                let raw: &[u8] = bytemuck::cast_slice(&t[..]);
-                let packed;
+            let tiling = |t: &TileTexels, cols, rows| -> Result<(), Error> {
+                let packed = pack(t, cols, rows);
+                let compressed;
                 let stored = match level {
                     Some(l) => {
-                        packed = zstd::bulk::compress(raw, l)
+                        compressed = zstd::bulk::compress(&packed, l)
                             .map_err(|e| Error::Scene(format!("{}: {e}", im.name)))?;
-                        &packed[..]
+                        &compressed[..]
                     }
-                    None => raw,
+                    None => &packed[..],
                 };
                 tiles.push(TileRef {
                     offset: self.offset,
@@ -600,7 +600,8 @@ impl DbWriter {
                 self.out().write_all(stored).at(&path)?;
                 self.offset += stored.len() as u64;
                 Ok(())
-            })?;
+            };
+            for_each_tile(texels, width, height, encoding, tiling)?;
             tiled.push(TextureImage {
                 name: im.name.clone(),
                 data: ImageData::Tiled(TiledImage {

@@ -123,6 +123,43 @@ fn encode(lut: &[f32; 256], v: f32) -> u8 {
     }
 }
 
+impl Level {
+    /// Columns and rows of tile `(tx, ty)` inside the level (tiles on its
+    /// right and bottom edges are cut short).
+    pub fn extent(&self, tx: u32, ty: u32) -> (u32, u32) {
+        (
+            (self.width - tx * TILE).min(TILE),
+            (self.height - ty * TILE).min(TILE),
+        )
+    }
+}
+
+/// The texels of a tile `cols` x `rows` inside its level, row by row: what
+/// a database stores of it (before compression), so that a small level's
+/// tile does not take a whole tile's bytes.
+pub fn pack(tile: &TileTexels, cols: u32, rows: u32) -> Vec<u8> {
+    let mut out = Vec::with_capacity((4 * cols * rows) as usize);
+    for r in 0..rows as usize {
+        let row = &tile[r * TILE as usize..r * TILE as usize + cols as usize];
+        out.extend_from_slice(bytemuck::cast_slice(row));
+    }
+    out
+}
+
+/// A tile from what [`pack`] made of it; `None` when `bytes` are not
+/// `cols` x `rows` texels.
+pub fn unpack(bytes: &[u8], cols: u32, rows: u32) -> Option<TileTexels> {
+    if bytes.len() != (4 * cols * rows) as usize {
+        return None;
+    }
+    let mut tile = [[0u8; 4]; TILE_TEXELS];
+    for (r, row) in bytes.chunks_exact((4 * cols) as usize).enumerate() {
+        let dst = &mut tile[r * TILE as usize..r * TILE as usize + cols as usize];
+        bytemuck::cast_slice_mut::<[u8; 4], u8>(dst).copy_from_slice(row);
+    }
+    Some(tile)
+}
+
 /// Tile `(tx, ty)` of a level of `w` x `h` texels (row by row).
 pub fn cut_tile(texels: &[[u8; 4]], w: u32, h: u32, tx: u32, ty: u32) -> Box<TileTexels> {
     let mut tile = Box::new([[0u8; 4]; TILE_TEXELS]);
@@ -137,20 +174,22 @@ pub fn cut_tile(texels: &[[u8; 4]], w: u32, h: u32, tx: u32, ty: u32) -> Box<Til
 }
 
 /// Every tile of the chain of a `w` x `h` image (row by row), in the
-/// chain's order, handed to `emit` one at a time: a level is held while
-/// it is cut and the next is made from it.
+/// chain's order, handed to `emit` one at a time with its columns and
+/// rows inside its level: a level is held while it is cut and the next
+/// is made from it.
 pub fn for_each_tile<E>(
     texels: Vec<[u8; 4]>,
     w: u32,
     h: u32,
     encoding: Encoding,
-    mut emit: impl FnMut(&TileTexels) -> Result<(), E>,
+    mut emit: impl FnMut(&TileTexels, u32, u32) -> Result<(), E>,
 ) -> Result<(), E> {
     let (mut level, mut lw, mut lh) = (texels, w, h);
     loop {
         for ty in 0..lh.div_ceil(TILE) {
             for tx in 0..lw.div_ceil(TILE) {
-                emit(&cut_tile(&level, lw, lh, tx, ty))?;
+                let (cols, rows) = ((lw - tx * TILE).min(TILE), (lh - ty * TILE).min(TILE));
+                emit(&cut_tile(&level, lw, lh, tx, ty), cols, rows)?;
             }
         }
         if lw == 1 && lh == 1 {
@@ -218,8 +257,10 @@ mod tests {
         assert_eq!(t1[(2 * TILE + 5) as usize], texels[(2 * w + 69) as usize]);
         assert_eq!(t1[6], [0; 4]);
         let mut n = 0;
-        for_each_tile(texels, w, h, Encoding::Linear, |_| {
+        for_each_tile(texels, w, h, Encoding::Linear, |t, cols, rows| {
             n += 1;
+            assert_eq!(unpack(&pack(t, cols, rows), cols, rows).as_ref(), Some(t));
+            assert_eq!(pack(t, cols, rows).len(), (4 * cols * rows) as usize);
             Ok::<_, ()>(())
         })
         .unwrap();

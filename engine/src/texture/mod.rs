@@ -235,7 +235,7 @@ impl Texture {
     pub fn held(width: u32, height: u32, texels: Vec<[u8; 4]>, encoding: Encoding) -> Texture {
         let (levels, n) = mip::levels(width, height).expect("a texture has texels");
         let mut tiles = Vec::with_capacity(n as usize);
-        mip::for_each_tile(texels, width, height, encoding, |t| {
+        mip::for_each_tile(texels, width, height, encoding, |t, _, _| {
             tiles.push(Box::new(*t));
             Ok::<_, ()>(())
         })
@@ -318,9 +318,21 @@ impl Texture {
         match &self.tiles {
             Tiles::Held(t) => f(&t[tile as usize]),
             Tiles::Stored { store, index, refs } => {
-                f(&store.tile(*index, tile, &refs[tile as usize]))
+                f(&store.tile(*index, tile, &refs[tile as usize], || self.extent(tile)))
             }
         }
+    }
+
+    /// Columns and rows of tile `tile` of the chain inside its level.
+    fn extent(&self, tile: u32) -> (u32, u32) {
+        let l = self
+            .levels
+            .iter()
+            .rev()
+            .find(|l| l.first_tile <= tile)
+            .expect("the first level starts at tile 0");
+        let k = tile - l.first_tile;
+        l.extent(k % l.tiles_x(), k / l.tiles_x())
     }
 
     #[inline]

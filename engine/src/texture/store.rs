@@ -119,16 +119,24 @@ impl TileStore {
         (self.capacity * TILE_BYTES) as u64
     }
 
-    /// Tile `tile` of texture `texture`, stored at `at`; zero texels (and
-    /// the error kept) when it cannot be read.
-    pub fn tile(&self, texture: u32, tile: u32, at: &TileRef) -> Arc<TileTexels> {
+    /// Tile `tile` of texture `texture`, stored at `at`, `extent()`
+    /// columns and rows inside its level; zero texels (and the error kept)
+    /// when it cannot be read.
+    pub fn tile(
+        &self,
+        texture: u32,
+        tile: u32,
+        at: &TileRef,
+        extent: impl FnOnce() -> (u32, u32),
+    ) -> Arc<TileTexels> {
         let key = (texture as u64) << 32 | tile as u64;
         if let Some(t) = self.lru.lock().expect("tile cache").get(key) {
             return t;
         }
         // Read outside the lock: other threads go on sampling cached
         // tiles meanwhile (two threads may read the same tile once each).
-        let t = match self.read(at) {
+        let (cols, rows) = extent();
+        let t = match self.read(at, cols, rows) {
             Ok(t) => Arc::new(t),
             Err(e) => {
                 let mut err = self.error.lock().expect("tile error");
@@ -145,7 +153,7 @@ impl TileStore {
         t
     }
 
-    fn read(&self, at: &TileRef) -> Result<TileTexels, String> {
+    fn read(&self, at: &TileRef, cols: u32, rows: u32) -> Result<TileTexels, String> {
         let mut stored = vec![0u8; at.stored as usize];
         read_at(&self.file, &mut stored, at.offset).map_err(|e| format!("cannot read: {e}"))?;
         self.tiles_read.fetch_add(1, Ordering::Relaxed);
@@ -154,23 +162,19 @@ impl TileStore {
         if !cfg!(fuzzing) && crc32fast::hash(&stored) != at.crc {
             return Err("checksum mismatch: the tile is corrupt".into());
         }
-        let mut tile = [[0u8; 4]; TILE_TEXELS];
-        let out: &mut [u8] = bytemuck::cast_slice_mut(&mut tile[..]);
-        if self.compressed {
-            let n = zstd::bulk::decompress_to_buffer(&stored, out)
-                .map_err(|e| format!("the tile does not decompress: {e}"))?;
-            if n != TILE_BYTES {
-                return Err(format!("the tile holds {n} bytes, not {TILE_BYTES}"));
-            }
-        } else if stored.len() == TILE_BYTES {
-            out.copy_from_slice(&stored);
+        let want = (4 * cols * rows) as usize;
+        let packed = if self.compressed {
+            zstd::bulk::decompress(&stored, want)
+                .map_err(|e| format!("the tile does not decompress: {e}"))?
         } else {
-            return Err(format!(
-                "the tile is {} bytes, not {TILE_BYTES}",
-                stored.len()
-            ));
-        }
-        Ok(tile)
+            stored
+        };
+        super::mip::unpack(&packed, cols, rows).ok_or_else(|| {
+            format!(
+                "the tile holds {} bytes, not the {want} of {cols} x {rows} texels",
+                packed.len()
+            )
+        })
     }
 
     /// What has been read so far.
