@@ -339,7 +339,7 @@ fn models_stored(models: &Option<(Vec<ModelInfo>, u64)>) -> u64 {
 struct Counter {
     counts: KindCounts,
     lights: u64,
-    materials: HashSet<[u32; 24]>,
+    materials: HashSet<crate::scene::MaterialKey>,
     textures: u64,
     statements: u64,
     any_material: bool,

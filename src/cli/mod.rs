@@ -30,7 +30,7 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Render a scene (.nff, .ply, .obj, .off, .gltf, .glb, .sdb or spd:NAME:SIZE) to a PNG or OpenEXR image
-    Render(render::RenderArgs),
+    Render(Box<render::RenderArgs>),
     /// Generate an SPD scene (balls, gears, mount, rings, tetra, tree, teapot)
     Gen(gen_cmd::GenArgs),
     /// Convert a scene (.nff, .ply, .obj, .off, .gltf, .glb, .sdb or spd:NAME:SIZE) to an object database or NFF
@@ -55,7 +55,7 @@ enum Command {
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(a) => render::run(a),
+        Command::Render(a) => render::run(*a),
         Command::Gen(a) => gen_cmd::run(a),
         Command::Convert(a) => convert::run(a),
         Command::Info(a) => info_cmd::run(a),

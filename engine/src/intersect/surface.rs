@@ -26,6 +26,10 @@ pub struct Attrs {
     /// area in space (zero without coordinates). Shading turns it into a
     /// footprint in texels to pick a mip level.
     pub uv_per_length: f32,
+    /// How the point moves as `u` grows (dp/du, not unit length; zero
+    /// without texture coordinates): with the normal, the tangent frame a
+    /// normal map is read in.
+    pub tangent: [f32; 3],
 }
 
 impl Attrs {
@@ -33,6 +37,7 @@ impl Attrs {
         uv: None,
         color: None,
         uv_per_length: 0.0,
+        tangent: [0.0; 3],
     };
 }
 

@@ -37,6 +37,7 @@ pub const NO_MATERIAL: u32 = u32::MAX;
 pub const NEUTRAL: Material = Material {
     pbr: None,
     texture: None,
+    maps: crate::scene::Maps::NONE,
     color: [0.8, 0.8, 0.8],
     kd: 1.0,
     ks: 0.0,
@@ -850,7 +851,7 @@ impl Bounds {
 /// Turns faces into objects, by the polygon policy.
 struct Emitter {
     materials: Vec<Material>,
-    last: Option<[u32; 24]>,
+    last: Option<crate::scene::MaterialKey>,
     summary: MeshSummary,
     pos: Vec<[f32; 3]>,
     nrm: Vec<[f32; 3]>,
@@ -871,6 +872,7 @@ impl Emitter {
             return Material {
                 pbr: None,
                 texture: None,
+                maps: crate::scene::Maps::NONE,
                 color: quantize(f.color),
                 ..NEUTRAL
             };
@@ -887,6 +889,7 @@ impl Emitter {
             return Material {
                 pbr: None,
                 texture: None,
+                maps: crate::scene::Maps::NONE,
                 color: quantize(s.map(|x| x / n)),
                 ..NEUTRAL
             };

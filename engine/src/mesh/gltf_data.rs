@@ -303,7 +303,8 @@ const GEOMETRY: [&str; 3] = [
 ///   the shapes are right, the shading may differ.
 /// - gltf-json 1.4.1's validation indexes a primitive's POSITION accessor
 ///   before checking that it exists (a panic on a bad file): that is
-///   checked first.
+///   checked first, as is gltf 1.4.1's `Image::source`, which unwraps a
+///   buffer-view image's `mimeType` (the specification requires one).
 fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> {
     let invalid = |e: gltf::Error| format!("not a valid glTF file: {e}");
     let mut root = gltf::Gltf::from_slice_without_validation(json)
@@ -333,6 +334,13 @@ fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> 
                     ));
                 }
             }
+        }
+    }
+    for (i, image) in root.images.iter().enumerate() {
+        if image.buffer_view.is_some() && image.mime_type.is_none() {
+            return Err(format!(
+                "image {i} lies in a buffer view but has no mimeType (image/png or image/jpeg)"
+            ));
         }
     }
     Ok((gltf::Document::from_json(root).map_err(invalid)?, ignored))

@@ -37,8 +37,12 @@
 //!   `COLOR_0`, multiply the base colour; such primitives become textured
 //!   triangles. `alphaMode: MASK` cuts the surface out where the alpha is
 //!   below `alphaCutoff` (`BLEND` is rendered opaque, with a warning).
-//!   Metallic-roughness, normal, occlusion and emissive textures are not
-//!   applied yet (one warning).
+//!   The metallic-roughness texture scales the metallic (blue) and
+//!   roughness (green) factors, the emissive texture the emissive colour,
+//!   and the normal texture (times its `scale`) tilts the shading normal
+//!   in the frame of the texture coordinates (tangents from the
+//!   triangle's corners); all are read at the first texture's coordinate
+//!   set. Occlusion textures are not applied (one warning).
 //!   A primitive without a material is the meshes' neutral grey.
 //!
 //! The file is read within the memory budget ([`super::gltf_data`]): the
@@ -532,8 +536,9 @@ impl Emit<'_, '_> {
                 }
             };
             let m = self.material(&prim.material())?;
-            let uvs = match (m.texture, base_color_set(&prim.material())) {
-                (Some(_), Some(set)) => match prim.get(&gltf::Semantic::TexCoords(set)) {
+            let textured = m.texture.is_some() || m.maps != crate::scene::Maps::NONE;
+            let uvs = match (textured, texture_set(&prim.material())) {
+                (true, Some(set)) => match prim.get(&gltf::Semantic::TexCoords(set)) {
                     Some(a) => {
                         let e = Elements::new(&a, self.bufs, lists).map_err(bad)?;
                         e.expect_vectors(
@@ -929,15 +934,22 @@ impl Bounds {
 }
 
 /// The NFF material of a glTF one (see the module documentation).
-/// The texture coordinate set the base colour texture of `m` reads, if it
-/// has one (`KHR_texture_transform` may name another).
-fn base_color_set(m: &gltf::Material<'_>) -> Option<u32> {
-    let info = m.pbr_metallic_roughness().base_color_texture()?;
-    Some(
+/// The texture coordinate set the textures of `m` read, if it has any:
+/// its base colour texture's, else its first other map's
+/// (`KHR_texture_transform` may name another). Every map of a material is
+/// read at one set (see [`Emit::material`]).
+fn texture_set(m: &gltf::Material<'_>) -> Option<u32> {
+    let set = |info: gltf::texture::Info<'_>| {
         info.texture_transform()
             .and_then(|t| t.tex_coord())
-            .unwrap_or(info.tex_coord()),
-    )
+            .unwrap_or(info.tex_coord())
+    };
+    let pbr = m.pbr_metallic_roughness();
+    pbr.base_color_texture()
+        .map(set)
+        .or_else(|| pbr.metallic_roughness_texture().map(set))
+        .or_else(|| m.emissive_texture().map(set))
+        .or_else(|| m.normal_texture().map(|n| n.tex_coord()))
 }
 
 /// A primitive's per-vertex attribute (texture coordinates, colours):
@@ -1000,14 +1012,62 @@ impl Corners {
 }
 
 impl Emit<'_, '_> {
-    /// The sray material of glTF material `m`, its base colour texture
-    /// sent to the sink (once per image) and bound.
+    /// The sray material of glTF material `m`, its textures sent to the
+    /// sink (once per image) and bound: base colour, metallic-roughness,
+    /// emissive and normal maps.
     fn material(&mut self, m: &gltf::Material<'_>) -> Result<Material, Error> {
         let mut out = material(m, self.warnings);
-        let Some(info) = m.pbr_metallic_roughness().base_color_texture() else {
-            return Ok(out);
-        };
-        let tex = info.texture();
+        let set = texture_set(m);
+        let pbr = m.pbr_metallic_roughness();
+        let mut sets = Vec::new();
+        if let Some(info) = pbr.base_color_texture() {
+            let alpha = pbr.base_color_factor()[3];
+            let cutoff = match m.alpha_mode() {
+                gltf::material::AlphaMode::Mask => m.alpha_cutoff().unwrap_or(0.5),
+                gltf::material::AlphaMode::Blend => {
+                    self.warnings.add(
+                        "alphaMode BLEND is rendered opaque (MASK cut-outs are honoured)",
+                        || format!("material {}", m.index().unwrap_or(0)),
+                    );
+                    0.0
+                }
+                gltf::material::AlphaMode::Opaque => 0.0,
+            };
+            sets.push(info_set(&info));
+            out.texture = Some(self.bind(info.texture(), transform(&info), cutoff, alpha)?);
+        }
+        if let Some(info) = pbr.metallic_roughness_texture() {
+            sets.push(info_set(&info));
+            out.maps.metallic_roughness =
+                Some(self.bind(info.texture(), transform(&info), 0.0, 1.0)?);
+        }
+        if let Some(info) = m.emissive_texture() {
+            sets.push(info_set(&info));
+            out.maps.emissive = Some(self.bind(info.texture(), transform(&info), 0.0, 1.0)?);
+        }
+        if let Some(n) = m.normal_texture() {
+            sets.push(n.tex_coord());
+            // glTF's normal scale rides in the binding's alpha.
+            out.maps.normal =
+                Some(self.bind(n.texture(), UvTransform::default(), 0.0, n.scale())?);
+        }
+        if sets.iter().any(|&s| Some(s) != set) {
+            self.warnings.add(
+                "textures of one material read different texture coordinate sets: all are read at the first's",
+                || format!("material {}", m.index().unwrap_or(0)),
+            );
+        }
+        Ok(out)
+    }
+
+    /// Binds texture `tex`: its image sent to the sink once, its sampler.
+    fn bind(
+        &mut self,
+        tex: gltf::Texture<'_>,
+        transform: UvTransform,
+        cutoff: f32,
+        alpha: f32,
+    ) -> Result<TextureBinding, Error> {
         let image = tex.source();
         let idx = match self.images.get(&image.index()) {
             Some(&i) => i,
@@ -1030,34 +1090,31 @@ impl Emit<'_, '_> {
             wrap_t: Wrap::from_gltf(smp.wrap_t().as_gl_enum()),
             filter: Filter::from_gltf(smp.mag_filter().map(|f| f.as_gl_enum())),
         };
-        let transform = info
-            .texture_transform()
-            .map_or(UvTransform::default(), |t| UvTransform {
-                offset: t.offset(),
-                rotation: t.rotation(),
-                scale: t.scale(),
-            });
-        let alpha = m.pbr_metallic_roughness().base_color_factor()[3];
-        let cutoff = match m.alpha_mode() {
-            gltf::material::AlphaMode::Mask => m.alpha_cutoff().unwrap_or(0.5),
-            gltf::material::AlphaMode::Blend => {
-                self.warnings.add(
-                    "alphaMode BLEND is rendered opaque (MASK cut-outs are honoured)",
-                    || format!("material {}", m.index().unwrap_or(0)),
-                );
-                0.0
-            }
-            gltf::material::AlphaMode::Opaque => 0.0,
-        };
-        out.texture = Some(TextureBinding {
+        Ok(TextureBinding {
             image: idx,
             sampler,
             transform,
             cutoff,
             alpha,
-        });
-        Ok(out)
+        })
     }
+}
+
+/// The texture coordinate set a texture reference reads.
+fn info_set(info: &gltf::texture::Info<'_>) -> u32 {
+    info.texture_transform()
+        .and_then(|t| t.tex_coord())
+        .unwrap_or(info.tex_coord())
+}
+
+/// A texture reference's `KHR_texture_transform`.
+fn transform(info: &gltf::texture::Info<'_>) -> UvTransform {
+    info.texture_transform()
+        .map_or(UvTransform::default(), |t| UvTransform {
+            offset: t.offset(),
+            rotation: t.rotation(),
+            scale: t.scale(),
+        })
 }
 
 fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
@@ -1065,13 +1122,9 @@ fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
         return NEUTRAL;
     }
     let pbr = m.pbr_metallic_roughness();
-    if pbr.metallic_roughness_texture().is_some()
-        || m.normal_texture().is_some()
-        || m.emissive_texture().is_some()
-        || m.occlusion_texture().is_some()
-    {
+    if m.occlusion_texture().is_some() {
         warnings.add(
-            "metallic-roughness, normal, occlusion and emissive textures are not applied yet (base colour textures are)",
+            "occlusion textures are not applied (direct light has no ambient term to occlude)",
             || format!("material {}", m.index().unwrap_or(0)),
         );
     }
@@ -1099,6 +1152,7 @@ fn material(m: &gltf::Material<'_>, warnings: &mut Warnings) -> Material {
                 .map(|e| e * m.emissive_strength().unwrap_or(1.0)),
         }),
         texture: None,
+        maps: crate::scene::Maps::NONE,
     }
 }
 

@@ -164,6 +164,7 @@ impl Partial {
         Material {
             pbr: None,
             texture: None,
+            maps: crate::scene::Maps::NONE,
             color: self.kd.unwrap_or(NEUTRAL.color),
             kd: 1.0,
             ks: ks.clamp(0.0, 1.0),
@@ -313,6 +314,7 @@ newmtl bare\n";
             Material {
                 pbr: None,
                 texture: None,
+                maps: crate::scene::Maps::NONE,
                 color: [1.0, 0.0, 0.0],
                 kd: 1.0,
                 ks: 0.0,
@@ -330,6 +332,7 @@ newmtl bare\n";
             Material {
                 pbr: None,
                 texture: None,
+                maps: crate::scene::Maps::NONE,
                 ior: 1.0,
                 ..NEUTRAL
             }

@@ -278,6 +278,7 @@ fn texture_material(
             cutoff: 0.0,
             alpha: 1.0,
         }),
+        maps: crate::scene::Maps::NONE,
         ..super::NEUTRAL
     })
 }

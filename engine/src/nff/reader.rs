@@ -269,6 +269,7 @@ impl<R: BufRead> Parser<R> {
                 sink.material(&Material {
                     pbr: None,
                     texture: None,
+                    maps: crate::scene::Maps::NONE,
                     color: [s(0)?, s(1)?, s(2)?],
                     kd: s(3)?,
                     ks: s(4)?,

@@ -5,7 +5,9 @@
 use crate::error::Error;
 use crate::intersect::Surface;
 use crate::math::Vec3;
-use crate::scene::{ImageData, LightKind, Material, Pbr, Photometric, SceneHeader, TextureBinding};
+use crate::scene::{
+    ImageData, LightKind, Maps, Material, Pbr, Photometric, SceneHeader, TextureBinding,
+};
 use crate::sdb::Database;
 use crate::texture::mip::TILE_BYTES;
 use crate::texture::{Encoding, Texture};
@@ -181,25 +183,47 @@ impl ShadeScene {
 
     /// Material `m` as it looks at surface `s`: its colour times the base
     /// colour texture at the surface's texture coordinates and times the
-    /// surface's vertex colour, when it has them; `None` when neither
-    /// applies (the material as it is).
+    /// surface's vertex colour, its metallic, roughness and emission times
+    /// their textures, and its shading normal from its normal map; `None`
+    /// where nothing applies (the material and normal as they are).
     #[inline]
-    pub fn look(&self, m: &Material, s: &Surface) -> Option<Material> {
-        let tex = match (m.texture, s.attrs.uv) {
-            (Some(b), Some(uv)) => self
-                .textures
-                .get(b.image as usize)
-                .map(|t| t.sample_level(&b.sampler, b.transform.apply(uv), self.level(t, &b, s))),
-            _ => None,
-        };
-        if tex.is_none() && s.attrs.color.is_none() {
+    pub fn look(&self, m: &Material, s: &Surface) -> Option<Look> {
+        let uv = s.attrs.uv;
+        let maps = uv.is_some() && (m.texture.is_some() || m.maps != Maps::NONE);
+        if !maps && s.attrs.color.is_none() {
             return None;
         }
+        let sample = |b: Option<TextureBinding>| -> Option<[f32; 4]> {
+            let (b, uv) = (b?, uv?);
+            let t = self.textures.get(b.image as usize)?;
+            Some(t.sample_level(&b.sampler, b.transform.apply(uv), self.level(t, &b, s)))
+        };
         let mut out = *m;
+        let tex = sample(m.texture);
         for k in 0..3 {
             out.color[k] *= tex.map_or(1.0, |t| t[k]) * s.attrs.color.map_or(1.0, |c| c[k]);
         }
-        Some(out)
+        let mut normal = None;
+        if maps {
+            if let Some(p) = out.pbr.as_mut() {
+                if let Some(t) = sample(m.maps.metallic_roughness) {
+                    p.roughness *= t[1];
+                    p.metallic *= t[2];
+                }
+                if let Some(t) = sample(m.maps.emissive) {
+                    for k in 0..3 {
+                        p.emissive[k] *= t[k];
+                    }
+                }
+            }
+            if let (Some(b), Some(t)) = (m.maps.normal, sample(m.maps.normal)) {
+                normal = mapped_normal(s, t, b.alpha);
+            }
+        }
+        Some(Look {
+            material: out,
+            normal,
+        })
     }
 
     /// The colour a ray of weight `weight` brings back when it hits nothing.
@@ -207,6 +231,30 @@ impl ShadeScene {
     pub fn background(&self, weight: f32) -> [f32; 3] {
         self.background.map(|c| c * weight)
     }
+}
+
+/// A material as it looks at one point ([`ShadeScene::look`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Look {
+    pub material: Material,
+    /// The shading normal a normal map gives, if one does.
+    pub normal: Option<Vec3>,
+}
+
+/// The shading normal that normal-map texel `t` (RGB in [0, 1], glTF's
+/// +X right, +Y up the image, +Z out of the surface) gives at `s`, its
+/// X and Y scaled by `scale`: in the frame of the shading normal, the
+/// tangent (dp/du made perpendicular to it) and their cross product.
+/// `None` where the surface has no tangent.
+fn mapped_normal(s: &Surface, t: [f32; 4], scale: f32) -> Option<Vec3> {
+    let n = s.ns;
+    let du = Vec3::from_array(s.attrs.tangent.map(|x| x as f64));
+    let tangent = (du - n * n.dot(du)).try_normalize()?;
+    let bitangent = n.cross(tangent);
+    let x = (2.0 * t[0] as f64 - 1.0) * scale as f64;
+    let y = (2.0 * t[1] as f64 - 1.0) * scale as f64;
+    let z = 2.0 * t[2] as f64 - 1.0;
+    (tangent * x + bitangent * y + n * z).try_normalize()
 }
 
 /// What a hit gives, in this order: its own emission, one shadow ray per
@@ -259,7 +307,8 @@ pub fn shade(
     emit: &mut impl FnMut(Spawn),
 ) {
     let looked = sc.look(m, s);
-    let m = looked.as_ref().unwrap_or(m);
+    let m = looked.as_ref().map_or(m, |l| &l.material);
+    let ns = looked.and_then(|l| l.normal).unwrap_or(s.ns);
     if let Some(p) = &m.pbr
         && p.emissive != [0.0; 3]
     {
@@ -267,7 +316,7 @@ pub fn shade(
             color: p.emissive.map(|e| e * weight),
         });
     }
-    let n = if s.ns.dot(d) > 0.0 { -s.ns } else { s.ns };
+    let n = if ns.dot(d) > 0.0 { -ns } else { ns };
     let dn = d.dot(n);
     let mirror = (d - n * (2.0 * dn)).try_normalize();
     for (i, light) in sc.lights.iter().enumerate() {

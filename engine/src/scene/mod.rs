@@ -52,6 +52,59 @@ pub struct Material {
     /// where the surface has texture coordinates.
     #[serde(skip)]
     pub texture: Option<TextureBinding>,
+    /// glTF's other textures: metallic-roughness, emissive and normal.
+    #[serde(skip)]
+    pub maps: Maps,
+}
+
+/// The textures of a glTF material besides its base colour's: each
+/// multiplies its factor where the surface has texture coordinates (read
+/// at the same coordinates as the base colour texture).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Maps {
+    /// `metallicRoughnessTexture` (linear): blue scales the metallic
+    /// factor, green the roughness.
+    pub metallic_roughness: Option<TextureBinding>,
+    /// `emissiveTexture` (sRGB): scales the emissive colour.
+    pub emissive: Option<TextureBinding>,
+    /// `normalTexture` (linear), in the tangent space the texture
+    /// coordinates give; glTF's `scale` is kept in the binding's `alpha`.
+    pub normal: Option<TextureBinding>,
+}
+
+impl Maps {
+    pub const NONE: Maps = Maps {
+        metallic_roughness: None,
+        emissive: None,
+        normal: None,
+    };
+
+    /// The maps with their slot numbers, as the tables store them.
+    pub fn slots(&self) -> [(u32, Option<TextureBinding>); 3] {
+        [
+            (0, self.metallic_roughness),
+            (1, self.emissive),
+            (2, self.normal),
+        ]
+    }
+
+    /// The map of slot `slot`.
+    pub fn slot_mut(&mut self, slot: u32) -> Option<&mut Option<TextureBinding>> {
+        match slot {
+            0 => Some(&mut self.metallic_roughness),
+            1 => Some(&mut self.emissive),
+            2 => Some(&mut self.normal),
+            _ => None,
+        }
+    }
+
+    /// Whether a map binds image `image` as data (linear values): the
+    /// metallic-roughness and normal maps.
+    pub fn binds_as_data(&self, image: u32) -> bool {
+        [self.metallic_roughness, self.normal]
+            .iter()
+            .any(|b| b.is_some_and(|b| b.image == image))
+    }
 }
 
 /// A texture a material binds: one of the scene's images
@@ -161,6 +214,9 @@ impl Pbr {
     }
 }
 
+/// A material's bits, to deduplicate materials exactly.
+pub type MaterialKey = [u32; 54];
+
 impl Material {
     /// The material of objects that precede any `f` statement: white,
     /// purely diffuse.
@@ -173,12 +229,16 @@ impl Material {
         ior: 1.0,
         pbr: None,
         texture: None,
+        maps: Maps::NONE,
     };
 
     /// Bit pattern used to deduplicate materials exactly.
-    pub fn key(&self) -> [u32; 24] {
+    pub fn key(&self) -> MaterialKey {
         let pbr = self.pbr.map_or([0; 5], |p| p.key());
         let tex = self.texture.map_or([0; 10], |t| t.key());
+        let mr = self.maps.metallic_roughness.map_or([0; 10], |t| t.key());
+        let em = self.maps.emissive.map_or([0; 10], |t| t.key());
+        let nm = self.maps.normal.map_or([0; 10], |t| t.key());
         [
             self.color[0].to_bits(),
             self.color[1].to_bits(),
@@ -204,6 +264,36 @@ impl Material {
             tex[7],
             tex[8],
             tex[9],
+            mr[0],
+            mr[1],
+            mr[2],
+            mr[3],
+            mr[4],
+            mr[5],
+            mr[6],
+            mr[7],
+            mr[8],
+            mr[9],
+            em[0],
+            em[1],
+            em[2],
+            em[3],
+            em[4],
+            em[5],
+            em[6],
+            em[7],
+            em[8],
+            em[9],
+            nm[0],
+            nm[1],
+            nm[2],
+            nm[3],
+            nm[4],
+            nm[5],
+            nm[6],
+            nm[7],
+            nm[8],
+            nm[9],
         ]
     }
 }

@@ -158,6 +158,7 @@ pub fn parse_material(s: &str) -> Result<Material, String> {
     Ok(Material {
         pbr: None,
         texture: None,
+        maps: super::Maps::NONE,
         color: [f(0), f(1), f(2)],
         kd: f(3),
         ks: f(4),

@@ -120,8 +120,12 @@ impl Database {
         }
         let images = self.scene.textures.len();
         if let Some((i, t)) = db.scene.materials.iter().enumerate().find_map(|(i, m)| {
-            m.texture
-                .filter(|t| t.image as usize >= images)
+            let mut bound = m.maps.slots().map(|(_, b)| b).to_vec();
+            bound.push(m.texture);
+            bound
+                .into_iter()
+                .flatten()
+                .find(|t| t.image as usize >= images)
                 .map(|t| (i, t))
         }) {
             return Err(Error::Database {

@@ -237,20 +237,17 @@ fn check_header(h: &RawHeader, file_bytes: u64, at: &At) -> Result<Layout, Error
 /// Checks that every texture binding of `materials` names one of the
 /// `images` images there are.
 fn check_bindings(materials: &[Material], images: usize, at: &At) -> Result<(), Error> {
-    match materials
-        .iter()
-        .enumerate()
-        .find(|(_, m)| m.texture.is_some_and(|t| t.image as usize >= images))
-    {
-        Some((i, m)) => Err(at.err(
-            "tables",
-            format!(
-                "material {i} binds image {} of {images}",
-                m.texture.map_or(0, |t| t.image)
-            ),
-        )),
-        None => Ok(()),
+    for (i, m) in materials.iter().enumerate() {
+        let mut bound = m.maps.slots().map(|(_, b)| b).to_vec();
+        bound.push(m.texture);
+        if let Some(b) = bound.iter().flatten().find(|b| b.image as usize >= images) {
+            return Err(at.err(
+                "tables",
+                format!("material {i} binds image {} of {images}", b.image),
+            ));
+        }
     }
+    Ok(())
 }
 
 /// Reads the tables, checks their checksum (but when fuzzing) and decodes

@@ -85,6 +85,7 @@ pub(super) fn decode_tables(
         materials.push(Material {
             pbr: None,
             texture: None,
+            maps: crate::scene::Maps::NONE,
             color: [m[0], m[1], m[2]],
             kd: m[3],
             ks: m[4],
@@ -165,7 +166,7 @@ pub(super) fn decode_tables(
     if appearance {
         decode_appearance(&mut d, &mut lights, &mut materials)?;
         if textures {
-            decode_bindings(&mut d, &mut materials)?;
+            decode_bindings(&mut d, &mut materials, tiled)?;
             if tiled {
                 (images, section) = decode_tiled_images(&mut d)?;
             } else {
@@ -320,22 +321,84 @@ pub(super) fn encode_bindings(materials: &[Material]) -> Vec<u8> {
     e.u32(bound.len() as u32);
     for (i, t) in bound {
         e.u32(i as u32);
-        e.u32(t.image);
-        let s = &t.sampler;
-        e.u32(s.wrap_s as u32 | (s.wrap_t as u32) << 4 | (s.filter as u32) << 8);
-        for x in [
-            t.transform.offset[0],
-            t.transform.offset[1],
-            t.transform.rotation,
-            t.transform.scale[0],
-            t.transform.scale[1],
-            t.cutoff,
-            t.alpha,
-        ] {
-            e.f32(x);
-        }
+        put_binding(&mut e, t);
+    }
+    // Version 9: the other maps, each by 3 x material + slot.
+    let maps: Vec<(usize, TextureBinding)> = materials
+        .iter()
+        .enumerate()
+        .flat_map(|(i, m)| {
+            m.maps
+                .slots()
+                .into_iter()
+                .filter_map(move |(slot, b)| b.map(|b| (3 * i + slot as usize, b)))
+        })
+        .collect();
+    e.u32(maps.len() as u32);
+    for (k, t) in maps {
+        e.u32(k as u32);
+        put_binding(&mut e, &t);
     }
     e.0
+}
+
+/// One binding's entry after its index: image, sampler, transform,
+/// cut-off and alpha.
+fn put_binding(e: &mut Enc, t: &TextureBinding) {
+    e.u32(t.image);
+    let s = &t.sampler;
+    e.u32(s.wrap_s as u32 | (s.wrap_t as u32) << 4 | (s.filter as u32) << 8);
+    for x in [
+        t.transform.offset[0],
+        t.transform.offset[1],
+        t.transform.rotation,
+        t.transform.scale[0],
+        t.transform.scale[1],
+        t.cutoff,
+        t.alpha,
+    ] {
+        e.f32(x);
+    }
+}
+
+/// Reads what [`put_binding`] wrote.
+fn get_binding(d: &mut Dec<'_>) -> Option<TextureBinding> {
+    let wrap = |c: u32| match c {
+        0 => Some(Wrap::Repeat),
+        1 => Some(Wrap::ClampToEdge),
+        2 => Some(Wrap::MirroredRepeat),
+        _ => None,
+    };
+    let finite = |x: f32| x.is_finite().then_some(x);
+    let image = d.u32()?;
+    let s = d.u32()?;
+    if s >> 12 != 0 {
+        return None;
+    }
+    let sampler = Sampler {
+        wrap_s: wrap(s & 15)?,
+        wrap_t: wrap(s >> 4 & 15)?,
+        filter: match s >> 8 & 15 {
+            0 => Filter::Nearest,
+            1 => Filter::Linear,
+            _ => return None,
+        },
+    };
+    let mut v = [0f32; 7];
+    for x in &mut v {
+        *x = finite(d.f32()?)?;
+    }
+    Some(TextureBinding {
+        image,
+        sampler,
+        transform: UvTransform {
+            offset: [v[0], v[1]],
+            rotation: v[2],
+            scale: [v[3], v[4]],
+        },
+        cutoff: v[5],
+        alpha: v[6],
+    })
 }
 
 /// Bytes of one tile's entry: its offset, stored size and CRC-32.
@@ -430,47 +493,21 @@ fn decode_tiled_images(d: &mut Dec<'_>) -> Option<(Vec<TextureImage>, TilesSecti
     Some((images, section))
 }
 
-/// Reads the materials' texture bindings into the materials they name.
-fn decode_bindings(d: &mut Dec<'_>, materials: &mut [Material]) -> Option<()> {
-    let wrap = |c: u32| match c {
-        0 => Some(Wrap::Repeat),
-        1 => Some(Wrap::ClampToEdge),
-        2 => Some(Wrap::MirroredRepeat),
-        _ => None,
-    };
-    let finite = |x: f32| x.is_finite().then_some(x);
+/// Reads the materials' texture bindings into the materials they name;
+/// `maps` (version 9): then their other maps.
+fn decode_bindings(d: &mut Dec<'_>, materials: &mut [Material], maps: bool) -> Option<()> {
     indexed_entries(d, materials.len(), TEXTURE_ENTRY, |d, i| {
-        let image = d.u32()?;
-        let s = d.u32()?;
-        if s >> 12 != 0 {
-            return None;
-        }
-        let sampler = Sampler {
-            wrap_s: wrap(s & 15)?,
-            wrap_t: wrap(s >> 4 & 15)?,
-            filter: match s >> 8 & 15 {
-                0 => Filter::Nearest,
-                1 => Filter::Linear,
-                _ => return None,
-            },
-        };
-        let mut v = [0f32; 7];
-        for x in &mut v {
-            *x = finite(d.f32()?)?;
-        }
-        materials.get_mut(i)?.texture = Some(TextureBinding {
-            image,
-            sampler,
-            transform: UvTransform {
-                offset: [v[0], v[1]],
-                rotation: v[2],
-                scale: [v[3], v[4]],
-            },
-            cutoff: v[5],
-            alpha: v[6],
-        });
+        materials.get_mut(i)?.texture = Some(get_binding(d)?);
         Some(())
-    })
+    })?;
+    if maps {
+        indexed_entries(d, 3 * materials.len(), TEXTURE_ENTRY, |d, k| {
+            let b = get_binding(d)?;
+            *materials.get_mut(k / 3)?.maps.slot_mut((k % 3) as u32)? = Some(b);
+            Some(())
+        })?;
+    }
+    Some(())
 }
 
 /// Reads the images of a version 8 database (names and bytes).

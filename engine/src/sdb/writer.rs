@@ -63,9 +63,12 @@ pub struct DbWriter {
     background: [f32; 3],
     lights: Vec<Light>,
     materials: Vec<Material>,
-    material_index: HashMap<[u32; 24], u32>,
+    material_index: HashMap<crate::scene::MaterialKey, u32>,
     /// The images materials bind (version 8).
     textures: Vec<TextureImage>,
+    /// Images bound as colours and as data ([`Encoding`]).
+    colour_images: std::collections::HashSet<u32>,
+    data_images: std::collections::HashSet<u32>,
     texture_bytes: u64,
     current_material: Option<u32>,
     material_statements: u64,
@@ -156,6 +159,8 @@ impl DbWriter {
             materials: Vec::new(),
             material_index: HashMap::new(),
             textures: Vec::new(),
+            colour_images: Default::default(),
+            data_images: Default::default(),
             texture_bytes: 0,
             current_material: None,
             material_statements: 0,
@@ -574,13 +579,20 @@ impl DbWriter {
             Compression::Zstd(l) => Some(l),
         };
         let path = self.path.clone();
-        for im in &images {
+        for (i, im) in images.iter().enumerate() {
             let ImageData::Encoded(bytes) = &im.data else {
                 unreachable!("the writer takes encoded images only");
             };
             let (width, height, texels) = crate::texture::decode_rgba8(bytes, &im.name)?;
             let mut tiles = Vec::new();
-            let encoding = Encoding::Srgb;
+            // An image bound only as data (metallic-roughness, normals)
+            // holds linear values; one bound as a colour anywhere is sRGB.
+            let i = i as u32;
+            let encoding = if self.data_images.contains(&i) && !self.colour_images.contains(&i) {
+                Encoding::Linear
+            } else {
+                Encoding::Srgb
+            };
             let tiling = |t: &TileTexels, cols, rows| -> Result<(), Error> {
                 let packed = pack(t, cols, rows);
                 let compressed;
@@ -773,6 +785,17 @@ impl SceneSink for DbWriter {
     }
 
     fn material(&mut self, m: &Material) -> Result<(), Error> {
+        // How each image is bound, the world's and the models' materials
+        // alike: colours (sRGB) or data (linear values).
+        for b in [m.texture, m.maps.emissive].into_iter().flatten() {
+            self.colour_images.insert(b.image);
+        }
+        for b in [m.maps.metallic_roughness, m.maps.normal]
+            .into_iter()
+            .flatten()
+        {
+            self.data_images.insert(b.image);
+        }
         if let Some(model) = self.open_model.as_mut() {
             return model.material(m);
         }

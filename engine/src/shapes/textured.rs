@@ -163,24 +163,36 @@ impl Kind for TexturedKind {
             _ => ng,
         };
         let mix = |a: f32, b: f32, c: f32| (a as f64 * w[0] + b as f64 * w[1] + c as f64 * w[2]) as f32;
-        let (uv, uv_per_length) = match s.uvs {
+        let (uv, uv_per_length, tangent) = match s.uvs {
             [a, b, c] => {
-                let uv_area = ((b[0] as f64 - a[0] as f64) * (c[1] as f64 - a[1] as f64)
-                    - (c[0] as f64 - a[0] as f64) * (b[1] as f64 - a[1] as f64))
-                    .abs();
+                let (du1, dv1) = (b[0] as f64 - a[0] as f64, b[1] as f64 - a[1] as f64);
+                let (du2, dv2) = (c[0] as f64 - a[0] as f64, c[1] as f64 - a[1] as f64);
+                let det = du1 * dv2 - du2 * dv1;
                 let (p0, p1, p2) = (
                     Vec3::from_f32(v[0]),
                     Vec3::from_f32(v[1]),
                     Vec3::from_f32(v[2]),
                 );
-                let area = (p1 - p0).cross(p2 - p0).length();
-                let ratio = if area > 0.0 { (uv_area / area).sqrt() } else { 0.0 };
+                let (e1, e2) = (p1 - p0, p2 - p0);
+                let area = e1.cross(e2).length();
+                let ratio = if area > 0.0 {
+                    (det.abs() / area).sqrt()
+                } else {
+                    0.0
+                };
+                // dp/du from the edges and their texture coordinates.
+                let tangent = if det != 0.0 {
+                    ((e1 * dv2 - e2 * dv1) * (1.0 / det)).to_array().map(|x| x as f32)
+                } else {
+                    [0.0; 3]
+                };
                 (
                     Some([mix(a[0], b[0], c[0]), mix(a[1], b[1], c[1])]),
                     ratio as f32,
+                    tangent,
                 )
             }
-            _ => (None, 0.0),
+            _ => (None, 0.0, [0.0; 3]),
         };
         let color = match s.colors {
             [a, b, c] => {
@@ -197,6 +209,7 @@ impl Kind for TexturedKind {
                 uv,
                 color,
                 uv_per_length,
+                tangent,
             },
         }
     }

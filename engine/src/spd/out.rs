@@ -114,6 +114,7 @@ impl<'a> Out<'a> {
         self.sink.material(&Material {
             pbr: None,
             texture: None,
+            maps: crate::scene::Maps::NONE,
             color: r3(c),
             kd: r32(kd),
             ks: r32(ks),

@@ -302,6 +302,137 @@ fn vertex_colours_multiply_the_base_colour_and_interpolate() {
     assert!(n > 1500, "only {n} pixels checked");
 }
 
+/// A `w` x `h` PNG whose texels are all `c`.
+fn flat_png(c: [u8; 4]) -> Vec<u8> {
+    let img = image::RgbaImage::from_pixel(4, 4, image::Rgba(c));
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    png
+}
+
+/// The quad of [`quad`] (the pattern as its base colour texture, image
+/// 0) with its material changed by `f`, which may bind the further
+/// images `extra` (images 1, 2, ... as files beside it).
+fn quad_with(dir: &Path, extra: &[Vec<u8>], f: impl Fn(&mut serde_json::Value)) -> PathBuf {
+    let path = quad(dir, Look::ImageFile(9729));
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    for (k, png) in extra.iter().enumerate() {
+        let name = format!("map{}.png", k + 1);
+        std::fs::write(dir.join(&name), png).unwrap();
+        doc["images"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"uri": name}));
+        doc["textures"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!({"source": k + 1, "sampler": 0}));
+    }
+    f(&mut doc["materials"][0]);
+    std::fs::write(&path, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn a_metallic_roughness_texture_scales_the_factors() {
+    // Green 128 (roughness 128/255), blue 0 (metallic 0) under factors 1:
+    // the image of the factors 0 and 128/255 without the texture, bit for
+    // bit (so the image, bound only as data, holds linear values).
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mapped = render(
+        d,
+        &quad_with(d, &[flat_png([0, 128, 0, 255])], |m| {
+            m["pbrMetallicRoughness"]["metallicFactor"] = json!(1.0);
+            m["pbrMetallicRoughness"]["metallicRoughnessTexture"] = json!({"index": 1});
+        }),
+    );
+    let plain = render(
+        d,
+        &quad_with(d, &[], |m| {
+            m["pbrMetallicRoughness"]["metallicFactor"] = json!(0.0);
+            m["pbrMetallicRoughness"]["roughnessFactor"] = json!(128.0f32 / 255.0);
+        }),
+    );
+    assert!(mapped == plain, "the texture did not scale the factors");
+    // And it matters: a rough surface differs.
+    let rough = render(d, &quad_with(d, &[], |_| {}));
+    assert!(rough != plain);
+}
+
+#[test]
+fn an_emissive_texture_adds_its_texels_times_the_factor() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let lit_only = render(d, &quad_with(d, &[], |_| {}));
+    let glowing = render(
+        d,
+        &quad_with(d, &[pattern_png()], |m| {
+            m["emissiveFactor"] = json!([1.0, 0.5, 1.0]);
+            m["emissiveTexture"] = json!({"index": 1});
+        }),
+    );
+    // The difference is the emission: the pattern (sRGB decoded, bilinear)
+    // times the factor, averaged over each pixel's corners.
+    let glow: Vec<[f32; 3]> = glowing
+        .iter()
+        .zip(&lit_only)
+        .map(|(g, l)| std::array::from_fn(|k| g[k] - l[k]))
+        .collect();
+    let tex = Texture::decode(&pattern_png(), "pattern", Encoding::Srgb).unwrap();
+    let s = Sampler {
+        wrap_s: Wrap::ClampToEdge,
+        wrap_t: Wrap::ClampToEdge,
+        filter: Filter::Linear,
+    };
+    let n = check(
+        &glow,
+        on_quad,
+        |x, y| {
+            let t = tex.sample(&s, uv(x, y));
+            [t[0], 0.5 * t[1], t[2]]
+        },
+        2e-3,
+    );
+    assert!(n > 1500, "only {n} pixels checked");
+}
+
+#[test]
+fn a_normal_map_tilts_the_shading_normal_in_the_texture_frame() {
+    // Every texel (204, 128, 230): the normal tilted toward +u (+x here),
+    // y of the frame (+v up the image, +y here) nearly zero.
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let img = render(
+        d,
+        &quad_with(d, &[flat_png([204, 128, 230, 255])], |m| {
+            m["pbrMetallicRoughness"]
+                .as_object_mut()
+                .unwrap()
+                .remove("baseColorTexture");
+            m["normalTexture"] = json!({"index": 1, "scale": 0.8});
+        }),
+    );
+    let c = |v: u8| 2.0 * (v as f64 / 255.0) - 1.0;
+    let n = glam::DVec3::new(0.8 * c(204), 0.8 * c(128), c(230)).normalize();
+    let pbr = Pbr {
+        metallic: 0.0,
+        roughness: 1.0,
+        emissive: [0.0; 3],
+    };
+    let expect = |x: f64, y: f64| {
+        let v = (glam::DVec3::new(0.0, 0.0, 10.0) - glam::DVec3::new(x, y, 0.0)).normalize();
+        brdf(&pbr, [1.0; 3], n, v, glam::DVec3::Z, n.z).map(|c| c * n.z as f32)
+    };
+    let k = check(&img, on_quad, expect, 2e-3);
+    assert!(k > 1500, "only {k} pixels checked");
+    // The tilt is visible: the flat quad's shading differs.
+    let lambert = lit(0.0, 0.0, [1.0; 3])[0];
+    assert!((img[(32 * SIZE + 32) as usize][0] - lambert).abs() > 0.02);
+}
+
 /// A 2 x 1 PNG: a transparent red texel beside an opaque green one.
 fn half_transparent_png() -> Vec<u8> {
     let mut img = image::RgbaImage::new(2, 1);

@@ -123,6 +123,7 @@ const MATERIALS: [Material; 2] = [
     Material {
         pbr: None,
         texture: None,
+        maps: sray_engine::scene::Maps::NONE,
         color: [0.8, 0.5, 0.3],
         kd: 0.7,
         ks: 0.3,
@@ -133,6 +134,7 @@ const MATERIALS: [Material; 2] = [
     Material {
         pbr: None,
         texture: None,
+        maps: sray_engine::scene::Maps::NONE,
         color: [0.3, 0.6, 0.9],
         kd: 0.5,
         ks: 0.2,
@@ -432,6 +434,7 @@ fn ties_between_instances_go_as_between_copies() {
         w.material(&Material {
             pbr: None,
             texture: None,
+            maps: sray_engine::scene::Maps::NONE,
             color: [0.1, 0.9, 0.1],
             ..MATERIALS[0]
         })
