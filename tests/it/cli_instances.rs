@@ -62,8 +62,8 @@ fn instances_render_as_their_copies_in_every_tracer() {
     // The shared mesh is stored once: one model, four instances.
     let i = info(d, "inst.sdb");
     // A glTF is a scene file: its world's objects in spatial order; the
-    // mesh is textured (version 8).
-    assert_eq!(i["version"], 8, "{i}");
+    // mesh is textured (version 9: its image as tiles).
+    assert_eq!(i["version"], 9, "{i}");
     assert_eq!(i["textures"], 1, "{i}");
     assert_eq!(i["counts"]["instance"], 4, "{i}");
     assert_eq!(i["objects"], 4, "{i}");
