@@ -5,8 +5,8 @@
 
 use super::MAX_GRIDS;
 use super::voxels::{REGISTERED, VoxelGrid, VoxelGrids};
-use crate::df::Hierarchies;
 use crate::grid::aggregate;
+use crate::grid::nested::Hierarchies;
 use crate::math::Aabb;
 use crate::sdb::{Block, BoxRef};
 

@@ -6,15 +6,13 @@
 mod lanes;
 mod mailbox;
 pub mod models;
-mod nested;
 mod object_grid;
 mod polygon;
 mod pyramid;
 mod trace;
 mod walk;
 
-pub(crate) use nested::{Entry, Hierarchies, NESTED, high_first, ray_meets};
-pub(crate) use object_grid::Boxes;
+pub(crate) use crate::grid::nested::{Boxes, Entry, NESTED, high_first, ray_meets};
 pub use object_grid::ObjectGrid;
 
 use crate::error::Error;
@@ -229,7 +227,7 @@ impl<'t> DfScene<'t> {
         opts.validate()?;
         let n = objects.len();
         // Voxel entries tag hierarchies with the top bit of an id.
-        if n >= nested::NESTED as usize {
+        if n >= NESTED as usize {
             return Err(Error::Invalid(format!(
                 "{n} objects are more than depth-first keeps in memory (2^31 at most); \
                  render breadth-first (--mode bf)"

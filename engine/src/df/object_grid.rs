@@ -1,45 +1,11 @@
-use super::nested::{Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use super::pyramid::Pyramid;
 use crate::error::Error;
 use crate::grid::GridSpec;
 use crate::grid::aggregate;
+use crate::grid::nested::{Boxes, Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use crate::objects::ObjectStore;
 use crate::scene::Aabb;
 use rayon::prelude::*;
-
-/// Objects' bounding boxes by id, as a grid's build reads them.
-pub trait Boxes: Sync {
-    fn count(&self) -> usize;
-    fn bbox(&self, id: u32) -> Aabb;
-
-    /// The object's input id, by which ties go: its id, unless the
-    /// database is in spatial order.
-    fn rank(&self, id: u32) -> u32 {
-        id
-    }
-
-    /// Whether some object's input id is not its id.
-    fn ranked(&self) -> bool {
-        false
-    }
-
-    /// Gives `f` every object's id and box, in id order.
-    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
-        for id in 0..self.count() as u32 {
-            f(id, self.bbox(id));
-        }
-    }
-}
-
-impl Boxes for [Aabb] {
-    fn count(&self) -> usize {
-        self.len()
-    }
-
-    fn bbox(&self, id: u32) -> Aabb {
-        self[id as usize]
-    }
-}
 
 impl Boxes for ObjectStore {
     fn count(&self) -> usize {
@@ -71,7 +37,7 @@ impl Boxes for ObjectStore {
 /// within a voxel (input id order, for a database in spatial order, so
 /// that objects are met, and shadow rays stop, as in the input's order). A voxel listing more than [`MIN_OBJECTS`] objects lists
 /// instead one entry tagged [`NESTED`], a hierarchy of boxes over them
-/// (see [`super::nested`]).
+/// (see [`crate::grid::nested`]).
 ///
 /// Only voxels that list something have a start: a bit per voxel says
 /// which, and a count per 64 voxels ranks them. A grid sized for a

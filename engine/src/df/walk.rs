@@ -17,10 +17,10 @@
 //! ties to the smaller input id, whatever the order of the tests.
 
 use super::lanes::{self, Found, Want};
-use super::nested::{Holds, MAX_PENDING, NESTED, high_first};
 use super::pyramid::BlockBounds;
 use super::trace::{NO_OBJECT, Scratch};
 use super::{Candidate, DfScene, ObjectGrid};
+use crate::grid::nested::{Holds, MAX_PENDING, NESTED, high_first};
 use crate::hit::{Hit, PrimId};
 use crate::kernels::{
     BATCH, BoxLanes, LANES, Lanes, RayLanes, RayTriangles, Triangle, each_lane, widen,
@@ -443,7 +443,7 @@ fn visit_voxel<R: Elem, L: Simd, G: Goal<R>>(
 }
 
 /// A voxel that is not crowded lists no more faces than a batch holds.
-const _: () = assert!(super::nested::MIN_OBJECTS <= BATCH);
+const _: () = assert!(crate::grid::nested::MIN_OBJECTS <= BATCH);
 
 /// Tests the faces gathered in the batch, each against the lanes that
 /// met it and had not tested it: ray by ray, all of a ray's faces at

@@ -8,6 +8,7 @@
 
 pub mod aggregate;
 mod dda;
+pub(crate) mod nested;
 mod partition;
 
 pub use dda::{Dda, DdaSave};

@@ -20,9 +20,42 @@
 //! wins does not depend on the order of the tests (nearest, ties to the
 //! smaller id).
 
-use super::object_grid::Boxes;
 use crate::math::Vec3;
 use crate::scene::Aabb;
+
+/// Objects' bounding boxes by id, as a grid's build reads them.
+pub trait Boxes: Sync {
+    fn count(&self) -> usize;
+    fn bbox(&self, id: u32) -> Aabb;
+
+    /// The object's input id, by which ties go: its id, unless the
+    /// database is in spatial order.
+    fn rank(&self, id: u32) -> u32 {
+        id
+    }
+
+    /// Whether some object's input id is not its id.
+    fn ranked(&self) -> bool {
+        false
+    }
+
+    /// Gives `f` every object's id and box, in id order.
+    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
+        for id in 0..self.count() as u32 {
+            f(id, self.bbox(id));
+        }
+    }
+}
+
+impl Boxes for [Aabb] {
+    fn count(&self) -> usize {
+        self.len()
+    }
+
+    fn bbox(&self, id: u32) -> Aabb {
+        self[id as usize]
+    }
+}
 
 /// Tag of a voxel entry that stands for a hierarchy; the other bits are
 /// the index of its root node. Object ids stay below it (a database holds
