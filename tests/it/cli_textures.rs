@@ -2,8 +2,9 @@
 //! floor whose texture takes 4.5 times `--memory` (144 MiB of texels, 192
 //! MiB with its mip chain), seen from just above it so that the near
 //! floor reads the finest level and the far floor coarse ones. Both
-//! tracers and two local workers give the same image; each render stays
-//! within the budget plus 64 MiB and reports the tiles it read.
+//! tracers, two local workers and two worker processes give the same
+//! image; each render (and each worker) stays within its budget plus 64
+//! MiB, and reports the tiles it read.
 
 use crate::common;
 
@@ -177,4 +178,44 @@ fn textures_four_times_the_memory_render_within_it_in_both_tracers_and_on_two_wo
         stats(d, "local.json")["eye_hit_rays"],
         renders[0].1["eye_hit_rays"]
     );
+
+    // Two worker processes of 32 MiB each (their caches hold the scene as
+    // the coordinator serves it): the same image, and each worker's peak
+    // within its budget plus 64 MiB.
+    std::fs::write(d.join("token"), "texture-secret\n").unwrap();
+    let (coord, url) = common::cluster::coordinator(d, &["--token-file", "token"]);
+    let workers: Vec<common::Proc> = ["t0", "t1"]
+        .iter()
+        .map(|n| common::cluster::worker(d, &url, n, Some("token"), &["--memory", "32MiB"]))
+        .collect();
+    for n in ["t0", "t1"] {
+        common::cluster::registered(&coord, n);
+    }
+    let mut a =
+        common::cluster::render_args("floor.sdb", &url, "token", "workers.png", "160", "4096");
+    a.push("--quiet");
+    ok(d, &a);
+    assert!(
+        std::fs::read(d.join("workers.png")).unwrap() == renders[0].0,
+        "two worker processes differ from the embedded render"
+    );
+    for w in &workers {
+        let status =
+            std::fs::read_to_string(format!("/proc/{}/status", w.child.id())).unwrap_or_default();
+        let Some(kb) = status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmHWM:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        else {
+            common::cannot_run("a worker's peak needs /proc/PID/status");
+            return;
+        };
+        let peak = kb / 1024.0;
+        assert!(
+            peak <= 32.0 + 64.0,
+            "a worker's peak RSS {peak:.1} MiB is over its 32 MiB budget plus 64 MiB"
+        );
+        eprintln!("worker peak RSS {peak:.1} MiB");
+        assert!(peak > 1.0, "{peak} MiB: not the worker's figure");
+    }
 }
