@@ -317,6 +317,43 @@ pub struct Carried {
     out: Outcome,
 }
 
+/// Shades `items` with `shade_one` in parallel chunks (four a thread),
+/// each into an output of its own, whose light and rays are then handed
+/// on in chunk order.
+fn shade_in_chunks<T: Sync>(
+    setup: &mut ShadeSetup<'_>,
+    pool: &rayon::ThreadPool,
+    items: &[T],
+    next: &mut NextRays,
+    contribute: &mut dyn FnMut(u32, [i64; 3]),
+    counts: &mut RayCounts,
+    shade_one: impl Fn(&T, &mut SetOutput) + Sync,
+) -> Result<(), Error> {
+    let chunks = pool.current_num_threads().max(1) * 4;
+    let chunk = items.len().div_ceil(chunks).max(64);
+    let n_chunks = items.len().div_ceil(chunk);
+    if setup.outputs.len() < n_chunks {
+        setup.outputs.resize_with(n_chunks, Default::default);
+    }
+    let outputs = &mut setup.outputs[..n_chunks];
+    pool.install(|| {
+        items
+            .par_chunks(chunk)
+            .zip(outputs.par_iter_mut())
+            .for_each(|(part, o)| {
+                o.rays.clear();
+                o.contributions.clear();
+                o.counts = RayCounts::default();
+                for item in part {
+                    shade_one(item, o);
+                }
+            })
+    });
+    let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
+    pool.install(|| next.extend_from_slices(&parts))?;
+    Ok(())
+}
+
 /// Shades hits whose surfaces came with them, in parallel chunks whose
 /// outputs are appended in order: the spawned rays stay in key order.
 fn shade_carried(
@@ -328,35 +365,16 @@ fn shade_carried(
     counts: &mut RayCounts,
 ) -> Result<(), Error> {
     let (materials, shade_scene) = (setup.materials, setup.shade);
-    let chunks = pool.current_num_threads().max(1) * 4;
-    let chunk = carried.len().div_ceil(chunks).max(64);
-    let n_chunks = carried.len().div_ceil(chunk);
-    if setup.outputs.len() < n_chunks {
-        setup.outputs.resize_with(n_chunks, Default::default);
-    }
-    let outputs = &mut setup.outputs[..n_chunks];
-    pool.install(|| {
-        carried
-            .par_chunks(chunk)
-            .zip(outputs.par_iter_mut())
-            .for_each(|(hits, o)| {
-                o.rays.clear();
-                o.contributions.clear();
-                o.counts = RayCounts::default();
-                for h in hits {
-                    shade_one_carried(
-                        materials,
-                        shade_scene,
-                        h,
-                        &mut o.rays,
-                        &mut o.contributions,
-                        &mut o.counts,
-                    );
-                }
-            })
-    });
-    let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
-    pool.install(|| next.extend_from_slices(&parts))?;
+    shade_in_chunks(setup, pool, carried, next, contribute, counts, |h, o| {
+        shade_one_carried(
+            materials,
+            shade_scene,
+            h,
+            &mut o.rays,
+            &mut o.contributions,
+            &mut o.counts,
+        )
+    })?;
     carried.clear();
     Ok(())
 }
@@ -630,38 +648,19 @@ fn shade_textured(
     pending.sort_unstable_by_key(|p| (p.key, p.at));
     let (materials, shade_scene) = (setup.materials, setup.shade);
     // Chunks in tile order: each thread reads its own run of tiles.
-    let chunks = pool.current_num_threads().max(1) * 4;
-    let chunk = pending.len().div_ceil(chunks).max(64);
-    let n_chunks = pending.len().div_ceil(chunk);
-    if setup.outputs.len() < n_chunks {
-        setup.outputs.resize_with(n_chunks, Default::default);
-    }
-    let outputs = &mut setup.outputs[..n_chunks];
-    pool.install(|| {
-        pending
-            .par_chunks(chunk)
-            .zip(outputs.par_iter_mut())
-            .for_each(|(ps, o)| {
-                o.rays.clear();
-                o.contributions.clear();
-                o.counts = RayCounts::default();
-                for p in ps {
-                    let h = &set[p.at as usize];
-                    shade_surface(
-                        shade_scene,
-                        &h.ray,
-                        h.id,
-                        &p.surf,
-                        &materials[p.material as usize],
-                        &mut o.rays,
-                        &mut o.contributions,
-                        &mut o.counts,
-                    );
-                }
-            })
-    });
-    let parts = gather(&setup.outputs[..n_chunks], contribute, counts);
-    pool.install(|| next.extend_from_slices(&parts))?;
+    shade_in_chunks(setup, pool, pending, next, contribute, counts, |p, o| {
+        let h = &set[p.at as usize];
+        shade_surface(
+            shade_scene,
+            &h.ray,
+            h.id,
+            &p.surf,
+            &materials[p.material as usize],
+            &mut o.rays,
+            &mut o.contributions,
+            &mut o.counts,
+        );
+    })?;
     pending.clear();
     Ok(())
 }
