@@ -1,0 +1,155 @@
+//! Registration (step 2 of a pass): each ray walks its grids and stores
+//! itself in up to its store number of voxels; and the sample of a
+//! round's rays that plans its slots by the registrations they make.
+
+use super::*;
+
+/// Rays [`sample_registrations`] walks at most.
+const SAMPLE_RAYS: u64 = 1024;
+
+/// The registrations rays `ray(0..len)` make in their first pass, on
+/// average, from up to [`SAMPLE_RAYS`] of them spread evenly over the
+/// round (rays that meet no grid take no slot and are not counted); `None`
+/// when no sampled ray meets a grid. What a round's slots are planned for
+/// (see [`crate::bf::Budget::slots`]): the rays of one scene differ by tens
+/// of times (mount11's eye rays make 1.3 a pass, rings80's 25), and a
+/// round's shadow rays are unlike its eye rays. Walking a thousand rays
+/// costs a few hundredths of a pass.
+pub fn sample_registrations<R: Real>(
+    len: u64,
+    ray: &(dyn Fn(u64) -> RayRec + Sync),
+    grids: &VoxelGrids,
+    store: &StorePlan,
+    eps: f64,
+) -> Option<f64> {
+    let mut slots = Slots::<R>::new(1);
+    slots.ensure(1, false);
+    let sh = &mut slots.shards[0];
+    let mut regs: [RegMap; MAX_GRIDS] = Default::default();
+    let mut region = [NO_REGION; MAX_GRIDS];
+    let step = (len / SAMPLE_RAYS).max(1);
+    let (mut rays, mut total) = (0u64, 0u64);
+    let mut i = step / 2;
+    while i < len {
+        let r = ray(i);
+        i += step;
+        if misses_every_grid(&r, grids, eps) {
+            continue;
+        }
+        for m in regs.iter_mut() {
+            m.clear(64, 0);
+        }
+        load(sh, 0, 0, &r, eps);
+        register(
+            &mut sh.hot[0],
+            &mut sh.cold[0],
+            0,
+            grids,
+            store,
+            &mut regs,
+            &mut region,
+        );
+        total += regs.iter().map(RegMap::len).sum::<usize>() as u64;
+        rays += 1;
+    }
+    (rays > 0).then(|| total as f64 / rays as f64)
+}
+
+/// A ray given a slot, to be loaded into it by the shard's own thread.
+/// Walks a ray through each grid, storing it in up to its store number of
+/// voxels: where it enters some object's voxel boundary, or the first
+/// voxel of its walk if that is occupied. Returns the sum of the store
+/// numbers of the walks it continued, and their number (for statistics).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn register<R: Real>(
+    h: &mut Hot<R>,
+    c: &mut Cold,
+    slot: u32,
+    grids: &VoxelGrids,
+    store: &StorePlan,
+    regs: &mut [RegMap; MAX_GRIDS],
+    region: &mut [Region; MAX_GRIDS],
+) -> (u64, u64) {
+    let (mut store_sum, mut walks) = (0u64, 0u64);
+    for (g, grid) in grids.grids.iter().enumerate() {
+        let w = &mut c.walks[g];
+        if w.state == DONE {
+            continue;
+        }
+        store_sum += store.store(g, w.k) as u64;
+        walks += 1;
+        h.prev[g] = w.last;
+        let spec: &GridSpec = &grid.spec;
+        if spec.cells() == 1 {
+            // A one-voxel grid (a few large objects): the ray is stored in
+            // it once, if it meets the grid's box at all.
+            if grid.flags[0] & OCCUPIED != 0
+                && spec.clip(c.o, c.d, c.inv, c.t_min, c.t_max).is_some()
+            {
+                regs[g].insert(0, slot);
+                region[g].add([0, 0, 0]);
+                w.last = [0, 0, 0];
+                w.k = w.k.saturating_add(1);
+            }
+            w.state = DONE;
+            continue;
+        }
+        let (mut dda, mut entry) = if w.state == FRESH {
+            match Dda::start(spec, c.o, c.d, c.inv, c.t_min, c.t_max) {
+                Some(d) => (d, None),
+                None => {
+                    w.state = DONE;
+                    continue;
+                }
+            }
+        } else {
+            let mut d = Dda::resume(spec, c.d, c.inv, &w.save);
+            match d.advance_axis() {
+                Some(a) => (d, Some(a)),
+                None => {
+                    w.state = DONE;
+                    continue;
+                }
+            }
+        };
+        let limit = store.store(g, w.k);
+        let mut n = 0;
+        loop {
+            if h.best.t < dda.t_enter {
+                w.state = DONE; // the best hit lies before this voxel
+                break;
+            }
+            let f = grid.flags[dda.index];
+            let stored = f & OCCUPIED != 0
+                && match entry {
+                    None => true,
+                    Some(a) => f & entry_face(a, dda.steps_up(a)) != 0,
+                };
+            if stored {
+                regs[g].insert(dda.index as u32, slot);
+                let v = dda.voxel();
+                region[g].add(v);
+                w.last = [v[0] as u16, v[1] as u16, v[2] as u16];
+                n += 1;
+                if n == limit {
+                    break;
+                }
+            }
+            match dda.advance_axis() {
+                Some(a) => entry = Some(a),
+                None => {
+                    w.state = DONE;
+                    break;
+                }
+            }
+        }
+        if w.state != DONE {
+            w.state = WALKING;
+            w.save = dda.save();
+        }
+        if n > 0 {
+            w.k = w.k.saturating_add(1);
+        }
+    }
+    (store_sum, walks)
+}

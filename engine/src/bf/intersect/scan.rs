@@ -1,0 +1,464 @@
+//! The scan of a pass (step 3): each block's candidate objects and
+//! aggregates tested against the rays registered in their voxels, the
+//! (object, ray) pairs gathered per shard and tested, and each hit offered
+//! to its ray (with its surface when the ray carries one).
+
+use super::*;
+
+/// A ray's mailbox value while it walks aggregate `index` in pass
+/// `pass`: no object's (an object's low half is zero), and no other
+/// aggregate's. A ray's mailbox outlives its pass; with the pass in the
+/// value, which aggregates a ray walks in a pass depends on that pass's
+/// registrations alone.
+#[inline(always)]
+fn aggregate_tag(index: u32, pass: u64) -> PrimId {
+    PrimId(((index as u64) << 32) | (pass % u32::MAX as u64 + 1))
+}
+
+/// Tests one block's candidate objects and aggregates against the shard's
+/// registered rays.
+pub(super) fn scan_block<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    found: &Found,
+    grids: &VoxelGrids,
+    models: &Models,
+    per_pass: bool,
+    carry: bool,
+    walk: &AggregateWalk,
+) {
+    scan_singles(sh, block, &found.singles, grids, models, per_pass, carry);
+    if !found.aggregates.is_empty() {
+        scan_aggregates(sh, block, found, grids, models.cutouts(), carry, walk);
+    }
+}
+
+/// What walking an aggregate needs besides the shard: the pass (which
+/// names the aggregates in the rays' mailboxes) and how far from its box
+/// an object's hit may be computed ([`crate::grid::box_slack`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct AggregateWalk {
+    pub(super) pass: u64,
+    pub(super) slack: f64,
+}
+
+/// Tests the block's aggregates against the shard's registered rays: a
+/// ray stored in some voxel of an aggregate's box walks its hierarchy
+/// once (the mailbox), entering only the boxes it may meet before its
+/// best hit so far, and tests the objects there (except those its last
+/// voxel of the previous pass shows it tested then). The hierarchy may
+/// lead it to objects outside the voxels it is stored in: their hits are
+/// hits all the same, and a hit is kept only if it is the nearest so far,
+/// so the ray's final hit, and the image, do not change.
+fn scan_aggregates<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    found: &Found,
+    grids: &VoxelGrids,
+    cutouts: Option<&Cutouts>,
+    carry: bool,
+    walk: &AggregateWalk,
+) {
+    // One aggregate's objects, decoded when its first ray meets it.
+    let mut objects: Vec<(ObjectRef<'_>, Option<Prepared>)> = Vec::new();
+    for a in &found.aggregates {
+        let g = a.group as usize;
+        if sh.regs[g].is_empty() {
+            continue;
+        }
+        let (lo, hi) = (a.lo.map(u32::from), a.hi.map(u32::from));
+        if !sh.region[g].overlaps(lo, hi) {
+            continue;
+        }
+        let members = &found.members[a.first as usize..(a.first + a.len) as usize];
+        let tag = aggregate_tag(a.index, walk.pass);
+        objects.clear();
+        let Shard {
+            regs,
+            hot,
+            cold,
+            q,
+            counts,
+            ..
+        } = &mut *sh;
+        for slot in registered(&regs[g], &grids.grids[g], lo, hi) {
+            let s = &mut hot[slot as usize];
+            if s.blocked {
+                continue;
+            }
+            if s.mailbox == tag {
+                counts.skipped_mailbox += 1;
+                continue;
+            }
+            s.mailbox = tag;
+            if objects.is_empty() {
+                for m in members {
+                    // Records were checked when the block was read.
+                    let Some(o) = block.object_at(m.at, m.index, m.rank) else {
+                        return;
+                    };
+                    objects.push((o, o.shape.prepare()));
+                }
+            }
+            counts.aggregate_walks += 1;
+            let c = &mut cold[slot as usize];
+            let q = &q[slot as usize];
+            let (o, inv) = (c.o, c.inv);
+            let prev = s.prev[g];
+            found
+                .trees
+                .visit(a.tree, high_first(c.d), (), &mut |e| match e {
+                    Entry::Box(b, ()) => {
+                        ray_meets(o, inv, s.t_min.to_f64(), s.upper.to_f64(), b, walk.slack)
+                            .then_some(())
+                    }
+                    Entry::Object(id, ()) => {
+                        let k = id as usize - a.first as usize;
+                        let m = &members[k];
+                        if prev[0] != NONE16
+                            && (0..3).all(|i| (m.lo[i]..=m.hi[i]).contains(&prev[i]))
+                        {
+                            // Tested in the previous pass (Fig. 5b).
+                            counts.skipped_last_voxel += 1;
+                            return Some(());
+                        }
+                        let (ob, pr) = &objects[k];
+                        counts.tests.add(ob.shape.kind());
+                        if let Some(t) = ob
+                            .shape
+                            .intersect(pr.as_ref(), &ob.bbox, q, s.t_min, s.upper)
+                            .filter(|_| keeps(cutouts, ob, q))
+                        {
+                            let t = t.to_f64();
+                            offer(s, c, t, PrimId::object(m.index), m.rank, carry, |ray| {
+                                Some((ob.shape.surface(ray, t), ob.material))
+                            });
+                        }
+                        // A shadow ray is done at its first blocker.
+                        (!s.blocked).then_some(())
+                    }
+                });
+        }
+    }
+}
+
+/// The rays (slots) of a shard stored in the voxels of box `lo..=hi` of
+/// `grid` (the shard's registrations there being `regs`), voxel by voxel:
+/// a ray stored in several of them comes once from each.
+#[inline(always)]
+fn registered<'a>(
+    regs: &'a RegMap,
+    grid: &'a VoxelGrid,
+    lo: [u32; 3],
+    hi: [u32; 3],
+) -> Registered<'a> {
+    Registered {
+        regs,
+        grid,
+        dense: regs.is_dense(),
+        lo,
+        hi,
+        // Just before the first voxel.
+        at: [lo[0].wrapping_sub(1), lo[1], lo[2]],
+        row: grid.spec.index([0, lo[1], lo[2]]),
+        slots: [].iter(),
+    }
+}
+
+/// The iterator of [`registered`]: the nested loops over a box's voxels,
+/// unrolled by hand (an iterator of iterators costs a tenth of a scan's
+/// instructions).
+struct Registered<'a> {
+    regs: &'a RegMap,
+    grid: &'a VoxelGrid,
+    dense: bool,
+    lo: [u32; 3],
+    hi: [u32; 3],
+    /// The voxel whose slots `slots` holds the rest of.
+    at: [u32; 3],
+    row: usize,
+    slots: std::slice::Iter<'a, u32>,
+}
+
+impl Iterator for Registered<'_> {
+    type Item = u32;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<u32> {
+        loop {
+            if let Some(&s) = self.slots.next() {
+                return Some(s);
+            }
+            // The next voxel, x fastest.
+            if self.at[0].wrapping_add(1) <= self.hi[0] {
+                self.at[0] = self.at[0].wrapping_add(1);
+            } else {
+                self.at[0] = self.lo[0];
+                if self.at[1] < self.hi[1] {
+                    self.at[1] += 1;
+                } else if self.at[2] < self.hi[2] {
+                    self.at[1] = self.lo[1];
+                    self.at[2] += 1;
+                } else {
+                    return None;
+                }
+                self.row = self.grid.spec.index([0, self.at[1], self.at[2]]);
+            }
+            let v = self.row + self.at[0] as usize;
+            if self.dense || self.grid.flags[v] & REGISTERED != 0 {
+                self.slots = self.regs.slots_in(v as u32).iter();
+            }
+        }
+    }
+}
+
+/// Tests one block's candidate objects, one by one, against the shard's
+/// registered rays.
+fn scan_singles<R: Real>(
+    sh: &mut Shard<R>,
+    block: &Block<'_>,
+    candidates: &[Candidate],
+    grids: &VoxelGrids,
+    models: &Models,
+    per_pass: bool,
+    carry: bool,
+) {
+    for c in candidates {
+        let g = c.group as usize;
+        if sh.regs[g].is_empty() {
+            continue;
+        }
+        let (lo, hi) = (c.lo.map(u32::from), c.hi.map(u32::from));
+        if !sh.region[g].overlaps(lo, hi) {
+            continue;
+        }
+        // Decoded on the first ray to test, and then kept.
+        let mut object: Option<(ObjectRef<'_>, Option<Prepared>, Option<Placement>)> = None;
+        // Where this instance went in `sh.placed`, when models are read
+        // per pass.
+        let mut placed_at = u32::MAX;
+        let index = c.index;
+        let prim = PrimId::object(index);
+        for slot in registered(&sh.regs[g], &grids.grids[g], lo, hi) {
+            let s = &mut sh.hot[slot as usize];
+            if s.blocked {
+                continue;
+            }
+            if s.mailbox == prim {
+                sh.counts.skipped_mailbox += 1;
+                continue;
+            }
+            s.mailbox = prim;
+            let p = s.prev[g];
+            if p[0] != NONE16
+                && (lo[0]..=hi[0]).contains(&(p[0] as u32))
+                && (lo[1]..=hi[1]).contains(&(p[1] as u32))
+                && (lo[2]..=hi[2]).contains(&(p[2] as u32))
+            {
+                // Tested in the previous pass, when the ray was
+                // stored in its last voxel, which this object's
+                // voxel box contains (Fig. 5b).
+                sh.counts.skipped_last_voxel += 1;
+                continue;
+            }
+            if object.is_none() {
+                // Records were checked when the block was read.
+                let Some(o) = block.object_at(c.at, c.index, c.rank) else {
+                    return;
+                };
+                let placement = match &o.shape {
+                    Shape::Instance(i) => Some(Placement::of(i)),
+                    _ => None,
+                };
+                if let (true, Some(pl)) = (per_pass, placement) {
+                    placed_at = sh.placed.len() as u32;
+                    sh.placed.push((index, c.rank, pl));
+                }
+                object = Some((o, o.shape.prepare(), placement));
+            }
+            let Some((o, pr, placement)) = &object else {
+                continue;
+            };
+            sh.counts.tests.add(o.shape.kind());
+            if placed_at != u32::MAX {
+                // Tested once the model is read, after the
+                // world's objects.
+                sh.pairs.push(Pair {
+                    slot,
+                    placed: placed_at,
+                });
+                continue;
+            }
+            let q = &sh.q[slot as usize];
+            let found = match placement {
+                None => o
+                    .shape
+                    .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
+                    .filter(|_| keeps(models.cutouts(), o, q))
+                    .map(|t| (t, prim)),
+                Some(pl) => {
+                    let c = &sh.cold[slot as usize];
+                    if s.shadow {
+                        models
+                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .then_some((s.upper, prim))
+                    } else {
+                        models
+                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .map(|(t, p)| (t, PrimId::instance(index, p)))
+                    }
+                }
+            };
+            if let Some((t, prim)) = found {
+                let t = t.to_f64();
+                offer(
+                    s,
+                    &mut sh.cold[slot as usize],
+                    t,
+                    prim,
+                    c.rank,
+                    carry,
+                    |ray| match (placement, prim.instance_parts()) {
+                        (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
+                        _ => Some((o.shape.surface(ray, t), o.material)),
+                    },
+                );
+            }
+        }
+    }
+}
+
+/// Whether object `o` is there where ray `q` meets it: not where an
+/// alpha-mask cut-out removes it (see [`Cutouts`]).
+#[inline(always)]
+fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> bool {
+    cutouts.is_none_or(|c| c.keeps(&o.shape, o.material, q))
+}
+
+/// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`, whose object
+/// has input id `rank`: a shadow ray is blocked; another keeps the hit if
+/// it wins, and with `carry` the surface there (exactly what the shading
+/// join would compute from the ray and this hit), which `surface` gives
+/// from the ray.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn offer<R: Real>(
+    s: &mut Hot<R>,
+    c: &mut Cold,
+    t: f64,
+    prim: PrimId,
+    rank: u32,
+    carry: bool,
+    surface: impl FnOnce(&RayQ<f64>) -> Option<(crate::intersect::Surface, u32)>,
+) {
+    if s.shadow {
+        s.blocked = true;
+        s.best = Hit { t, prim };
+    } else if s.best.loses_to_ranked(c.rank, t, prim, rank) {
+        s.best = Hit { t, prim };
+        c.rank = rank;
+        s.upper = R::from_f64(t).next_up();
+        if carry && let Some((surf, material)) = surface(&RayQ::from_vec3(c.o, c.d)) {
+            c.ng = surf.ng;
+            c.ns = surf.ns;
+            // A surface with attributes (texture coordinates, colours)
+            // is not carried: the shading join works it out again, so
+            // that slots need no room for attributes.
+            c.material = if surf.attrs == Attrs::NONE {
+                material
+            } else {
+                JOIN
+            };
+        }
+    }
+}
+
+/// Bytes the shards' pending (ray, instance) pairs and placements take.
+pub(super) fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
+    use std::mem::size_of;
+    shards
+        .iter()
+        .map(|sh| {
+            sh.pairs.len() * size_of::<Pair>()
+                + sh.placed.len() * size_of::<(u32, u32, Placement)>()
+        })
+        .sum()
+}
+
+/// Reads, one at a time and in file order, the models this pass's
+/// instances place, and tests each instance's rays against its model:
+/// the same tests, hits and surfaces as a model held in memory gives
+/// (see [`crate::models`]), and which hit is nearest does not depend on
+/// the order of the tests.
+pub(super) fn test_pairs<R: Real>(
+    shards: &mut [Shard<R>],
+    db: &Database,
+    models: &Models,
+    pool: &rayon::ThreadPool,
+    carry: bool,
+    st: &mut IntersectStats,
+) -> Result<(), Error> {
+    let mut wanted: Vec<u32> = Vec::new();
+    for sh in shards.iter_mut() {
+        let placed = &sh.placed;
+        // By model, then ray, then instance: each ray meets its
+        // instances in the database's order whatever shard it is in, so
+        // that counts do not depend on the number of threads.
+        sh.pairs.sort_unstable_by_key(|p| {
+            let (index, _, pl) = &placed[p.placed as usize];
+            (pl.model, p.slot, *index)
+        });
+        wanted.extend(sh.placed.iter().map(|(_, _, pl)| pl.model));
+    }
+    wanted.sort_unstable();
+    wanted.dedup();
+    for m in wanted {
+        let model = models.read_model(db, m as usize, &crate::progress::NoProgress)?;
+        st.model_reads += 1;
+        pool.install(|| {
+            shards.par_iter_mut().for_each(|sh| {
+                let Shard {
+                    hot,
+                    q,
+                    cold,
+                    placed,
+                    pairs,
+                    counts,
+                    ..
+                } = sh;
+                let from = pairs.partition_point(|p| placed[p.placed as usize].2.model < m);
+                for p in &pairs[from..] {
+                    let (index, rank, pl) = &placed[p.placed as usize];
+                    if pl.model != m {
+                        break;
+                    }
+                    let slot = p.slot as usize;
+                    let (s, c) = (&mut hot[slot], &mut cold[slot]);
+                    if s.blocked {
+                        continue;
+                    }
+                    let q = &q[slot];
+                    let found = if s.shadow {
+                        model
+                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .then(|| (s.upper.to_f64(), PrimId::object(*index)))
+                    } else {
+                        model
+                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .map(|(t, k)| (t.to_f64(), PrimId::instance(*index, k)))
+                    };
+                    if let Some((t, prim)) = found {
+                        offer(s, c, t, prim, *rank, carry, |ray| {
+                            model.surface(pl, prim.instance_parts()?.1, ray, t)
+                        });
+                    }
+                }
+            })
+        });
+    }
+    for sh in shards.iter_mut() {
+        sh.pairs.clear();
+        sh.placed.clear();
+    }
+    Ok(())
+}
