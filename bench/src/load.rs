@@ -531,9 +531,10 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
     while (stats.registered.load(Ordering::Relaxed) as usize) < sc.workers {
         if t.elapsed() > Duration::from_secs(120) || stats.errors.load(Ordering::Relaxed) > 0 {
             bail!(
-                "{} of {} simulated workers registered",
+                "{} of {} simulated workers registered ({} registrations tried again)",
                 stats.registered.load(Ordering::Relaxed),
-                sc.workers
+                sc.workers,
+                stats.register_retries.load(Ordering::Relaxed)
             );
         }
         std::thread::sleep(Duration::from_millis(50));

@@ -50,6 +50,9 @@ pub struct SimConfig {
 #[derive(Default)]
 pub struct SimStats {
     pub registered: AtomicU64,
+    /// Registrations tried again (the coordinator did not take the
+    /// connection at once).
+    pub register_retries: AtomicU64,
     pub tasks: AtomicU64,
     pub input_bytes: AtomicU64,
     pub output_bytes: AtomicU64,
@@ -95,17 +98,37 @@ async fn worker(i: usize, cfg: &SimConfig, stats: &Arc<SimStats>) -> Result<(), 
         ca: None,
         identity: None,
     };
-    let mut c = target.connect().await?;
-    let reply = c
-        .register(v1::RegisterRequest {
-            name: format!("sim-{i}"),
-            threads: 2,
-            memory_bytes: 2 << 30,
-            protocol_version: sray_proto::PROTOCOL_VERSION,
-        })
-        .await
-        .map_err(|s| s.message().to_string())?
-        .into_inner();
+    // As a real worker does, try again while the coordinator cannot take
+    // the connection (a thousand workers connecting at once overflow its
+    // accept queue on a loaded machine), spread over time by worker.
+    let mut attempt = 0u64;
+    let (mut c, reply) = loop {
+        let tried = async {
+            let mut c = target.connect().await?;
+            let reply = c
+                .register(v1::RegisterRequest {
+                    name: format!("sim-{i}"),
+                    threads: 2,
+                    memory_bytes: 2 << 30,
+                    protocol_version: sray_proto::PROTOCOL_VERSION,
+                })
+                .await
+                .map_err(|s| s.message().to_string())?
+                .into_inner();
+            Ok::<_, String>((c, reply))
+        }
+        .await;
+        match tried {
+            Ok(ok) => break ok,
+            Err(e) if attempt >= 30 || stopped() => return Err(e),
+            Err(_) => {
+                attempt += 1;
+                stats.register_retries.fetch_add(1, Ordering::Relaxed);
+                let wait = 200 + (i as u64 * 37 + attempt * 101) % 800;
+                tokio::time::sleep(Duration::from_millis(wait)).await;
+            }
+        }
+    };
     stats.registered.fetch_add(1, Ordering::Relaxed);
     let session = reply.session;
     let every = Duration::from_millis(reply.heartbeat_ms.max(100) as u64);

@@ -230,8 +230,19 @@ struct Node {
 /// Setups whose executors (grids, kept records) a worker keeps at once.
 const SETUPS_KEPT: usize = 2;
 
-/// How long to wait between attempts to reach the coordinator.
+/// How long to wait between attempts to reach the coordinator, about.
 const RETRY: Duration = Duration::from_secs(1);
+
+/// [`RETRY`] give or take half of it, so that a cluster's workers,
+/// started together or lost together when the coordinator restarts, do
+/// not all knock at once (a thousand at once overflow its accept queue).
+fn retry_wait() -> Duration {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos() as u64)
+        ^ std::process::id() as u64;
+    RETRY / 2 + Duration::from_millis(nanos % RETRY.as_millis() as u64)
+}
 
 impl Node {
     async fn serve(&mut self) -> anyhow::Result<()> {
@@ -283,7 +294,7 @@ impl Node {
                         tracing::info!(url = %self.cfg.target.url, error = %s.message(), "waiting for the coordinator");
                         waited = true;
                     }
-                    tokio::time::sleep(RETRY).await;
+                    tokio::time::sleep(retry_wait()).await;
                 }
             }
         }
@@ -320,7 +331,7 @@ impl Node {
                 Err(s) if fatal(&s) => {
                     anyhow::bail!("the coordinator refused this worker: {}", s.message())
                 }
-                Err(_) => tokio::time::sleep(RETRY).await,
+                Err(_) => tokio::time::sleep(retry_wait()).await,
             }
         }
     }
