@@ -63,7 +63,7 @@ use crate::scene::setup::{DEFAULT_BACKGROUND, default_lights};
 use crate::scene::{Light, LightKind, Material, MeshFacts, Pbr, Photometric, SceneSink, View};
 use crate::scene::{TextureBinding, TextureImage};
 use crate::shapes::{Patch, Polygon, Shape, Textured, pack_color};
-use crate::texture::{Encoding, Filter, Sampler, Texture, UvTransform, Wrap};
+use crate::texture::{Filter, Sampler, UvTransform, Wrap};
 use glam::{DAffine3, DMat4, DVec3};
 use gltf::accessor::Dimensions;
 use gltf::mesh::Mode;
@@ -1078,7 +1078,7 @@ impl Emit<'_, '_> {
                 let name = format!("image {}", image.index());
                 // Checked now, so that a render does not fail on it.
                 let what = (self.bad)(name.clone()).to_string();
-                Texture::decode(&bytes, &what, Encoding::Srgb)?;
+                crate::texture::decode_rgba8(&bytes, &what)?;
                 let i = self.sink.texture(&TextureImage::encoded(what, bytes))?;
                 self.images.insert(image.index(), i);
                 i

@@ -19,7 +19,6 @@ use crate::input::Wrapping;
 use crate::progress::Progress;
 use crate::scene::{SceneSink, TextureBinding, TextureImage};
 use crate::shapes::MAX_POLYGON_VERTICES;
-use crate::texture::{Encoding, Texture};
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -93,7 +92,7 @@ fn read_image(path: &Path, b: &mut MeshBuilder<'_>, warnings: &mut Warnings) -> 
             return None;
         }
     };
-    if let Err(e) = Texture::decode(&bytes, &what, Encoding::Srgb) {
+    if let Err(e) = crate::texture::decode_rgba8(&bytes, &what) {
         warnings.add(
             "a map_Kd texture that does not decode; its faces are untextured",
             || e.to_string(),

@@ -27,7 +27,6 @@ use crate::input::{Wrapping, read_error};
 use crate::progress::Progress;
 use crate::scene::{Material, SceneSink, TextureBinding, TextureImage};
 use crate::shapes::MAX_POLYGON_VERTICES;
-use crate::texture::{Encoding as ImageEncoding, Texture};
 use std::io::{BufRead, ErrorKind};
 use std::path::{Path, PathBuf};
 
@@ -261,7 +260,7 @@ fn texture_material(
             return NO_MATERIAL;
         }
     };
-    if let Err(e) = Texture::decode(&bytes, &what, ImageEncoding::Srgb) {
+    if let Err(e) = crate::texture::decode_rgba8(&bytes, &what) {
         warnings.add(
             "the TextureFile does not decode; the mesh is untextured",
             || e.to_string(),
