@@ -458,6 +458,11 @@ impl Emit<'_, '_> {
                     .add("a primitive without positions is skipped", what);
                 continue;
             };
+            let colors = prim.get(&gltf::Semantic::Colors(0)).is_some();
+            if fully_cut_out(&prim.material(), colors, &mut *self.warnings, &what) {
+                self.summary.skipped_primitives += 1;
+                continue;
+            }
             let lists = self.shares.lists;
             let pos = Elements::new(&pos, self.bufs, lists).map_err(bad)?;
             pos.expect_vectors(Dimensions::Vec3, "positions", Components::Quantized)
@@ -934,6 +939,31 @@ impl Bounds {
 }
 
 /// The NFF material of a glTF one (see the module documentation).
+/// Whether material `m` cuts its whole surface out: `alphaMode: MASK`
+/// without a base colour texture, its base colour's alpha below the
+/// cut-off (one alpha over the whole surface, so the primitive is not
+/// there at all; `COLOR_0` can only lower it). Where only the vertex
+/// colours' alpha (`colors`) would cut, nothing is cut (said once).
+fn fully_cut_out(
+    m: &gltf::Material<'_>,
+    colors: bool,
+    warnings: &mut Warnings,
+    what: &dyn Fn() -> String,
+) -> bool {
+    let pbr = m.pbr_metallic_roughness();
+    if m.alpha_mode() != gltf::material::AlphaMode::Mask || pbr.base_color_texture().is_some() {
+        return false;
+    }
+    let cut = pbr.base_color_factor()[3] < m.alpha_cutoff().unwrap_or(0.5);
+    if !cut && colors {
+        warnings.add(
+            "alphaMode MASK without a base colour texture cuts by the base colour's alpha only (COLOR_0's alpha is not read)",
+            what,
+        );
+    }
+    cut
+}
+
 /// The texture coordinate set the textures of `m` read, if it has any:
 /// its base colour texture's, else its first other map's
 /// (`KHR_texture_transform` may name another). Every map of a material is

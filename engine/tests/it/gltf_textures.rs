@@ -433,6 +433,33 @@ fn a_normal_map_tilts_the_shading_normal_in_the_texture_frame() {
     assert!((img[(32 * SIZE + 32) as usize][0] - lambert).abs() > 0.02);
 }
 
+#[test]
+fn a_masked_material_without_a_texture_cuts_by_its_alpha() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let path = leaf(d, "MASK");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let with_alpha = |alpha: f64| {
+        let mut doc = doc.clone();
+        doc["materials"][0] = json!({"alphaMode": "MASK", "alphaCutoff": 0.5,
+            "pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.0, 0.0, alpha],
+                "metallicFactor": 0.0, "roughnessFactor": 1.0}});
+        std::fs::write(&path, serde_json::to_string(&doc).unwrap()).unwrap();
+        render(d, &path)
+    };
+    // Below the cut-off the leaf is not there at all: the image of the
+    // scene without its node; above, it is.
+    let cut = with_alpha(0.3);
+    let kept = with_alpha(0.8);
+    let mut without = doc.clone();
+    without["scenes"][0]["nodes"] = json!([1, 2, 3]);
+    std::fs::write(&path, serde_json::to_string(&without).unwrap()).unwrap();
+    let bare = render(d, &path);
+    assert!(cut == bare, "a leaf below its cut-off still shows");
+    assert!(kept != bare, "a leaf above its cut-off is gone");
+}
+
 /// A 2 x 1 PNG: a transparent red texel beside an opaque green one.
 fn half_transparent_png() -> Vec<u8> {
     let mut img = image::RgbaImage::new(2, 1);
