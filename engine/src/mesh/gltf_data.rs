@@ -304,7 +304,8 @@ const GEOMETRY: [&str; 3] = [
 /// - gltf-json 1.4.1's validation indexes a primitive's POSITION accessor
 ///   before checking that it exists (a panic on a bad file): that is
 ///   checked first, as is gltf 1.4.1's `Image::source`, which unwraps a
-///   buffer-view image's `mimeType` (the specification requires one).
+///   buffer-view image's `mimeType` and an image's `uri` when it has no
+///   buffer view (the specification requires them).
 fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> {
     let invalid = |e: gltf::Error| format!("not a valid glTF file: {e}");
     let mut root = gltf::Gltf::from_slice_without_validation(json)
@@ -337,10 +338,16 @@ fn parse_document(json: &[u8]) -> Result<(gltf::Document, Vec<String>), String> 
         }
     }
     for (i, image) in root.images.iter().enumerate() {
-        if image.buffer_view.is_some() && image.mime_type.is_none() {
-            return Err(format!(
-                "image {i} lies in a buffer view but has no mimeType (image/png or image/jpeg)"
-            ));
+        match (&image.buffer_view, &image.uri) {
+            (Some(_), _) if image.mime_type.is_none() => {
+                return Err(format!(
+                    "image {i} lies in a buffer view but has no mimeType (image/png or image/jpeg)"
+                ));
+            }
+            (None, None) => {
+                return Err(format!("image {i} has neither a bufferView nor a uri"));
+            }
+            _ => {}
         }
     }
     Ok((gltf::Document::from_json(root).map_err(invalid)?, ignored))
