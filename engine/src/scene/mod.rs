@@ -97,14 +97,6 @@ impl Maps {
             _ => None,
         }
     }
-
-    /// Whether a map binds image `image` as data (linear values): the
-    /// metallic-roughness and normal maps.
-    pub fn binds_as_data(&self, image: u32) -> bool {
-        [self.metallic_roughness, self.normal]
-            .iter()
-            .any(|b| b.is_some_and(|b| b.image == image))
-    }
 }
 
 /// A texture a material binds: one of the scene's images
