@@ -658,4 +658,74 @@ mod tests {
             );
         }
     }
+
+    /// Mirror spheres packed in a box: a dense grid (most voxels list
+    /// something), whose reflected rays scatter, so that groups of them
+    /// walk alone voxel by voxel (`walk::diverge`). The image and the ray
+    /// counts must be the breadth-first tracer's, which walks each ray by
+    /// itself, in both precisions and at one and two threads.
+    #[test]
+    fn lone_walks_in_a_dense_grid_give_the_breadth_first_image() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut s = String::from(
+            "v\nfrom 2.2 1.6 2.6\nat 0 0 0\nup 0 1 0\nangle 35\nhither 0.001\n\
+             resolution 40 40\nb 0.1 0.1 0.2\nl 3 8 4 1 1 1\nl -4 6 5 0.6 0.6 0.6\n\
+             f 0.8 0.8 0.8 0.3 0.7 20 0 1\n",
+        );
+        let mut x: u64 = 11;
+        let mut next = || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..1500 {
+            let c = [next(), next(), next()];
+            writeln!(
+                s,
+                "s {} {} {} {}",
+                c[0],
+                c[1],
+                c[2],
+                0.02 + 0.03 * (next() + 0.5)
+            )
+            .unwrap();
+        }
+        let path = dir.path().join("mirrors.sdb");
+        let mut w = DbWriter::create(&path, Compression::None).unwrap();
+        read_nff_from(s.as_bytes(), Path::new("mirrors.nff"), &mut w, &NoProgress).unwrap();
+        w.finish().unwrap();
+        let db = Database::open(&path).unwrap();
+        let objects = ObjectStore::load(&db, &NoProgress).unwrap();
+        for precision in [Precision::Double, Precision::Single] {
+            for threads in [1, 2] {
+                let opts = RenderOptions {
+                    width: 40,
+                    height: 40,
+                    max_depth: 4,
+                    threads,
+                    precision,
+                    ..Default::default()
+                };
+                let scene =
+                    DfScene::new(&db, &objects, Models::default(), &opts, TEXTURE_MEMORY).unwrap();
+                assert!(scene.grids[0].dense(), "the test needs a dense grid");
+                let (frame, rays, ..) = trace::render(&scene, &opts, &NoProgress).unwrap();
+                assert!(rays.reflect_rays > 500, "{rays:?}");
+                let bf = crate::bf::BfOptions {
+                    memory: 1 << 30,
+                    store: crate::bf::StoreNumber::Adaptive,
+                    spill_dir: None,
+                    shading: crate::bf::Shading::Carry,
+                    models: Default::default(),
+                };
+                let want = crate::bf::render(&db, &opts, &bf, &NoProgress).unwrap();
+                assert!(
+                    want.frame.to_rgb8() == frame.to_rgb8(),
+                    "{precision:?}, {threads} threads: images differ"
+                );
+                assert_eq!(want.stats.rays, rays, "{precision:?}, {threads} threads");
+            }
+        }
+    }
 }

@@ -63,6 +63,13 @@ pub struct ObjectGrid {
     pub pyramid: Pyramid,
 }
 
+/// The share of listing voxels above which a grid is [`ObjectGrid::dense`]:
+/// measured (instructions of 256x256 renders), the SPD's balls (37 %),
+/// gears (50 %) and rings (22 %) gain from lone rays walking voxel by
+/// voxel; teapot (13 %), mount (14 %), tetra (17 %), tree (8 %) and the
+/// Stanford dragon (5 %) lose.
+const DENSE: f64 = 0.2;
+
 impl ObjectGrid {
     /// Builds the grid over `bounds` for the objects (by id) `member` selects,
     /// holding crowded groups as aggregates if `aggregates`; `pool` builds
@@ -294,6 +301,14 @@ impl ObjectGrid {
     #[inline(always)]
     pub fn occupied(&self, index: usize) -> bool {
         self.occupied[index >> 6] >> (index & 63) & 1 != 0
+    }
+
+    /// Whether enough of the grid's voxels list something that a lone
+    /// ray walks it faster voxel by voxel than by skipping empty blocks.
+    #[inline(always)]
+    pub fn dense(&self) -> bool {
+        let cells = self.spec.res.iter().map(|&r| r as f64).product::<f64>();
+        (self.start.len() - 1) as f64 >= DENSE * cells
     }
 
     /// Entries listed, and voxels listing any.

@@ -298,7 +298,10 @@ fn trace_packet<R: Elem>(
 ) {
     let t0 = sc.profile.then(std::time::Instant::now);
     let mut best = Hits::<R>::new(rays);
-    walk::nearest(s, sc, rays, rays.all(), &mut best);
+    // Eye rays leave one point through neighbouring pixels: they walk
+    // together. The rays they spawn may not.
+    let apart = depth > 1 && walk::diverge(s, rays, rays.all());
+    walk::nearest(s, sc, rays, rays.all(), &mut best, apart);
     if let Some(t0) = t0 {
         sc.intersect_ns += t0.elapsed().as_nanos() as u64;
     }
@@ -431,6 +434,7 @@ struct CachedBlocker<'a, 't, R> {
     s: &'a DfScene<'t>,
     c: super::Candidate<'a, 't>,
     rays: &'a RayLanes<R>,
+    m: Lanes,
     found: &'a mut Found<R>,
     tests: &'a mut KindCounts,
 }
@@ -445,7 +449,7 @@ impl<R: Elem> crate::simd::Job for CachedBlocker<'_, '_, R> {
             self.s,
             self.c,
             rays,
-            rays.all(),
+            self.m,
             &rays.t_max,
             super::lanes::Want::Any,
             self.found,
@@ -469,22 +473,51 @@ fn occluded_all<R: Elem>(
     let cached = sc.shadow_cache[slot];
     let mut open = all;
     if cached != NO_OBJECT {
-        let c = s.candidate(cached);
-        let hit = sc.isa.run(CachedBlocker {
-            s,
-            c,
-            rays,
-            found: &mut sc.found,
-            tests: &mut sc.tests,
-        });
-        open &= !hit;
+        open &= !blocked_by(s, sc, cached, rays, all);
     }
     if open == 0 {
         return 0;
     }
-    let (blocked, blocker) = walk::occluded(s, sc, rays, open, cached);
-    if blocker != NO_OBJECT {
-        sc.shadow_cache[slot] = blocker;
+    if !walk::diverge(s, rays, open) {
+        let (blocked, blocker) = walk::occluded(s, sc, rays, open, [cached, NO_OBJECT], false);
+        if blocker != NO_OBJECT {
+            sc.shadow_cache[slot] = blocker;
+        }
+        return open & !blocked;
     }
-    open & !blocked
+    // Few rays left: one at a time, each trying the blocker the one
+    // before it found (Haines' cache kept ray to ray).
+    let mut lit = open;
+    for i in each_lane(open) {
+        let bit: Lanes = 1 << i;
+        let latest = sc.shadow_cache[slot];
+        if latest != cached && blocked_by(s, sc, latest, rays, bit) != 0 {
+            lit &= !bit;
+            continue;
+        }
+        let (blocked, blocker) = walk::occluded(s, sc, rays, bit, [cached, latest], true);
+        if blocked != 0 {
+            lit &= !bit;
+            sc.shadow_cache[slot] = blocker;
+        }
+    }
+    lit
+}
+
+/// The lanes of `m` that object `id` blocks.
+fn blocked_by<R: Elem>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    id: u32,
+    rays: &RayLanes<R>,
+    m: Lanes,
+) -> Lanes {
+    sc.isa.run(CachedBlocker {
+        s,
+        c: s.candidate(id),
+        rays,
+        m,
+        found: &mut sc.found,
+        tests: &mut sc.tests,
+    })
 }

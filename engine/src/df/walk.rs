@@ -7,8 +7,11 @@
 //! objects (and crowded voxels' hierarchies) are tested with the kernels.
 //! Lanes drop out of a block as soon as their rays miss it or have found
 //! a nearer hit, so coherent rays share the walk and incoherent ones
-//! narrow it to their own; a group of one ray is a plain walk of the grid
-//! that skips empty space.
+//! narrow it to their own. The lanes descend in groups of one octant of
+//! directions, for which the order of the children is front to back.
+//! Rays that diverge (reflections off small spheres) walk alone through
+//! a dense grid, voxel by voxel ([`diverge`]): the descent costs a box
+//! test per block, a 3D-DDA step a few instructions per voxel.
 //!
 //! Each ray finds exactly the hit it finds alone, whatever the group:
 //! every culling test is conservative (boxes grown by the scene's slack,
@@ -20,6 +23,7 @@ use super::lanes::{self, Found, Want};
 use super::pyramid::BlockBounds;
 use super::trace::{NO_OBJECT, Scratch};
 use super::{Candidate, DfScene, ObjectGrid};
+use crate::grid::Dda;
 use crate::grid::nested::{Holds, MAX_PENDING, NESTED, high_first};
 use crate::hit::{Hit, PrimId};
 use crate::kernels::{
@@ -95,6 +99,12 @@ trait Goal<R: Elem> {
     fn take(&mut self, s: &DfScene, id: u32, hit: Lanes, out: &Found<R>, instance: bool);
     /// Takes lane `i`'s hit at `t` on object `id`.
     fn take_lane(&mut self, s: &DfScene, i: usize, t: R, id: u32);
+    /// Where lane `i`'s walk may end (in `f64`): past its best hit so
+    /// far, or its ray's end.
+    fn far(&self, rays: &RayLanes<R>, i: usize) -> f64;
+    /// Whether lane `i` has found what it looks for before `t_exit`, so
+    /// that no voxel beyond can change it.
+    fn done_before(&self, i: usize, t_exit: f64) -> bool;
 }
 
 struct Nearest<'b, R> {
@@ -132,6 +142,20 @@ impl<R: Elem> Goal<R> for Nearest<'_, R> {
     fn take_lane(&mut self, s: &DfScene, i: usize, t: R, id: u32) {
         self.best.offer(i, t, PrimId::object(id), s.objects.ranks());
     }
+
+    #[inline(always)]
+    fn far(&self, rays: &RayLanes<R>, i: usize) -> f64 {
+        if self.best.prim[i] == PrimId::NONE {
+            rays.t_max64[i]
+        } else {
+            self.best.t[i].next_up()
+        }
+    }
+
+    #[inline(always)]
+    fn done_before(&self, i: usize, t_exit: f64) -> bool {
+        self.best.prim[i] != PrimId::NONE && self.best.t[i] < t_exit
+    }
 }
 
 struct Any<'r, R> {
@@ -165,6 +189,16 @@ impl<R: Elem> Goal<R> for Any<'_, R> {
             self.blocker = id;
         }
     }
+
+    #[inline(always)]
+    fn far(&self, rays: &RayLanes<R>, i: usize) -> f64 {
+        rays.t_max64[i]
+    }
+
+    #[inline(always)]
+    fn done_before(&self, i: usize, _: f64) -> bool {
+        self.open >> i & 1 == 0
+    }
 }
 
 /// A walk, run with the lanes of the render's instruction set: the walk
@@ -174,7 +208,9 @@ struct Walk<'a, 't, 's, R, G> {
     sc: &'s mut Scratch<R>,
     rays: &'a RayLanes<R>,
     goal: G,
-    tested: u32,
+    tested: [u32; 2],
+    /// Each lane walks alone.
+    apart: bool,
 }
 
 impl<R: Elem, G: Goal<R>> Job for Walk<'_, '_, '_, R, G> {
@@ -182,18 +218,27 @@ impl<R: Elem, G: Goal<R>> Job for Walk<'_, '_, '_, R, G> {
 
     #[inline(always)]
     fn run<L: Simd>(mut self) -> G {
-        walk::<R, L, G>(self.s, self.sc, self.rays, &mut self.goal, self.tested);
+        walk::<R, L, G>(
+            self.s,
+            self.sc,
+            self.rays,
+            &mut self.goal,
+            self.tested,
+            self.apart,
+        );
         self.goal
     }
 }
 
-/// The nearest hits of the lanes `m` of `rays`, offered to `best`.
+/// The nearest hits of the lanes `m` of `rays`, offered to `best`; with
+/// `apart`, each lane walks alone (see [`diverge`]).
 pub fn nearest<R: Elem>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &RayLanes<R>,
     m: Lanes,
     best: &mut Hits<R>,
+    apart: bool,
 ) {
     let isa = sc.isa;
     isa.run(Walk {
@@ -201,19 +246,38 @@ pub fn nearest<R: Elem>(
         sc,
         rays,
         goal: Nearest { best, all: m },
-        tested: NO_OBJECT,
+        tested: [NO_OBJECT; 2],
+        apart,
     });
 }
 
+/// The lanes of `m` split by the signs of their rays' directions: a
+/// walk enters blocks front to back for one octant of directions, so
+/// rays of other octants in the same descent would find their hits late
+/// and test objects behind them. Coherent packets fall in one group.
+#[inline]
+fn by_octant<R: Real>(rays: &RayLanes<R>, m: Lanes) -> [Lanes; 8] {
+    let mut groups = [0 as Lanes; 8];
+    for i in each_lane(m) {
+        let o = (rays.d64[0][i] < 0.0) as usize
+            | ((rays.d64[1][i] < 0.0) as usize) << 1
+            | ((rays.d64[2][i] < 0.0) as usize) << 2;
+        groups[o] |= 1 << i;
+    }
+    groups
+}
+
 /// The lanes of `m` that something blocks before their `t_max`, and one
-/// object that blocks some (or `NO_OBJECT`). `tested` (an object already
-/// tried on these lanes, or `NO_OBJECT`) is not tested again.
+/// object that blocks some (or `NO_OBJECT`). The objects `tested` (or
+/// `NO_OBJECT`), already tried on these lanes, are not tested again;
+/// with `apart`, each lane walks alone.
 pub fn occluded<R: Elem>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     rays: &RayLanes<R>,
     m: Lanes,
-    tested: u32,
+    tested: [u32; 2],
+    apart: bool,
 ) -> (Lanes, u32) {
     let isa = sc.isa;
     let goal = isa.run(Walk {
@@ -226,6 +290,7 @@ pub fn occluded<R: Elem>(
             blocker: NO_OBJECT,
         },
         tested,
+        apart,
     });
     (m & !goal.open, goal.blocker)
 }
@@ -238,12 +303,16 @@ fn walk<R: Elem, L: Simd, G: Goal<R>>(
     sc: &mut Scratch<R>,
     rays: &RayLanes<R>,
     goal: &mut G,
-    tested: u32,
+    tested: [u32; 2],
+    apart: bool,
 ) {
     sc.mailbox.begin();
-    if tested != NO_OBJECT {
-        sc.mailbox.untested(tested, goal.live());
+    for id in tested {
+        if id != NO_OBJECT {
+            sc.mailbox.untested(id, goal.live());
+        }
     }
+    let octants = by_octant(rays, goal.live());
     for (i, g) in s.grids.iter().enumerate().rev() {
         if goal.live() == 0 {
             return;
@@ -251,8 +320,76 @@ fn walk<R: Elem, L: Simd, G: Goal<R>>(
         if g.single_cell() {
             // A one-voxel grid (a few large objects): no walk needed.
             visit_voxel::<R, L, G>(s, sc, g, 0, goal.live(), rays, goal);
+        } else if apart && g.dense() {
+            // Voxel by voxel through a grid with few empty voxels to skip.
+            for lane in each_lane(goal.live()) {
+                walk_lane::<R, L, G>(s, sc, g, lane, rays, goal);
+            }
         } else {
-            walk_grid::<R, L, G>(s, sc, g, &s.blocks[i], rays, goal);
+            for m in octants {
+                if m & goal.live() != 0 {
+                    walk_grid::<R, L, G>(s, sc, g, &s.blocks[i], rays, m, goal);
+                }
+            }
+        }
+    }
+}
+
+/// Whether the rays of lanes `m` had better walk one at a time, voxel by
+/// voxel: only in a scene with a dense grid (few empty voxels to skip),
+/// and only if they are too few to share a pyramid's descent or point too
+/// many ways for their walks to overlap (the spread of their unit
+/// directions). Lone walks find the same hits; only time and test counts
+/// differ, and those depend on the rays alone.
+pub(super) fn diverge<R: Real>(s: &DfScene, rays: &RayLanes<R>, m: Lanes) -> bool {
+    if !s.grids.iter().any(|g| !g.single_cell() && g.dense()) {
+        return false;
+    }
+    if m.count_ones() <= 2 {
+        return true;
+    }
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for i in each_lane(m) {
+        let d = rays.d(i);
+        let u = d / d.length();
+        for a in 0..3 {
+            lo[a] = lo[a].min(u[a]);
+            hi[a] = hi[a].max(u[a]);
+        }
+    }
+    let spread = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
+    spread > SPREAD
+}
+
+/// The spread of unit directions (largest range of a coordinate) above
+/// which a group's rays walk alone: measured on the SPD scenes, reflected
+/// rays off the balls' and rings' spheres spread wider and gain; the
+/// teapot's and mount's reflections stay below it.
+const SPREAD: f64 = 0.5;
+
+/// Lane `lane` alone through grid `g`, voxel by voxel (the 3D-DDA of
+/// Amanatides and Woo), left as soon as its hit lies before the current
+/// voxel's far side.
+#[inline(always)]
+fn walk_lane<R: Elem, L: Simd, G: Goal<R>>(
+    s: &DfScene,
+    sc: &mut Scratch<R>,
+    g: &ObjectGrid,
+    lane: usize,
+    rays: &RayLanes<R>,
+    goal: &mut G,
+) {
+    let bit: Lanes = 1 << lane;
+    let (o, d, inv) = (rays.o(lane), rays.d(lane), rays.inv(lane));
+    let Some(mut w) = Dda::start(&g.spec, o, d, inv, rays.t_min64[lane], goal.far(rays, lane))
+    else {
+        return;
+    };
+    loop {
+        visit_voxel::<R, L, G>(s, sc, g, w.index, bit, rays, goal);
+        if goal.done_before(lane, w.t_exit()) || !w.advance() {
+            return;
         }
     }
 }
@@ -271,7 +408,7 @@ fn grown<R: Real>(lo: [f64; 3], hi: [f64; 3], pad: f64) -> ([R; 3], [R; 3]) {
 const MAX_BLOCKS: usize = 7 * 13 + 1;
 
 /// The pyramid's descent through grid `g`, whose blocks' boxes are
-/// `blocks`.
+/// `blocks`, of the lanes `m` (of one octant of directions).
 #[inline(always)]
 fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
     s: &DfScene,
@@ -279,13 +416,14 @@ fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
     g: &ObjectGrid,
     blocks: &BlockBounds,
     rays: &RayLanes<R>,
+    m: Lanes,
     goal: &mut G,
 ) {
     let spec = &g.spec;
-    let first = goal.live().trailing_zeros() as usize & (LANES - 1);
+    let first = (m & goal.live()).trailing_zeros() as usize & (LANES - 1);
     let order = ChildOrder::of(rays.d(first));
     let mut stack = [(0u8, [0u32; 3], 0 as Lanes); MAX_BLOCKS];
-    stack[0] = (g.pyramid.height() as u8, [0; 3], goal.live());
+    stack[0] = (g.pyramid.height() as u8, [0; 3], m & goal.live());
     let mut sp = 1;
     while sp > 0 {
         sp -= 1;
