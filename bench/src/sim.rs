@@ -16,6 +16,7 @@
 use sray_engine::bf::{Contribution, RayRec, ResultRec, SPAWN_SLOTS};
 use sray_engine::hit::PrimId;
 use sray_proto::auth::Token;
+use sray_proto::colour;
 use sray_proto::net::{Client, Target};
 use sray_proto::v1::{self, task_output::Part};
 use sray_proto::wire::{encode, records_per_chunk};
@@ -377,7 +378,8 @@ fn output(
         }
     } else {
         // Colour: one contribution per coloured ray, to its corner; a
-        // worker that keeps its records sums a corner's in a row.
+        // worker that keeps its records sums a corner's in a row and
+        // sends them packed per slot, as a real worker does.
         let mut contribs: Vec<Contribution> = Vec::new();
         let per = records_per_chunk::<Contribution>();
         for id in first..first + n {
@@ -399,12 +401,12 @@ fn output(
                 }),
             }
             if contribs.len() == per {
-                push(&mut msgs, v1::RecordKind::Contributions, encode(&contribs));
+                push_colour(&mut msgs, task.keep_output, &contribs);
                 contribs.clear();
             }
         }
         if !contribs.is_empty() {
-            push(&mut msgs, v1::RecordKind::Contributions, encode(&contribs));
+            push_colour(&mut msgs, task.keep_output, &contribs);
         }
         // Spawned rays, in key order.
         let per = records_per_chunk::<RayRec>();
@@ -460,6 +462,32 @@ fn output(
         part: Some(Part::Summary(summary)),
     });
     Ok(msgs)
+}
+
+/// A chunk of contributions: packed per slot where the records stay at
+/// the worker (`keep`), else as records.
+fn push_colour(msgs: &mut Vec<v1::TaskOutput>, keep: bool, recs: &[Contribution]) {
+    let (kind, data) = if keep {
+        let mut v: Vec<colour::SlotColour> = recs
+            .iter()
+            .map(|x| colour::SlotColour {
+                slot: x.corner,
+                run: x.run,
+                rgb: x.rgb,
+            })
+            .collect();
+        (v1::RecordKind::Colour, encode(&colour::pack(&mut v)))
+    } else {
+        (v1::RecordKind::Contributions, encode(recs))
+    };
+    msgs.push(v1::TaskOutput {
+        part: Some(Part::Records(v1::RecordChunk {
+            kind: kind as i32,
+            data,
+            held: None,
+            raw: false,
+        })),
+    });
 }
 
 #[cfg(test)]

@@ -89,6 +89,9 @@ impl Held {
 pub struct TaskOutput {
     pub results: Option<Records<ResultRec>>,
     pub contributions: Option<Records<Contribution>>,
+    /// Colour packed per frame slot (`RECORD_KIND_COLOUR`: from a worker
+    /// that keeps its records), the chunks as they came, back to back.
+    pub colour: Option<Records<u8>>,
     pub rays: Option<Records<RayRec>>,
     /// Results that hit something (intersection).
     pub hits: u64,
@@ -96,6 +99,43 @@ pub struct TaskOutput {
     /// `Task.keep_output`).
     pub kept_rays: u64,
     pub summary: v1::TaskSummary,
+}
+
+impl TaskOutput {
+    /// Calls `f` with each contribution of the output: those sent one by
+    /// one, then those packed per slot (read as they lie, in memory or in
+    /// a spill file's pieces).
+    pub fn for_each_contribution(&self, mut f: impl FnMut(&Contribution)) -> anyhow::Result<()> {
+        if let Some(c) = &self.contributions {
+            c.for_each_slice(&mut |s| {
+                s.iter().for_each(&mut f);
+                Ok(())
+            })?;
+        }
+        if let Some(p) = &self.colour {
+            let mut r = sray_proto::colour::Reader::default();
+            let mut bad = None;
+            p.for_each_slice(&mut |s| {
+                if bad.is_none()
+                    && let Err(e) = r.feed(s, &mut |x| {
+                        f(&Contribution {
+                            corner: x.slot,
+                            run: x.run,
+                            rgb: x.rgb,
+                        })
+                    })
+                {
+                    bad = Some(e);
+                }
+                Ok(())
+            })?;
+            match bad {
+                Some(e) => return Err(e.into()),
+                None => r.finish()?,
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Who did a piece of work.

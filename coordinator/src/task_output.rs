@@ -9,7 +9,7 @@ use crate::task::{TaskInput, TaskOutput};
 use sray_engine::bf::{Contribution, RayRec, ResultRec};
 use sray_engine::spill::RecordsWriter;
 use sray_proto::v1;
-use sray_proto::wire::{decode_chunk, records_per_chunk};
+use sray_proto::wire::{decode_bytes, decode_chunk, records_per_chunk};
 
 /// Takes a task's output records, checking them as they come.
 pub(crate) struct Receiver<'a> {
@@ -18,6 +18,7 @@ pub(crate) struct Receiver<'a> {
     input: &'a TaskInput,
     results: Option<RecordsWriter<ResultRec>>,
     contributions: Option<RecordsWriter<Contribution>>,
+    colour: Option<RecordsWriter<u8>>,
     rays: Option<RecordsWriter<RayRec>>,
     n_results: u64,
     hits: u64,
@@ -34,6 +35,7 @@ impl<'a> Receiver<'a> {
             input,
             results: None,
             contributions: None,
+            colour: None,
             rays: None,
             n_results: 0,
             hits: 0,
@@ -59,6 +61,13 @@ impl<'a> Receiver<'a> {
                 .contributions
                 .get_or_insert_with(|| {
                     RecordsWriter::new(&self.shared.records, &self.shared.spill, "out-contrib")
+                })
+                .push_vec(v)
+                .map_err(local),
+            Checked::Colour(v) => self
+                .colour
+                .get_or_insert_with(|| {
+                    RecordsWriter::new(&self.shared.records, &self.shared.spill, "out-colour")
                 })
                 .push_vec(v)
                 .map_err(local),
@@ -144,6 +153,28 @@ impl<'a> Receiver<'a> {
                 }
                 Ok(Checked::Contributions(v))
             }
+            (Ok(v1::RecordKind::Colour), false) => {
+                // Packed per slot: only from a worker that keeps its
+                // records, as runs are. Read through once here, for the
+                // same bounds as contributions; kept as it came.
+                if !self.task.keep_output {
+                    return Err("packed colour from a task whose output is checked".into());
+                }
+                let data = decode_bytes(&c.data, c.raw, sray_proto::colour::MAX_CHUNK_BYTES)
+                    .map_err(|e| e.to_string())?;
+                let mut r = sray_proto::colour::Reader::new(self.input.corners);
+                r.feed(&data, &mut |_| ())
+                    .and_then(|()| r.finish())
+                    .map_err(|e| e.to_string())?;
+                self.slots_added += r.slots;
+                if self.slots_added > self.task.ray_count {
+                    return Err(format!(
+                        "contributions to {} frame slots from a shard of {} rays",
+                        self.slots_added, self.task.ray_count
+                    ));
+                }
+                Ok(Checked::Colour(data))
+            }
             (Ok(v1::RecordKind::Rays), false) => {
                 let v = decode_chunk::<RayRec>(&c.data, c.raw, records_per_chunk::<RayRec>())
                     .map_err(|e| e.to_string())?;
@@ -186,6 +217,7 @@ impl<'a> Receiver<'a> {
                 .map(|w| w.finish())
                 .transpose()
                 .map_err(local)?,
+            colour: self.colour.map(|w| w.finish()).transpose().map_err(local)?,
             rays: self.rays.map(|w| w.finish()).transpose().map_err(local)?,
             hits,
             kept_rays,
@@ -246,6 +278,7 @@ impl<'a> Receiver<'a> {
 enum Checked {
     Results(Vec<ResultRec>),
     Contributions(Vec<Contribution>),
+    Colour(Vec<u8>),
     Rays(Vec<RayRec>),
 }
 

@@ -4,6 +4,7 @@
 //! message limits, scene hashes, the token checks and roles, random ids, TLS settings.
 
 pub mod auth;
+pub mod colour;
 pub mod ids;
 pub mod net;
 pub mod scene_hash;
@@ -36,4 +37,6 @@ pub const FILE_DESCRIPTOR_SET: &[u8] =
 /// cannot read.
 /// 10: the digest of kept records (`TaskSummary.kept_digest`), which
 /// verification with records at the workers compares.
-pub const PROTOCOL_VERSION: u32 = 10;
+/// 11: a shading whose records stay at the worker sends its colour packed
+/// (`RECORD_KIND_COLOUR`, see [`colour`]) instead of contributions.
+pub const PROTOCOL_VERSION: u32 = 11;

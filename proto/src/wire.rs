@@ -23,6 +23,8 @@ pub enum WireError {
     Ragged { len: usize, size: usize },
     #[error("a compressed chunk is malformed: {0}")]
     Malformed(String),
+    #[error("a packed chunk is malformed: {0}")]
+    Packed(String),
 }
 
 /// Records per chunk for records of type `T`.
@@ -123,7 +125,10 @@ pub fn encode_bytes(bytes: &[u8], size: usize) -> Vec<u8> {
     let n = bytes.len() / size;
     with_codec(|c| {
         let planes = scratch(&mut c.planes, bytes.len());
-        if size.is_multiple_of(8) {
+        if size == 1 {
+            // Bytes: one plane, as they are.
+            planes.copy_from_slice(bytes);
+        } else if size.is_multiple_of(8) {
             for j in 0..size / 8 {
                 let mut prev = 0u64;
                 for (i, rec) in bytes.chunks_exact(size).enumerate() {
@@ -168,6 +173,38 @@ pub fn decode_chunk<T: Pod>(data: &[u8], raw: bool, max: usize) -> Result<Vec<T>
     unpack(data)
 }
 
+/// [`decode_chunk`] of one-byte records: the bytes are decompressed
+/// straight into the vector returned (no planes to undo, nothing zeroed
+/// or copied first).
+pub fn decode_bytes(data: &[u8], raw: bool, max: usize) -> Result<Vec<u8>, WireError> {
+    if raw {
+        if data.len() > max {
+            return Err(WireError::Malformed("too many records".into()));
+        }
+        return Ok(data.to_vec());
+    }
+    let bad = |m: &str| WireError::Malformed(m.to_string());
+    let (head, body) = data
+        .split_first_chunk::<4>()
+        .ok_or_else(|| bad("no record count"))?;
+    let n = u32::from_le_bytes(*head) as usize;
+    if n > max {
+        return Err(bad("too many records"));
+    }
+    let mut out = Vec::with_capacity(n);
+    with_codec(|c| {
+        let got = c.decompressor.decompress_to_buffer(body, &mut out)?;
+        if got != n {
+            return Err(std::io::Error::other(
+                "the record count and the data disagree",
+            ));
+        }
+        Ok(())
+    })
+    .map_err(|e| bad(&e.to_string()))?;
+    Ok(out)
+}
+
 /// The records of an [`encode`]d chunk; at most `max` of them (a bound
 /// on what a malformed chunk may make the receiver allocate).
 pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
@@ -193,7 +230,9 @@ pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
                 "the record count and the data disagree",
             ));
         }
-        if size.is_multiple_of(8) {
+        if size == 1 {
+            bytes.copy_from_slice(planes);
+        } else if size.is_multiple_of(8) {
             for j in 0..size / 8 {
                 let mut prev = 0u64;
                 for i in 0..n {
@@ -222,6 +261,24 @@ pub fn decode<T: Pod>(data: &[u8], max: usize) -> Result<Vec<T>, WireError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn bytes_decode_as_one_byte_records() {
+        let v: Vec<u8> = (0..5000u32).map(|i| (i * i % 251) as u8).collect();
+        let e = encode(&v);
+        assert_eq!(decode_bytes(&e, false, 5000).unwrap(), v);
+        assert_eq!(decode::<u8>(&e, 5000).unwrap(), v);
+        assert!(decode_bytes(&e, false, 4999).is_err());
+        assert_eq!(decode_bytes(&v, true, 5000).unwrap(), v);
+        assert!(decode_bytes(&v, true, 4999).is_err());
+        // A count that the data do not fill, or overflow: refused.
+        let mut more = e.clone();
+        more[0] ^= 1;
+        assert!(decode_bytes(&more, false, 1 << 20).is_err());
+        let mut less = e.clone();
+        less[0] = less[0].wrapping_sub(2);
+        assert!(decode_bytes(&less, false, 1 << 20).is_err());
+    }
 
     #[test]
     fn raw_chunks_are_the_records_as_they_lie() {

@@ -340,6 +340,18 @@ async fn contribute(
     t: &v1::Task,
     recs: &[sray_engine::bf::Contribution],
 ) -> Result<bool, String> {
+    let data = sray_proto::wire::encode(recs);
+    send_chunk(c, session, t, v1::RecordKind::Contributions, data).await
+}
+
+/// Sends a shading output of one chunk of `kind`; as [`contribute`].
+async fn send_chunk(
+    c: &mut Client,
+    session: &str,
+    t: &v1::Task,
+    kind: v1::RecordKind,
+    data: Vec<u8>,
+) -> Result<bool, String> {
     use v1::task_output::Part;
     let msgs = vec![
         v1::TaskOutput {
@@ -347,8 +359,8 @@ async fn contribute(
         },
         v1::TaskOutput {
             part: Some(Part::Records(v1::RecordChunk {
-                kind: v1::RecordKind::Contributions as i32,
-                data: sray_proto::wire::encode(recs),
+                kind: kind as i32,
+                data,
                 held: None,
                 raw: false,
             })),
@@ -366,7 +378,9 @@ async fn contribute(
 /// A run of contributions (one record for a row of frame slots) is taken
 /// only from a worker that keeps its records, and no shard's
 /// contributions may cover more slots than it has rays: a few bytes from
-/// a worker can never ask the coordinator for unbounded work.
+/// a worker can never ask the coordinator for unbounded work. Colour
+/// packed per slot is taken only from a worker that keeps its records
+/// too (elsewhere verification compares contributions one by one).
 #[test]
 fn contributions_cover_no_more_slots_than_their_rays() {
     let dir = tempfile::tempdir().unwrap();
@@ -382,7 +396,7 @@ fn contributions_cover_no_more_slots_than_their_rays() {
         let mut seed = 11u64;
         let mut answers = Vec::new();
         let t0 = Instant::now();
-        while answers.len() < 2 && t0.elapsed() < Duration::from_secs(60) {
+        while answers.len() < 3 && t0.elapsed() < Duration::from_secs(60) {
             let Some(t) = next(&mut c, &session).await else {
                 continue;
             };
@@ -395,6 +409,17 @@ fn contributions_cover_no_more_slots_than_their_rays() {
                 run,
                 rgb: [1, 2, 3],
             };
+            if answers.len() == 2 {
+                let mut one = vec![sray_proto::colour::SlotColour {
+                    slot: 0,
+                    run: 0,
+                    rgb: [1, 2, 3],
+                }];
+                let data = sray_proto::wire::encode(&sray_proto::colour::pack(&mut one));
+                let kind = v1::RecordKind::Colour;
+                answers.push(send_chunk(&mut c, &session, &t, kind, data).await);
+                continue;
+            }
             let recs: Vec<_> = if answers.is_empty() {
                 // A run of four slots, where runs are not taken.
                 vec![one(0, 3)]
@@ -410,7 +435,7 @@ fn contributions_cover_no_more_slots_than_their_rays() {
     });
     drop(rt);
     drop(coord);
-    assert_eq!(answers.len(), 2, "{answers:?}");
+    assert_eq!(answers.len(), 3, "{answers:?}");
     let msg = |a: &Result<bool, String>| a.clone().err().unwrap_or_default();
     assert!(
         msg(&answers[0]).contains("a run of contributions"),
@@ -418,6 +443,10 @@ fn contributions_cover_no_more_slots_than_their_rays() {
     );
     assert!(
         msg(&answers[1]).contains("frame slots from a shard of"),
+        "{answers:?}"
+    );
+    assert!(
+        msg(&answers[2]).contains("packed colour from a task whose output is checked"),
         "{answers:?}"
     );
 }

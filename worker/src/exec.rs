@@ -408,7 +408,11 @@ fn run_task<R: Real>(
             // that missed) lengthens its run. Sums of integers far from
             // the frame's saturation are exact in any order; colours
             // beyond 2^30 (in fixed point, 2^62) are sent apart, as the
-            // frame adds them saturating.
+            // frame adds them saturating. Each chunk of them then
+            // travels packed per slot (`sray_proto::colour`: sorted by
+            // slot, a slot's colours added, nothing to decompress), which
+            // the coordinator adds at a fraction of the cost of
+            // contributions.
             let merge = task.keep_output;
             let small = |c: &[i64; 3]| c.iter().all(|x| x.unsigned_abs() < 1 << 62);
             let (next, _count, sst) = {
@@ -436,7 +440,7 @@ fn run_task<R: Real>(
                         rgb,
                     });
                     if buf.len() == per {
-                        if let Err(e) = out.records(RecordKind::Contributions, &buf) {
+                        if let Err(e) = send_colour(out, merge, &buf) {
                             send_err = Some(e);
                         }
                         buf.clear();
@@ -453,7 +457,7 @@ fn run_task<R: Real>(
                 return Err(e);
             }
             if !buf.is_empty() {
-                out.records(RecordKind::Contributions, &buf)?;
+                send_colour(out, merge, &buf)?;
             }
             let per = records_per_chunk::<RayRec>();
             let send = !task.keep_output;
@@ -763,4 +767,24 @@ fn result_reader<R: Real>(
             }
         },
     })
+}
+
+/// Sends a chunk of a shading's contributions: packed per slot where the
+/// records stay here (`keep`), else as they are (verification compares
+/// them one by one).
+fn send_colour(out: &Output<'_>, keep: bool, buf: &[Contribution]) -> Result<(), String> {
+    use sray_proto::colour::{SlotColour, pack};
+    if !keep {
+        return out.records(RecordKind::Contributions, buf);
+    }
+    let mut v: Vec<SlotColour> = buf
+        .iter()
+        .map(|x| SlotColour {
+            slot: x.corner,
+            run: x.run,
+            rgb: x.rgb,
+        })
+        .collect();
+    // Encoded as bytes, as records are (or raw).
+    out.records(RecordKind::Colour, &pack(&mut v))
 }

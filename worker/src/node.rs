@@ -110,6 +110,17 @@ fn lie(fault: Option<Fault>, m: v1::TaskOutput) -> v1::TaskOutput {
         c.data = encode(&v);
         c.raw = false;
     }
+    if c.kind == v1::RecordKind::Colour as i32
+        && let Ok(bytes) =
+            sray_proto::wire::decode_bytes(&c.data, c.raw, sray_proto::colour::MAX_CHUNK_BYTES)
+        && let Ok(mut v) = sray_proto::colour::unpack(&bytes, usize::MAX)
+    {
+        for x in &mut v {
+            x.rgb = [x.rgb[1] / 2, x.rgb[2], x.rgb[0]];
+        }
+        c.data = encode(&sray_proto::colour::pack(&mut v));
+        c.raw = false;
+    }
     v1::TaskOutput {
         part: Some(Part::Records(c)),
     }

@@ -3,7 +3,6 @@
 //! and a fingerprint of the colour it adds to each frame slot.
 
 use crate::task::TaskOutput;
-use sray_engine::bf::Contribution;
 use sray_engine::spill::Records;
 use sray_proto::v1;
 
@@ -65,7 +64,7 @@ pub(super) fn print_of(stage: v1::Stage, o: &TaskOutput, key: u64) -> anyhow::Re
             last,
         ],
         digest,
-        colour: colour_print(o.contributions.as_ref(), key)?,
+        colour: colour_print(o, key)?,
     })
 }
 
@@ -83,11 +82,12 @@ pub(super) fn digest_of<T: bytemuck::Pod>(r: &Records<T>) -> anyhow::Result<Vec<
 /// 2^61 - 1, a prime.
 const P: u64 = (1 << 61) - 1;
 
+/// `x` modulo `P` (2^61 ≡ 1: the high bits fold onto the low ones).
 fn mod_p(x: u128) -> u64 {
     let p = P as u128;
     let x = (x & p) + (x >> 61);
-    let x = (x & p) + (x >> 61);
-    (x % p) as u64
+    let x = ((x & p) + (x >> 61)) as u64;
+    if x >= P { x - P } else { x }
 }
 
 /// The fingerprint of the colour contributions add to each frame slot:
@@ -95,22 +95,23 @@ fn mod_p(x: u128) -> u64 {
 /// pseudo-random weight of the slot (keyed by `key`), modulo `P`. Linear
 /// in the contributions, so contributions to one slot added together
 /// first (or sent in runs) give the same fingerprint.
-fn colour_print(c: Option<&Records<Contribution>>, key: u64) -> anyhow::Result<[u64; 3]> {
-    let mut acc = [0u64; 3];
-    let Some(c) = c else { return Ok(acc) };
-    c.for_each_slice(&mut |s| {
-        for x in s {
-            for slot in x.corner as u64..x.end() {
-                let w = splitmix(slot ^ key) % P;
-                for (a, v) in acc.iter_mut().zip(x.rgb) {
-                    let v = v.rem_euclid(P as i64) as u128;
-                    *a = mod_p(*a as u128 + v * w as u128);
+fn colour_print(o: &TaskOutput, key: u64) -> anyhow::Result<[u64; 3]> {
+    // Sums of products below 2^122, folded modulo P only when they pass
+    // 2^125 (and at the end): the same remainder, fewer folds.
+    let mut acc = [0u128; 3];
+    o.for_each_contribution(|x| {
+        let v = x.rgb.map(|v| v.rem_euclid(P as i64) as u128);
+        for slot in x.corner as u64..x.end() {
+            let w = mod_p(splitmix(slot ^ key) as u128) as u128;
+            for (a, v) in acc.iter_mut().zip(v) {
+                *a += v * w;
+                if *a >= 1 << 125 {
+                    *a = mod_p(*a) as u128;
                 }
             }
         }
-        Ok(())
     })?;
-    Ok(acc)
+    Ok(acc.map(mod_p))
 }
 
 fn splitmix(x: u64) -> u64 {
@@ -123,11 +124,37 @@ fn splitmix(x: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::colour_print;
+    use crate::task::TaskOutput;
     use sray_engine::bf::Contribution;
     use sray_engine::spill::{MemoryShare, Records};
+    use sray_proto::colour::{SlotColour, pack};
 
-    fn recs(v: Vec<Contribution>) -> Records<Contribution> {
-        Records::memory(v, MemoryShare::new(0).lease())
+    fn recs(v: Vec<Contribution>) -> TaskOutput {
+        TaskOutput {
+            contributions: Some(Records::memory(v, MemoryShare::new(0).lease())),
+            ..Default::default()
+        }
+    }
+
+    /// The same, packed per slot in chunks of `per` (as a worker that
+    /// keeps its records sends them).
+    fn packed(v: &[Contribution], per: usize) -> TaskOutput {
+        let mut bytes = Vec::new();
+        for c in v.chunks(per) {
+            let mut e: Vec<SlotColour> = c
+                .iter()
+                .map(|x| SlotColour {
+                    slot: x.corner,
+                    run: x.run,
+                    rgb: x.rgb,
+                })
+                .collect();
+            bytes.extend(pack(&mut e));
+        }
+        TaskOutput {
+            colour: Some(Records::memory(bytes, MemoryShare::new(0).lease())),
+            ..Default::default()
+        }
     }
 
     fn c(corner: u32, run: u32, rgb: [i64; 3]) -> Contribution {
@@ -135,16 +162,37 @@ mod tests {
     }
 
     #[test]
+    fn folding_modulo_p_is_the_remainder() {
+        use super::{P, mod_p};
+        let mut x = 0x1234_5678_9abc_def0_u128;
+        for _ in 0..10_000 {
+            x = x.wrapping_mul(0x2545_f491_4f6c_dd1d_3c6e_f372_fe94_f82b) >> 5;
+            assert_eq!(mod_p(x) as u128, x % P as u128);
+            assert_eq!(mod_p(x >> 64) as u128, (x >> 64) % P as u128);
+        }
+        for x in [
+            0,
+            P as u128 - 1,
+            P as u128,
+            (P as u128) << 61,
+            u64::MAX as u128,
+        ] {
+            assert_eq!(mod_p(x) as u128, x % P as u128);
+        }
+    }
+
+    #[test]
     fn the_colour_print_is_that_of_the_sums_per_slot() {
         // One at a time, in some order (as a checked output comes) ...
-        let apart = recs(vec![
+        let apart_v = vec![
             c(7, 0, [-3, 0, 1 << 40]),
             c(5, 0, [1, 2, 3]),
             c(6, 0, [7, 7, 7]),
             c(5, 0, [4, 5, 6]),
             c(8, 0, [7, 7, 7]),
             c(7, 0, [10, 7, 6]),
-        ]);
+        ];
+        let apart = recs(apart_v.clone());
         // ... summed per slot and in runs (as a worker that keeps its
         // records sends them): the same print.
         let merged = recs(vec![
@@ -154,10 +202,12 @@ mod tests {
             c(8, 0, [7, 7, 7]),
         ]);
         let key = 0x5eed;
-        assert_eq!(
-            colour_print(Some(&apart), key).unwrap(),
-            colour_print(Some(&merged), key).unwrap()
-        );
+        let print = colour_print(&apart, key).unwrap();
+        assert_eq!(print, colour_print(&merged, key).unwrap());
+        // Packed per slot, in one chunk or several: the same print.
+        for per in [1, 2, 6] {
+            assert_eq!(print, colour_print(&packed(&apart_v, per), key).unwrap());
+        }
         // A run is its slots one by one.
         let run = recs(vec![c(5, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])]);
         let slots = recs(vec![
@@ -167,8 +217,8 @@ mod tests {
             c(8, 0, [7, 7, 7]),
         ]);
         assert_eq!(
-            colour_print(Some(&run), key).unwrap(),
-            colour_print(Some(&slots), key).unwrap()
+            colour_print(&run, key).unwrap(),
+            colour_print(&slots, key).unwrap()
         );
         // Another colour, or the same colour in another slot, differs.
         for other in [
@@ -177,10 +227,11 @@ mod tests {
             vec![c(5, 0, [5, 7, 9]), c(6, 3, [7, 7, 7])],
             vec![c(4, 0, [5, 7, 9]), c(6, 2, [7, 7, 7])],
         ] {
-            let p = colour_print(Some(&recs(other)), key).unwrap();
-            assert_ne!(p, colour_print(Some(&run), key).unwrap());
+            let p = colour_print(&packed(&other, 8), key).unwrap();
+            assert_ne!(p, colour_print(&run, key).unwrap());
+            assert_eq!(p, colour_print(&recs(other), key).unwrap());
         }
         // Nothing is no colour.
-        assert_eq!(colour_print(None, key).unwrap(), [0; 3]);
+        assert_eq!(colour_print(&TaskOutput::default(), key).unwrap(), [0; 3]);
     }
 }

@@ -406,14 +406,7 @@ fn merge_shade(
     let mut parts = Vec::with_capacity(outs.len());
     let mut last: Option<u64> = None;
     for o in outs {
-        if let Some(c) = o.contributions {
-            c.for_each_slice(&mut |s| {
-                for x in s {
-                    frame.add_contribution(x);
-                }
-                Ok(())
-            })?;
-        }
+        o.for_each_contribution(|x| frame.add_contribution(x))?;
         let Some(r) = o.rays else { continue };
         if let (Some(first), Some(l)) = (r.get(0)?, last) {
             anyhow::ensure!(first.key > l, "spawned rays out of key order across shards");
