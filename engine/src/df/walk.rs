@@ -7,9 +7,7 @@
 //! objects (and crowded voxels' hierarchies) are tested with the kernels.
 //! Lanes drop out of a block as soon as their rays miss it or have found
 //! a nearer hit, so coherent rays share the walk and incoherent ones
-//! narrow it to their own. The lanes descend in groups of one octant of
-//! directions, for which the order of the children is front to back.
-//! Rays that diverge (reflections off small spheres) walk alone through
+//! narrow it to their own. Rays that diverge (reflections off small spheres) walk alone through
 //! a dense grid, voxel by voxel ([`diverge`]): the descent costs a box
 //! test per block, a 3D-DDA step a few instructions per voxel.
 //!
@@ -251,22 +249,6 @@ pub fn nearest<R: Elem>(
     });
 }
 
-/// The lanes of `m` split by the signs of their rays' directions: a
-/// walk enters blocks front to back for one octant of directions, so
-/// rays of other octants in the same descent would find their hits late
-/// and test objects behind them. Coherent packets fall in one group.
-#[inline]
-fn by_octant<R: Real>(rays: &RayLanes<R>, m: Lanes) -> [Lanes; 8] {
-    let mut groups = [0 as Lanes; 8];
-    for i in each_lane(m) {
-        let o = (rays.d64[0][i] < 0.0) as usize
-            | ((rays.d64[1][i] < 0.0) as usize) << 1
-            | ((rays.d64[2][i] < 0.0) as usize) << 2;
-        groups[o] |= 1 << i;
-    }
-    groups
-}
-
 /// The lanes of `m` that something blocks before their `t_max`, and one
 /// object that blocks some (or `NO_OBJECT`). The objects `tested` (or
 /// `NO_OBJECT`), already tried on these lanes, are not tested again;
@@ -312,7 +294,6 @@ fn walk<R: Elem, L: Simd, G: Goal<R>>(
             sc.mailbox.untested(id, goal.live());
         }
     }
-    let octants = by_octant(rays, goal.live());
     for (i, g) in s.grids.iter().enumerate().rev() {
         if goal.live() == 0 {
             return;
@@ -326,11 +307,7 @@ fn walk<R: Elem, L: Simd, G: Goal<R>>(
                 walk_lane::<R, L, G>(s, sc, g, lane, rays, goal);
             }
         } else {
-            for m in octants {
-                if m & goal.live() != 0 {
-                    walk_grid::<R, L, G>(s, sc, g, &s.blocks[i], rays, m, goal);
-                }
-            }
+            walk_grid::<R, L, G>(s, sc, g, &s.blocks[i], rays, goal);
         }
     }
 }
@@ -408,7 +385,7 @@ fn grown<R: Real>(lo: [f64; 3], hi: [f64; 3], pad: f64) -> ([R; 3], [R; 3]) {
 const MAX_BLOCKS: usize = 7 * 13 + 1;
 
 /// The pyramid's descent through grid `g`, whose blocks' boxes are
-/// `blocks`, of the lanes `m` (of one octant of directions).
+/// `blocks`.
 #[inline(always)]
 fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
     s: &DfScene,
@@ -416,14 +393,13 @@ fn walk_grid<R: Elem, L: Simd, G: Goal<R>>(
     g: &ObjectGrid,
     blocks: &BlockBounds,
     rays: &RayLanes<R>,
-    m: Lanes,
     goal: &mut G,
 ) {
     let spec = &g.spec;
-    let first = (m & goal.live()).trailing_zeros() as usize & (LANES - 1);
+    let first = goal.live().trailing_zeros() as usize & (LANES - 1);
     let order = ChildOrder::of(rays.d(first));
     let mut stack = [(0u8, [0u32; 3], 0 as Lanes); MAX_BLOCKS];
-    stack[0] = (g.pyramid.height() as u8, [0; 3], m & goal.live());
+    stack[0] = (g.pyramid.height() as u8, [0; 3], goal.live());
     let mut sp = 1;
     while sp > 0 {
         sp -= 1;
