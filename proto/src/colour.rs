@@ -400,4 +400,44 @@ mod tests {
             ]
         );
     }
+
+    /// Bytes from a worker are not trusted: any bytes, cut anywhere and
+    /// fed in slices of any length, give entries or an error, never a
+    /// panic, and never a slot at or past the reader's limit.
+    #[test]
+    fn garbage_gives_an_error_not_a_panic() {
+        let mut x: u64 = 0x9E37_79B9_7F4A_7C15;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let good = pack_sorted(&[c(3, 0, [1, 2, 3]), c(9, 4, [-5, 6, 1 << 40])]);
+        for case in 0..3000 {
+            let len = (next() % 200) as usize;
+            let mut b: Vec<u8> = (0..len).map(|_| next() as u8).collect();
+            if case % 3 == 0 {
+                // Mostly well formed, one byte changed.
+                b = good.clone();
+                let i = (next() as usize) % b.len();
+                b[i] = next() as u8;
+            }
+            let _ = unpack(&b, 1 << 20);
+            let mut r = Reader::new(64);
+            let mut at = 0;
+            let mut failed = false;
+            while at < b.len() && !failed {
+                let n = 1 + (next() % 40) as usize;
+                let end = (at + n).min(b.len());
+                failed = r
+                    .feed(&b[at..end], &mut |e| assert!(e.end() <= 64, "{e:?}"))
+                    .is_err();
+                at = end;
+            }
+            if !failed {
+                let _ = r.finish();
+            }
+        }
+    }
 }
