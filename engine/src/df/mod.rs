@@ -47,6 +47,9 @@ pub struct DfScene<'t> {
     pub materials: Vec<Material>,
     /// One grid per object group; the last holds the large objects, if any.
     pub grids: Vec<ObjectGrid>,
+    /// Whether a grid of more than one voxel is [`ObjectGrid::dense`]:
+    /// only then may rays walk alone (see `walk::diverge`).
+    has_dense: bool,
     pub shade: ShadeScene,
     pub camera: Camera,
     /// A distance far above the rounding of any hit's position (in either
@@ -329,12 +332,14 @@ impl<'t> DfScene<'t> {
         ));
         let mut models = models;
         models.set_cutouts(Cutouts::new(&materials, shade.textures.clone()));
+        let has_dense = grids.iter().any(|g| !g.single_cell() && g.dense());
         Ok(DfScene {
             objects,
             records,
             preps,
             edge_bins,
             materials,
+            has_dense,
             grids,
             shade,
             camera: Camera::new(&header.view, opts.width, opts.height)?,

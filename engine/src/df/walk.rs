@@ -319,7 +319,7 @@ fn walk<R: Elem, L: Simd, G: Goal<R>>(
 /// directions). Lone walks find the same hits; only time and test counts
 /// differ, and those depend on the rays alone.
 pub(super) fn diverge<R: Real>(s: &DfScene, rays: &RayLanes<R>, m: Lanes) -> bool {
-    if !s.grids.iter().any(|g| !g.single_cell() && g.dense()) {
+    if !s.has_dense {
         return false;
     }
     if m.count_ones() <= 2 {
@@ -327,12 +327,12 @@ pub(super) fn diverge<R: Real>(s: &DfScene, rays: &RayLanes<R>, m: Lanes) -> boo
     }
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
+    // Spawned rays (the only ones asked about) have unit directions.
     for i in each_lane(m) {
-        let d = rays.d(i);
-        let u = d / d.length();
         for a in 0..3 {
-            lo[a] = lo[a].min(u[a]);
-            hi[a] = hi[a].max(u[a]);
+            let u = rays.d64[a][i];
+            lo[a] = lo[a].min(u);
+            hi[a] = hi[a].max(u);
         }
     }
     let spread = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
