@@ -48,20 +48,21 @@ impl EdgeBins {
             v_lo = v_lo.min(p[iv] as f64);
             v_hi = v_hi.max(p[iv] as f64);
         }
-        let bins = n / 2;
+        let bins = n;
         let scale = if v_hi > v_lo {
             bins as f64 / (v_hi - v_lo)
         } else {
             0.0
         };
-        let bin = |x: f64| ((x - v_lo) * scale).clamp(0.0, (bins - 1) as f64) as usize;
-        // Each edge goes in the bins of its v range and one more on each
-        // side, so that the rounding of a bin index never loses it.
+        // The bin of a v is computed here and in `inside` by the same
+        // operations, each rounded monotonically (a subtraction, a
+        // product by a positive number, a cut to an integer, a clamp):
+        // every v of an edge's range, a point's v that the edge can
+        // straddle among them, falls in a bin between those of its ends.
+        let bin = |x: f64| Self::bin_of(x, v_lo, scale, bins);
         let range = |e: usize| {
             let (a, b) = (v[(e + n - 1) % n][iv] as f64, v[e][iv] as f64);
-            let lo = bin(a.min(b)).saturating_sub(1);
-            let hi = (bin(a.max(b)) + 1).min(bins - 1);
-            (lo, hi)
+            (bin(a.min(b)), bin(a.max(b)))
         };
         let mut count = vec![0u32; bins + 1];
         for e in 0..n {
@@ -93,6 +94,12 @@ impl EdgeBins {
             start,
             edges,
         })
+    }
+
+    /// The bin of `x` (at least `v_lo`), of `bins` bins `1 / scale` wide.
+    #[inline(always)]
+    fn bin_of(x: f64, v_lo: f64, scale: f64, bins: usize) -> usize {
+        (((x - v_lo) * scale) as usize).min(bins - 1)
     }
 
     /// Nearest `t` in `(t_min, t_max)` at which `ray` meets polygon `v`
@@ -139,8 +146,7 @@ impl EdgeBins {
         if !(x >= self.v_lo && x <= self.v_hi) {
             return false;
         }
-        let bins = self.start.len() - 1;
-        let b = (((x - self.v_lo) * self.scale) as usize).min(bins - 1);
+        let b = Self::bin_of(x, self.v_lo, self.scale, self.start.len() - 1);
         let mut inside = false;
         let count = v.len();
         for &e in &self.edges[self.start[b] as usize..self.start[b + 1] as usize] {
