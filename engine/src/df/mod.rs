@@ -389,13 +389,17 @@ impl<'t> DfScene<'t> {
                 },
                 v: self.objects.positions(&f),
             },
-            Slot::Record(r) => {
-                let h = &self.records[r as usize];
-                match h.placement {
-                    PLAIN => Candidate::Record(h),
-                    p => Candidate::Instance(h, &self.placements[p as usize]),
-                }
-            }
+            Slot::Record(r) => self.record_candidate(r),
+        }
+    }
+
+    /// Record `r` (of [`Slot::Record`]) as a candidate.
+    #[inline(always)]
+    pub fn record_candidate(&self, r: u32) -> Candidate<'_, 't> {
+        let h = &self.records[r as usize];
+        match h.placement {
+            PLAIN => Candidate::Record(h),
+            p => Candidate::Instance(h, &self.placements[p as usize]),
         }
     }
 

@@ -496,16 +496,18 @@ fn visit_voxel<R: Elem, L: Simd, G: Goal<R>>(
             return;
         }
         if e & NESTED == 0 {
-            if let Slot::Face(face) = s.objects.slot(e) {
-                let m = sc.mailbox.untested(e, lanes & goal.live());
-                if m != 0 {
-                    sc.tests.add_n(face.kind(), m.count_ones() as u64);
-                    let j = sc.batch.push(&s.objects.positions(&face));
-                    sc.batch_ids[j] = e;
-                    sc.batch_lanes[j] = m;
-                }
+            let slot = s.objects.slot(e);
+            let m = sc.mailbox.untested(e, lanes & goal.live());
+            if m == 0 {
+                continue;
+            }
+            if let Slot::Face(face) = slot {
+                sc.tests.add_n(face.kind(), m.count_ones() as u64);
+                let j = sc.batch.push(&s.objects.positions(&face));
+                sc.batch_ids[j] = e;
+                sc.batch_lanes[j] = m;
             } else {
-                entry::<R, L, G>(s, sc, e, lanes, rays, goal);
+                test::<R, L, G>(s, sc, e, slot, rays, m, goal);
             }
             continue;
         }
@@ -612,39 +614,43 @@ fn entry<R: Elem, L: Simd, G: Goal<R>>(
 ) {
     let m = sc.mailbox.untested(id, lm & goal.live());
     if m != 0 {
-        test::<R, L, G>(s, sc, id, rays, m, goal);
+        test::<R, L, G>(s, sc, id, s.objects.slot(id), rays, m, goal);
     }
 }
 
-/// Tests object `id` against the lanes `m`.
+/// Tests object `id`, whose slot is `slot`, against the lanes `m`.
 #[inline(always)]
 fn test<R: Elem, L: Simd, G: Goal<R>>(
     s: &DfScene,
     sc: &mut Scratch<R>,
     id: u32,
+    slot: Slot,
     rays: &RayLanes<R>,
     m: Lanes,
     goal: &mut G,
 ) {
     // Faces (the bulk of a mesh) straight to the triangle kernel; other
     // objects through their kind's test.
-    if let Slot::Face(f) = s.objects.slot(id) {
-        let v = s.objects.positions(&f);
-        sc.tests.add_n(f.kind(), m.count_ones() as u64);
-        let hit = Triangle {
-            v: &v,
-            rays,
-            m,
-            limit: goal.limit(),
-            t_out: &mut sc.found.t,
+    let r = match slot {
+        Slot::Record(r) => r,
+        Slot::Face(f) => {
+            let v = s.objects.positions(&f);
+            sc.tests.add_n(f.kind(), m.count_ones() as u64);
+            let hit = Triangle {
+                v: &v,
+                rays,
+                m,
+                limit: goal.limit(),
+                t_out: &mut sc.found.t,
+            }
+            .run::<L>();
+            if hit != 0 {
+                goal.take(s, id, hit, &sc.found, false);
+            }
+            return;
         }
-        .run::<L>();
-        if hit != 0 {
-            goal.take(s, id, hit, &sc.found, false);
-        }
-        return;
-    }
-    let c = s.candidate(id);
+    };
+    let c = s.record_candidate(r);
     let hit = lanes::test::<R, L>(
         s,
         c,
