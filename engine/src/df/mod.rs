@@ -596,13 +596,7 @@ mod tests {
              f 0.6 0.6 0.6 1 0 0 0 1\np 4\n-3 0 -3\n-3 0 3\n3 0 3\n3 0 -3\n\
              f 0.9 0.3 0.2 0.6 0.4 20 0 1\n",
         );
-        let mut x: u64 = 7;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = numbers(7);
         for _ in 0..400 {
             let c = [next(), next() + 0.5, next()];
             s.push_str("p 3\n");
@@ -614,9 +608,31 @@ mod tests {
         for _ in 0..100 {
             writeln!(s, "s {} 0.05 {} 0.05", 4.0 * next(), 4.0 * next()).unwrap();
         }
-        let path = dir.join("crowd.sdb");
+        database(dir, "crowd", &s)
+    }
+
+    /// Reproducible numbers in [-0.5, 0.5).
+    fn numbers(seed: u64) -> impl FnMut() -> f64 {
+        let mut x = seed;
+        move || {
+            x = x
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        }
+    }
+
+    /// The database `name.sdb` in `dir` of the NFF text `nff`.
+    fn database(dir: &Path, name: &str, nff: &str) -> Database {
+        let path = dir.join(format!("{name}.sdb"));
         let mut w = DbWriter::create(&path, Compression::None).unwrap();
-        read_nff_from(s.as_bytes(), Path::new("crowd.nff"), &mut w, &NoProgress).unwrap();
+        read_nff_from(
+            nff.as_bytes(),
+            Path::new(&format!("{name}.nff")),
+            &mut w,
+            &NoProgress,
+        )
+        .unwrap();
         w.finish().unwrap();
         Database::open(&path).unwrap()
     }
@@ -681,13 +697,7 @@ mod tests {
              resolution 40 40\nb 0.1 0.1 0.2\nl 3 8 4 1 1 1\nl -4 6 5 0.6 0.6 0.6\n\
              f 0.8 0.8 0.8 0.3 0.7 20 0 1\n",
         );
-        let mut x: u64 = 11;
-        let mut next = || {
-            x = x
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut next = numbers(11);
         for _ in 0..1500 {
             let c = [next(), next(), next()];
             writeln!(
@@ -700,11 +710,7 @@ mod tests {
             )
             .unwrap();
         }
-        let path = dir.path().join("mirrors.sdb");
-        let mut w = DbWriter::create(&path, Compression::None).unwrap();
-        read_nff_from(s.as_bytes(), Path::new("mirrors.nff"), &mut w, &NoProgress).unwrap();
-        w.finish().unwrap();
-        let db = Database::open(&path).unwrap();
+        let db = database(dir.path(), "mirrors", &s);
         let objects = ObjectStore::load(&db, &NoProgress).unwrap();
         for precision in [Precision::Double, Precision::Single] {
             for threads in [1, 2] {
