@@ -16,7 +16,6 @@
 use sray_engine::bf::{Contribution, RayRec, ResultRec, SPAWN_SLOTS};
 use sray_engine::hit::PrimId;
 use sray_proto::auth::Token;
-use sray_proto::colour;
 use sray_proto::net::{Client, Target};
 use sray_proto::v1::{self, task_output::Part};
 use sray_proto::wire::{encode, records_per_chunk};
@@ -468,15 +467,10 @@ fn output(
 /// the worker (`keep`), else as records.
 fn push_colour(msgs: &mut Vec<v1::TaskOutput>, keep: bool, recs: &[Contribution]) {
     let (kind, data) = if keep {
-        let mut v: Vec<colour::SlotColour> = recs
-            .iter()
-            .map(|x| colour::SlotColour {
-                slot: x.corner,
-                run: x.run,
-                rgb: x.rgb,
-            })
-            .collect();
-        (v1::RecordKind::Colour, encode(&colour::pack(&mut v)))
+        (
+            v1::RecordKind::Colour,
+            encode(&sray_worker::exec::pack_colour(recs)),
+        )
     } else {
         (v1::RecordKind::Contributions, encode(recs))
     };

@@ -773,10 +773,18 @@ fn result_reader<R: Real>(
 /// records stay here (`keep`), else as they are (verification compares
 /// them one by one).
 fn send_colour(out: &Output<'_>, keep: bool, buf: &[Contribution]) -> Result<(), String> {
-    use sray_proto::colour::{SlotColour, pack};
     if !keep {
         return out.records(RecordKind::Contributions, buf);
     }
+    // Encoded as bytes, as records are (or raw).
+    out.records(RecordKind::Colour, &pack_colour(buf))
+}
+
+/// A chunk of contributions packed per slot
+/// ([`sray_proto::colour::pack`]), as a worker that keeps its records
+/// sends them.
+pub fn pack_colour(buf: &[Contribution]) -> Vec<u8> {
+    use sray_proto::colour::{SlotColour, pack};
     let mut v: Vec<SlotColour> = buf
         .iter()
         .map(|x| SlotColour {
@@ -785,6 +793,5 @@ fn send_colour(out: &Output<'_>, keep: bool, buf: &[Contribution]) -> Result<(),
             rgb: x.rgb,
         })
         .collect();
-    // Encoded as bytes, as records are (or raw).
-    out.records(RecordKind::Colour, &pack(&mut v))
+    pack(&mut v)
 }

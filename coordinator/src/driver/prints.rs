@@ -127,7 +127,6 @@ mod tests {
     use crate::task::TaskOutput;
     use sray_engine::bf::Contribution;
     use sray_engine::spill::{MemoryShare, Records};
-    use sray_proto::colour::{SlotColour, pack};
 
     fn recs(v: Vec<Contribution>) -> TaskOutput {
         TaskOutput {
@@ -141,15 +140,7 @@ mod tests {
     fn packed(v: &[Contribution], per: usize) -> TaskOutput {
         let mut bytes = Vec::new();
         for c in v.chunks(per) {
-            let mut e: Vec<SlotColour> = c
-                .iter()
-                .map(|x| SlotColour {
-                    slot: x.corner,
-                    run: x.run,
-                    rgb: x.rgb,
-                })
-                .collect();
-            bytes.extend(pack(&mut e));
+            bytes.extend(sray_worker::exec::pack_colour(c));
         }
         TaskOutput {
             colour: Some(Records::memory(bytes, MemoryShare::new(0).lease())),
