@@ -343,6 +343,9 @@ pub struct BfStats {
     /// Per round, the mean store number of each pass.
     pub store_numbers: Vec<Vec<f64>>,
     pub rays_per_round: Vec<u64>,
+    /// Per round, the ray slots: the most rays a pass holds (fewer rays
+    /// per pass mean more passes, each a scan of the objects).
+    pub slots_per_round: Vec<u64>,
     pub db_scans: u64,
     pub db_bytes_read: u64,
     /// Blocks the intersection passes left unread (see `skip`).

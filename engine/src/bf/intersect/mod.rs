@@ -1042,3 +1042,37 @@ fn complete<R: Real>(sh: &mut Shard<R>, ngrids: usize, carry: bool) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The parts of a slot, printed (`--nocapture`) to see what a slot
+    /// spends its bytes on.
+    #[test]
+    fn slot_parts() {
+        use std::mem::size_of;
+        for (name, hot, q, total) in [
+            (
+                "f64",
+                size_of::<Hot<f64>>(),
+                size_of::<RayQ<f64>>(),
+                slot_bytes::<f64>(),
+            ),
+            (
+                "f32",
+                size_of::<Hot<f32>>(),
+                size_of::<RayQ<f32>>(),
+                slot_bytes::<f32>(),
+            ),
+        ] {
+            println!(
+                "{name}: Hot {hot}, RayQ {q}, Cold {}, Walk {}, Pending {}, Outcome {}: slot {total}",
+                size_of::<Cold>(),
+                size_of::<Walk>(),
+                size_of::<Pending>(),
+                size_of::<Outcome>(),
+            );
+        }
+    }
+}
