@@ -660,8 +660,10 @@ mod tests {
         // what rays make.
         let before = (b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS)) as u64 / b.slot_bytes;
         assert!(most >= before, "{most} slots against {before}");
+        // A streamed ray waits in the queue by its slot, which takes no
+        // more than the id a ray admitted by id waits by.
         let (streamed, _) = b.slots(false, true, 1.5, true, true);
-        assert!(streamed < few);
+        assert!(streamed <= few);
         // A grid too large for a dense voxel index leaves its share.
         let (sparse, _) = b.slots(false, true, 1.5, false, false);
         assert!(sparse > few);
