@@ -343,6 +343,9 @@ pub struct BfStats {
     /// Per round, the mean store number of each pass.
     pub store_numbers: Vec<Vec<f64>>,
     pub rays_per_round: Vec<u64>,
+    /// Per round, the ray slots: the most rays a pass holds (fewer rays
+    /// per pass mean more passes, each a scan of the objects).
+    pub slots_per_round: Vec<u64>,
     pub db_scans: u64,
     pub db_bytes_read: u64,
     /// Blocks the intersection passes left unread (see `skip`).
@@ -657,8 +660,10 @@ mod tests {
         // what rays make.
         let before = (b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS)) as u64 / b.slot_bytes;
         assert!(most >= before, "{most} slots against {before}");
+        // A streamed ray waits in the queue by its slot, which takes no
+        // more than the id a ray admitted by id waits by.
         let (streamed, _) = b.slots(false, true, 1.5, true, true);
-        assert!(streamed < few);
+        assert!(streamed <= few);
         // A grid too large for a dense voxel index leaves its share.
         let (sparse, _) = b.slots(false, true, 1.5, false, false);
         assert!(sparse > few);

@@ -488,6 +488,7 @@ impl<'db, R: Real> Tracer<'db, R> {
         };
         let st = &mut self.stats;
         st.passes.push(ist.passes);
+        st.slots_per_round.push(slots_n.min(n).max(1));
         st.remaining_rays_per_pass
             .push(ist.remaining_rays_per_pass.clone());
         st.store_numbers.push(ist.store_numbers.clone());

@@ -114,57 +114,40 @@ impl Dda {
         self.step[axis] > 0
     }
 
-    /// The little a walk needs to be resumed later: current voxel, the
-    /// distances to the next faces, and where it ends.
+    /// The walk of [`Dda::start`] (same ray, grid and extent) moved on
+    /// to voxel `cell`, which that walk reaches: bit for bit the state
+    /// [`Dda::advance`] leaves there, except `t_enter`, which is left at
+    /// minus infinity (the next [`Dda::advance`] sets it). `None` where
+    /// [`Dda::start`] gives `None`.
+    ///
+    /// The distance to the next face on an axis changes only when the walk
+    /// steps along that axis, by adding `t_delta` to it; the walk has
+    /// stepped `|cell - start|` times along each axis, so the same
+    /// additions in the same order give the same bits. (A product in place
+    /// of the sums would round differently.) This lets a breadth-first ray
+    /// keep only the voxel it stopped in between passes, not its walk.
     #[inline]
-    pub fn save(&self) -> DdaSave {
-        DdaSave {
-            t_next: self.t_next,
-            t_end: self.t_end,
-            cell: [
-                self.cell[0] as u16,
-                self.cell[1] as u16,
-                self.cell[2] as u16,
-            ],
-        }
-    }
-
-    /// Rebuilds a walk saved by [`Dda::save`] for the same ray and grid.
-    #[inline]
-    pub fn resume(g: &GridSpec, d: Vec3, inv: Vec3, s: &DdaSave) -> Dda {
-        let cs = g.cell_size();
-        let strides = [
-            1isize,
-            g.res[0] as isize,
-            g.res[0] as isize * g.res[1] as isize,
-        ];
-        let mut t_delta = [f64::INFINITY; 3];
-        let mut step = [0i32; 3];
-        let mut stride = [0isize; 3];
-        let mut out = [-1i32; 3];
-        for i in 0..3 {
-            if d[i] > 0.0 {
-                step[i] = 1;
-                out[i] = g.res[i] as i32;
-                t_delta[i] = cs[i] * inv[i];
-            } else if d[i] < 0.0 {
-                step[i] = -1;
-                t_delta[i] = -cs[i] * inv[i];
+    pub fn start_at(
+        g: &GridSpec,
+        o: Vec3,
+        d: Vec3,
+        inv: Vec3,
+        t_min: f64,
+        t_max: f64,
+        cell: [u32; 3],
+    ) -> Option<Dda> {
+        let mut w = Dda::start(g, o, d, inv, t_min, t_max)?;
+        for (i, &c) in cell.iter().enumerate() {
+            let steps = (c as i32 - w.cell[i]) * w.step[i];
+            debug_assert!(steps >= 0, "voxel {cell:?} is not on the walk");
+            for _ in 0..steps {
+                w.t_next[i] += w.t_delta[i];
             }
-            stride[i] = step[i] as isize * strides[i];
+            w.cell[i] = c as i32;
         }
-        let c = [s.cell[0] as u32, s.cell[1] as u32, s.cell[2] as u32];
-        Dda {
-            cell: [c[0] as i32, c[1] as i32, c[2] as i32],
-            index: g.index(c),
-            t_enter: f64::NEG_INFINITY,
-            t_next: s.t_next,
-            t_delta,
-            t_end: s.t_end,
-            step,
-            stride,
-            out,
-        }
+        w.index = g.index(cell);
+        w.t_enter = f64::NEG_INFINITY;
+        Some(w)
     }
 
     /// The current voxel's coordinates.
@@ -175,24 +158,5 @@ impl Dda {
             self.cell[1] as u32,
             self.cell[2] as u32,
         ]
-    }
-}
-
-/// A saved 3D-DDA walk (see [`Dda::save`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct DdaSave {
-    pub t_next: [f64; 3],
-    pub t_end: f64,
-    pub cell: [u16; 3],
-}
-
-impl DdaSave {
-    /// Distance at which the ray leaves the saved voxel.
-    #[inline(always)]
-    pub fn t_exit(&self) -> f64 {
-        self.t_next[0]
-            .min(self.t_next[1])
-            .min(self.t_next[2])
-            .min(self.t_end)
     }
 }

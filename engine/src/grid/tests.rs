@@ -145,28 +145,53 @@ fn uniform_scenes_keep_one_grid() {
 }
 
 #[test]
-fn a_saved_walk_resumes_where_it_stopped() {
+fn a_walk_started_at_a_voxel_is_the_walk_that_got_there() {
     let g = GridSpec::new(&unit_box(), [7, 5, 3]);
-    let o = V3::new(-0.3, 0.1, 0.2);
-    let d = V3::new(1.0, 0.77, 0.31);
-    let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-    let mut a = Dda::start(&g, o, d, inv, 0.0, f64::INFINITY).unwrap();
-    let mut b = a;
-    for _ in 0..3 {
-        assert!(a.advance());
-    }
-    let mut r = Dda::resume(&g, d, inv, &a.save());
-    for _ in 0..3 {
-        b.advance();
-    }
-    assert_eq!(r.voxel(), b.voxel());
-    loop {
-        let (x, y) = (r.advance_axis(), b.advance_axis());
-        assert_eq!(x, y);
-        assert_eq!(r.voxel(), b.voxel());
-        assert_eq!(r.index, b.index);
-        if x.is_none() {
-            break;
+    let mut rng = Lcg(7);
+    for k in 0..200 {
+        let o = V3::new(
+            f64::from(rng.next()) * 1.6 - 0.3,
+            f64::from(rng.next()),
+            f64::from(rng.next()),
+        );
+        let d = V3::new(
+            f64::from(rng.next()) - 0.5,
+            f64::from(rng.next()) - 0.5,
+            f64::from(rng.next()) - 0.5,
+        );
+        // Some rays along a plane or an axis.
+        let d = match k % 5 {
+            0 => V3::new(d.x, d.y, 0.0),
+            1 => V3::new(0.0, 0.0, d.z),
+            _ => d,
+        };
+        if d.x == 0.0 && d.y == 0.0 && d.z == 0.0 {
+            continue;
+        }
+        let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+        let Some(mut a) = Dda::start(&g, o, d, inv, 0.0, f64::INFINITY) else {
+            continue;
+        };
+        let stop = k % 9;
+        for _ in 0..stop {
+            if !a.advance() {
+                break;
+            }
+        }
+        let mut r = Dda::start_at(&g, o, d, inv, 0.0, f64::INFINITY, a.voxel()).unwrap();
+        assert_eq!(r.voxel(), a.voxel());
+        assert_eq!(r.index, a.index);
+        assert_eq!(r.t_exit().to_bits(), a.t_exit().to_bits(), "ray {k}");
+        loop {
+            let (x, y) = (r.advance_axis(), a.advance_axis());
+            assert_eq!(x, y);
+            if x.is_none() {
+                break;
+            }
+            assert_eq!(r.voxel(), a.voxel());
+            assert_eq!(r.index, a.index);
+            assert_eq!(r.t_enter.to_bits(), a.t_enter.to_bits(), "ray {k}");
+            assert_eq!(r.t_exit().to_bits(), a.t_exit().to_bits(), "ray {k}");
         }
     }
 }

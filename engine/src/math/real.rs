@@ -38,6 +38,19 @@ pub trait Real:
     /// The smallest number greater than `self`.
     fn next_up(self) -> Self;
 
+    /// What a value of this precision needs beside it to give back the
+    /// `f64` it was made from (see [`Real::unround`]): nothing for `f64`,
+    /// the `f64` itself for `f32`. It lets the breadth-first tracer's ray
+    /// slots hold a ray once, in its tests' precision, when that is `f64`,
+    /// and the `f64` ray beside it only when it is not.
+    type Kept: Copy + Debug + Default + Send + Sync + 'static;
+    /// What to keep of `x` beside `Self::from_f64(x)`.
+    fn keep(x: f64) -> Self::Kept;
+    /// The `f64` `x` this value was made from (as `Self::from_f64(x)`),
+    /// given `kept`, which gives what [`Real::keep`] kept of `x` (and is
+    /// called only where something was kept).
+    fn unround(self, kept: impl FnOnce() -> Self::Kept) -> f64;
+
     #[inline]
     fn max(self, o: Self) -> Self {
         if self > o { self } else { o }
@@ -49,8 +62,18 @@ pub trait Real:
 }
 
 macro_rules! impl_real {
-    ($t:ty) => {
+    ($t:ty, $kept:ty, |$x:ident| $keep:expr, |$s:ident, $k:ident| $unround:expr) => {
         impl Real for $t {
+            type Kept = $kept;
+            #[inline(always)]
+            fn keep($x: f64) -> Self::Kept {
+                $keep
+            }
+            #[inline(always)]
+            fn unround(self, $k: impl FnOnce() -> Self::Kept) -> f64 {
+                let $s = self;
+                $unround
+            }
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
             const TWO: Self = 2.0;
@@ -90,5 +113,7 @@ macro_rules! impl_real {
     };
 }
 
-impl_real!(f32);
-impl_real!(f64);
+// An `f32` loses the `f64` it was made from, which is kept beside it.
+impl_real!(f32, f64, |x| x, |_s, kept| kept());
+// An `f64` is the `f64` it was made from: nothing is kept.
+impl_real!(f64, (), |_x| (), |s, _kept| s);

@@ -39,9 +39,11 @@ pub fn sample_registrations<R: Real>(
         for m in regs.iter_mut() {
             m.clear(64, 0);
         }
-        load(sh, 0, 0, &r, eps);
+        stage(sh, 0, 0, &r, eps);
+        load(sh, 0);
         register(
             &mut sh.hot[0],
+            &sh.q[0],
             &mut sh.cold[0],
             0,
             grids,
@@ -63,7 +65,8 @@ pub fn sample_registrations<R: Real>(
 #[allow(clippy::too_many_arguments)]
 pub(super) fn register<R: Real>(
     h: &mut Hot<R>,
-    c: &mut Cold,
+    q: &RayQ<R>,
+    c: &mut Cold<R>,
     slot: u32,
     grids: &VoxelGrids,
     store: &StorePlan,
@@ -71,6 +74,7 @@ pub(super) fn register<R: Real>(
     region: &mut [Region; MAX_GRIDS],
 ) -> (u64, u64) {
     let (mut store_sum, mut walks) = (0u64, 0u64);
+    let r = ray64(q, h, c);
     for (g, grid) in grids.grids.iter().enumerate() {
         let w = &mut c.walks[g];
         if w.state == DONE {
@@ -84,7 +88,7 @@ pub(super) fn register<R: Real>(
             // A one-voxel grid (a few large objects): the ray is stored in
             // it once, if it meets the grid's box at all.
             if grid.flags[0] & OCCUPIED != 0
-                && spec.clip(c.o, c.d, c.inv, c.t_min, c.t_max).is_some()
+                && spec.clip(r.o, r.d, r.inv, r.t_min, r.t_max).is_some()
             {
                 regs[g].insert(0, slot);
                 region[g].add([0, 0, 0]);
@@ -95,7 +99,7 @@ pub(super) fn register<R: Real>(
             continue;
         }
         let (mut dda, mut entry) = if w.state == FRESH {
-            match Dda::start(spec, c.o, c.d, c.inv, c.t_min, c.t_max) {
+            match Dda::start(spec, r.o, r.d, r.inv, r.t_min, r.t_max) {
                 Some(d) => (d, None),
                 None => {
                     w.state = DONE;
@@ -103,7 +107,11 @@ pub(super) fn register<R: Real>(
                 }
             }
         } else {
-            let mut d = Dda::resume(spec, c.d, c.inv, &w.save);
+            // Where the walk stopped last pass (see `Walk`).
+            let cell = w.last.map(u32::from);
+            // (It started, so it starts again.)
+            let mut d = Dda::start_at(spec, r.o, r.d, r.inv, r.t_min, r.t_max, cell)
+                .expect("a walk that started starts again");
             match d.advance_axis() {
                 Some(a) => (d, Some(a)),
                 None => {
@@ -144,8 +152,10 @@ pub(super) fn register<R: Real>(
             }
         }
         if w.state != DONE {
+            // Stopped in the voxel just stored in, `w.last`: where the
+            // next pass starts its walk again.
+            debug_assert_eq!(w.last.map(u32::from), dda.voxel());
             w.state = WALKING;
-            w.save = dda.save();
         }
         if n > 0 {
             w.k = w.k.saturating_add(1);

@@ -103,11 +103,12 @@ fn scan_aggregates<R: Real>(
             counts.aggregate_walks += 1;
             let c = &mut cold[slot as usize];
             let q = &q[slot as usize];
-            let (o, inv) = (c.o, c.inv);
+            let r = ray64(q, s, c);
+            let (o, inv) = (r.o, r.inv);
             let prev = s.prev[g];
             found
                 .trees
-                .visit(a.tree, high_first(c.d), (), &mut |e| match e {
+                .visit(a.tree, high_first(r.d), (), &mut |e| match e {
                     Entry::Box(b, ()) => {
                         ray_meets(o, inv, s.t_min.to_f64(), s.upper.to_f64(), b, walk.slack)
                             .then_some(())
@@ -130,7 +131,7 @@ fn scan_aggregates<R: Real>(
                             .filter(|_| keeps(cutouts, ob, q))
                         {
                             let t = t.to_f64();
-                            offer(s, c, t, PrimId::object(m.index), m.rank, carry, |ray| {
+                            offer(s, q, c, t, PrimId::object(m.index), m.rank, carry, |ray| {
                                 Some((ob.shape.surface(ray, t), ob.material))
                             });
                         }
@@ -297,14 +298,14 @@ fn scan_singles<R: Real>(
                     .filter(|_| keeps(models.cutouts(), o, q))
                     .map(|t| (t, prim)),
                 Some(pl) => {
-                    let c = &sh.cold[slot as usize];
+                    let (o, d) = od64(q, &sh.cold[slot as usize]);
                     if s.shadow {
                         models
-                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .blocks(pl, q, o, d, s.t_min, s.upper, &mut sh.counts.tests)
                             .then_some((s.upper, prim))
                     } else {
                         models
-                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut sh.counts.tests)
+                            .nearest(pl, q, o, d, s.t_min, s.upper, &mut sh.counts.tests)
                             .map(|(t, p)| (t, PrimId::instance(index, p)))
                     }
                 }
@@ -313,6 +314,7 @@ fn scan_singles<R: Real>(
                 let t = t.to_f64();
                 offer(
                     s,
+                    q,
                     &mut sh.cold[slot as usize],
                     t,
                     prim,
@@ -335,7 +337,7 @@ fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> 
     cutouts.is_none_or(|c| c.keeps(&o.shape, o.material, q))
 }
 
-/// Gives ray `s` (its cold part `c`) a hit at `t` on `prim`, whose object
+/// Gives ray `s` (its ray `q`, its cold part `c`) a hit at `t` on `prim`, whose object
 /// has input id `rank`: a shadow ray is blocked; another keeps the hit if
 /// it wins, and with `carry` the surface there (exactly what the shading
 /// join would compute from the ray and this hit), which `surface` gives
@@ -344,7 +346,8 @@ fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> 
 #[allow(clippy::too_many_arguments)]
 fn offer<R: Real>(
     s: &mut Hot<R>,
-    c: &mut Cold,
+    q: &RayQ<R>,
+    c: &mut Cold<R>,
     t: f64,
     prim: PrimId,
     rank: u32,
@@ -358,7 +361,11 @@ fn offer<R: Real>(
         s.best = Hit { t, prim };
         c.rank = rank;
         s.upper = R::from_f64(t).next_up();
-        if carry && let Some((surf, material)) = surface(&RayQ::from_vec3(c.o, c.d)) {
+        let ray = || {
+            let (o, d) = od64(q, c);
+            RayQ::from_vec3(o, d)
+        };
+        if carry && let Some((surf, material)) = surface(&ray()) {
             c.ng = surf.ng;
             c.ns = surf.ns;
             // A surface with attributes (texture coordinates, colours)
@@ -438,17 +445,18 @@ pub(super) fn test_pairs<R: Real>(
                         continue;
                     }
                     let q = &q[slot];
+                    let (o, d) = od64(q, c);
                     let found = if s.shadow {
                         model
-                            .blocks(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .blocks(pl, q, o, d, s.t_min, s.upper, &mut counts.tests)
                             .then(|| (s.upper.to_f64(), PrimId::object(*index)))
                     } else {
                         model
-                            .nearest(pl, q, c.o, c.d, s.t_min, s.upper, &mut counts.tests)
+                            .nearest(pl, q, o, d, s.t_min, s.upper, &mut counts.tests)
                             .map(|(t, k)| (t.to_f64(), PrimId::instance(*index, k)))
                     };
                     if let Some((t, prim)) = found {
-                        offer(s, c, t, prim, *rank, carry, |ray| {
+                        offer(s, q, c, t, prim, *rank, carry, |ray| {
                             model.surface(pl, prim.instance_parts()?.1, ray, t)
                         });
                     }
