@@ -166,33 +166,43 @@ impl Frame {
 
     /// Each pixel's linear colour: the mean of its four corners (or of its
     /// samples), unclamped, in f64. Every encoding derives from this one
-    /// computation, so the 8-bit and the float images of a frame agree.
+    /// computation ([`Frame::pixel_row`]), so the 8-bit and the float
+    /// images of a frame agree.
     pub fn to_rgb_f64(&self) -> Vec<[f64; 3]> {
-        let (w, h) = (self.width as usize, self.height as usize);
-        let mut out = Vec::with_capacity(w * h);
+        let w = self.width as usize;
+        let mut out = vec![[0.0; 3]; w * self.height as usize];
+        if w > 0 {
+            for (y, row) in out.chunks_exact_mut(w).enumerate() {
+                self.pixel_row(y, row);
+            }
+        }
+        out
+    }
+
+    /// Row `y` of [`Frame::to_rgb_f64`], into `out` (a row's pixels): what
+    /// the PNG writer takes a row at a time, with no image-sized buffer.
+    fn pixel_row(&self, y: usize, out: &mut [[f64; 3]]) {
+        let w = self.width as usize;
         // Each slot is clamped to a sane range first, so that a sum of
         // four fits in an i64.
         let v = |j: usize, k: usize| self.slots[j][k].clamp(-(1 << 60), 1 << 60);
         let spp = self.sampling.per_slot() as f64;
-        for y in 0..h {
-            for x in 0..w {
-                out.push(std::array::from_fn(|k| {
-                    let mean = match self.sampling {
-                        Sampling::Corners => {
-                            let i = y * (w + 1) + x;
-                            let sum: i64 = [i, i + 1, i + w + 1, i + w + 2]
-                                .iter()
-                                .map(|&j| v(j, k))
-                                .sum();
-                            sum as f64 * (1.0 / 4.0)
-                        }
-                        Sampling::Jittered { .. } => v(y * w + x, k) as f64 / spp,
-                    };
-                    mean * (1.0 / FIXED_ONE)
-                }));
-            }
+        for (x, px) in out.iter_mut().enumerate() {
+            *px = std::array::from_fn(|k| {
+                let mean = match self.sampling {
+                    Sampling::Corners => {
+                        let i = y * (w + 1) + x;
+                        let sum: i64 = [i, i + 1, i + w + 1, i + w + 2]
+                            .iter()
+                            .map(|&j| v(j, k))
+                            .sum();
+                        sum as f64 * (1.0 / 4.0)
+                    }
+                    Sampling::Jittered { .. } => v(y * w + x, k) as f64 / spp,
+                };
+                mean * (1.0 / FIXED_ONE)
+            });
         }
-        out
     }
 
     /// 8-bit RGB: each pixel the average of its four corners (or of its
@@ -251,10 +261,16 @@ impl Frame {
     /// spilled frame's, so that an image does not depend on the budget
     /// down to its bytes.
     fn write_png(&self, out: &mut dyn Write) -> Result<(), Error> {
-        let rgb = self.to_rgb8();
-        let mut rows = rgb.chunks_exact(3 * self.width as usize);
+        // A row at a time: no image of floats and of bytes held whole (a
+        // 4096x4096 frame would take 400 MB and 50 MB more).
+        let mut row = vec![[0.0f64; 3]; self.width as usize];
+        let mut y = 0;
         write_png(self.width, self.height, out, |bytes| {
-            bytes.copy_from_slice(rows.next().expect("one row per image row"));
+            self.pixel_row(y, &mut row);
+            y += 1;
+            for (b, c) in bytes.iter_mut().zip(row.iter().flatten()) {
+                *b = to_u8(*c);
+            }
             Ok(())
         })
     }
