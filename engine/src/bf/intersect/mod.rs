@@ -29,6 +29,10 @@
 //! decoded block for its own rays, so no ray is touched by two threads
 //! while it is traced (a finished ray's result is a copy, which another
 //! thread may write to its place).
+//!
+//! This module holds the pass loop ([`intersect_rays`]) and the shards;
+//! each stage has a module of its own: [`slot`] (what a ray slot holds),
+//! [`admit`] (fill), [`register`], [`scan`] and [`complete`].
 
 use super::candidates::{Candidate, Found, NO_REGION, Region, candidates};
 use super::records::{Outcome, RayRec, ResultRec};
@@ -41,7 +45,7 @@ use crate::grid::nested::{Entry, high_first, ray_meets};
 use crate::grid::{Dda, GridSpec};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::{Attrs, RayQ};
-use crate::math::{Real, Vec3, Vec3Ext};
+use crate::math::Real;
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
 use crate::render::{Cutouts, KindCounts};
@@ -50,185 +54,18 @@ use crate::shapes::{Prepared, Shape};
 use rayon::prelude::*;
 use serde::Serialize;
 
+mod admit;
+mod complete;
 mod register;
 mod scan;
+mod slot;
+use admit::{ByIdFill, load, misses_every_grid, stage};
+use complete::{complete, put_results};
 use register::register;
 pub use register::sample_registrations;
 use scan::{AggregateWalk, pair_bytes, scan_block, test_pairs};
-
-/// Grids a ray can walk (the main grid, and dense regions or the huge
-/// objects' grid: see [`crate::grid::MAX_GROUPS`]).
-pub const MAX_GRIDS: usize = crate::grid::MAX_GROUPS;
-const NONE16: u16 = u16::MAX;
-
-const FRESH: u8 = 0;
-const WALKING: u8 = 1;
-const DONE: u8 = 2;
-/// A carried material that asks for the shading join instead (the
-/// surface has attributes, which slots do not keep).
-const JOIN: u32 = u32::MAX;
-
-/// A ray's walk through one grid, in 8 bytes. Its 3D-DDA state is not
-/// kept: a walk that will go on stopped in the voxel it last stored the ray
-/// in (it stops when the ray's store number is used up), and the walk from
-/// the ray's start to that voxel gives the state bit for bit again
-/// ([`Dda::start_at`]). Kept, the state took 40 bytes a grid.
-#[derive(Clone, Copy, Debug)]
-struct Walk {
-    /// The last voxel stored in (`NONE16` in [0] when none yet); while
-    /// `WALKING`, the voxel the walk stopped in.
-    last: [u16; 3],
-    state: u8,
-    /// Passes in which this walk registered.
-    k: u8,
-}
-
-const NEW_WALK: Walk = Walk {
-    last: [NONE16; 3],
-    state: FRESH,
-    k: 0,
-};
-
-/// What the scan reads for every registration it visits: small, and kept
-/// apart from the rest of the ray so that visits stay in cache.
-#[derive(Clone, Copy, Debug)]
-struct Hot<R> {
-    /// The last primitive tested (the paper's mailbox).
-    mailbox: PrimId,
-    best: Hit,
-    /// Tests must find a hit below this: just above the best distance, so
-    /// that an exact tie is seen and goes to the smaller id.
-    upper: R,
-    t_min: R,
-    /// Per grid, the last voxel stored in during the previous pass
-    /// (`NONE16` in [0] when none): the last-voxel rule's voxel.
-    prev: [[u16; 3]; MAX_GRIDS],
-    active: bool,
-    shadow: bool,
-    blocked: bool,
-}
-
-/// The rest of a ray in memory: what registration and completion need.
-/// The ray itself is the slot's [`RayQ`], in the tests' precision; in
-/// `f64` that is the ray as given, and nothing else is kept of it (`o`,
-/// `d` and `t_min` take no room); in `f32` they keep the `f64` values the
-/// walks need (see [`ray64`]).
-#[derive(Clone, Copy, Debug)]
-struct Cold<R: Real> {
-    id: u64,
-    t_max: f64,
-    o: [R::Kept; 3],
-    d: [R::Kept; 3],
-    t_min: R::Kept,
-    /// The surface at the best hit so far, when surfaces are carried.
-    ng: Vec3,
-    ns: Vec3,
-    material: u32,
-    /// The input id of the best hit's object, which decides ties.
-    rank: u32,
-    walks: [Walk; MAX_GRIDS],
-}
-
-fn empty_hot<R: Real>() -> Hot<R> {
-    Hot {
-        mailbox: PrimId::NONE,
-        best: Hit::NONE,
-        upper: R::INFINITY,
-        t_min: R::ZERO,
-        prev: [[NONE16; 3]; MAX_GRIDS],
-        active: false,
-        shadow: false,
-        blocked: false,
-    }
-}
-
-fn empty_cold<R: Real>() -> Cold<R> {
-    Cold {
-        walks: [NEW_WALK; MAX_GRIDS],
-        id: 0,
-        t_max: f64::INFINITY,
-        o: [R::keep(0.0); 3],
-        d: [R::keep(1.0), R::keep(0.0), R::keep(0.0)],
-        t_min: R::keep(0.0),
-        ng: Vec3::ZERO,
-        ns: Vec3::ZERO,
-        material: 0,
-        rank: 0,
-    }
-}
-
-/// A slot's ray in `f64`, as its walks take it: exactly the values
-/// [`load`] worked out from the ray given.
-#[derive(Clone, Copy, Debug)]
-struct Ray64 {
-    o: Vec3,
-    d: Vec3,
-    inv: Vec3,
-    t_min: f64,
-    t_max: f64,
-}
-
-/// The origin and direction of a slot's ray in `f64`.
-#[inline(always)]
-fn od64<R: Real>(q: &RayQ<R>, c: &Cold<R>) -> (Vec3, Vec3) {
-    (
-        Vec3::new(
-            q.o.x.unround(|| c.o[0]),
-            q.o.y.unround(|| c.o[1]),
-            q.o.z.unround(|| c.o[2]),
-        ),
-        Vec3::new(
-            q.d.x.unround(|| c.d[0]),
-            q.d.y.unround(|| c.d[1]),
-            q.d.z.unround(|| c.d[2]),
-        ),
-    )
-}
-
-/// A slot's ray in `f64` (see [`Ray64`]). In `f64`, copies of the slot's
-/// [`RayQ`] and [`Hot`] values, which [`load`] made from the same
-/// values; in `f32`, the kept values, with `1 / d` worked out as `load`
-/// did (the same operations give the same bits).
-#[inline(always)]
-fn ray64<R: Real>(q: &RayQ<R>, h: &Hot<R>, c: &Cold<R>) -> Ray64 {
-    let (o, d) = od64(q, c);
-    Ray64 {
-        o,
-        d,
-        inv: Vec3::new(
-            q.inv.x.unround(|| R::keep(1.0 / d.x)),
-            q.inv.y.unround(|| R::keep(1.0 / d.y)),
-            q.inv.z.unround(|| R::keep(1.0 / d.z)),
-        ),
-        t_min: h.t_min.unround(|| c.t_min),
-        t_max: c.t_max,
-    }
-}
-
-/// Bytes one ray slot takes (with its place in the queue of rays loaded
-/// in parallel, see [`Shard::pending`], and in the pass's finished rays
-/// and their order, see [`put_results`]).
-pub fn slot_bytes<R: Real>() -> usize {
-    std::mem::size_of::<Hot<R>>()
-        + std::mem::size_of::<Cold<R>>()
-        + std::mem::size_of::<RayQ<R>>()
-        // Its place in the queue, or the id it was admitted by.
-        + std::mem::size_of::<Pending>().max(std::mem::size_of::<u64>())
-        // Its place among the pass's finished rays, and in their order.
-        + 2 * std::mem::size_of::<u32>()
-}
-
-/// Bytes of a slot's place in the queue of streamed rays (see
-/// [`Shard::pending`]) beyond what a ray admitted by id takes instead (its
-/// id): what a slot saves when its rays can be had by id and its results
-/// have their places.
-pub fn streamed_extra_bytes() -> usize {
-    std::mem::size_of::<Pending>().saturating_sub(std::mem::size_of::<u64>())
-}
-
-/// Memory per registration: its key, its slot id, and its share of the
-/// voxel table.
-pub const REGISTRATION_BYTES: usize = 8 + 4 + 24;
+use slot::{Cold, DONE, FRESH, Hot, JOIN, NONE16, WALKING, empty_cold, empty_hot, od64, ray64};
+pub use slot::{MAX_GRIDS, REGISTRATION_BYTES, slot_bytes, streamed_extra_bytes};
 
 /// Counters of one pass.
 #[derive(Clone, Copy, Debug, Default)]
@@ -461,68 +298,6 @@ impl<R: Real> Slots<R> {
     }
 }
 
-/// Whether the ray meets no grid's box within its extent: nothing can
-/// be found along it.
-fn misses_every_grid(r: &RayRec, grids: &VoxelGrids, eps: f64) -> bool {
-    let o = Vec3::from_array(r.o);
-    let d = Vec3::from_array(r.d);
-    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-    let t_min = if r.kind == super::records::RayKind::Eye as u8 {
-        0.0
-    } else {
-        eps
-    };
-    grids
-        .grids
-        .iter()
-        .all(|g| g.spec.clip(o, d, inv, t_min, r.t_max).is_none())
-}
-
-/// Puts what [`load`] needs of ray `r` into slot `i`: the serial part
-/// of giving a ray a slot (see [`Shard::pending`]).
-fn stage<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
-    let t_min = if r.kind == super::records::RayKind::Eye as u8 {
-        0.0
-    } else {
-        eps
-    };
-    let (o, d) = (Vec3::from_array(r.o), Vec3::from_array(r.d));
-    let shadow = r.is_shadow();
-    sh.hot[i] = Hot {
-        mailbox: PrimId::NONE,
-        best: Hit::NONE,
-        upper: if shadow {
-            R::from_f64(r.t_max)
-        } else {
-            R::INFINITY
-        },
-        t_min: R::from_f64(t_min),
-        prev: [[NONE16; 3]; MAX_GRIDS],
-        active: true,
-        shadow,
-        blocked: false,
-    };
-    let q = &mut sh.q[i];
-    q.o = o.cast();
-    q.d = d.cast();
-    sh.cold[i] = Cold {
-        id,
-        t_max: r.t_max,
-        o: o.to_array().map(R::keep),
-        d: d.to_array().map(R::keep),
-        t_min: R::keep(t_min),
-        ..empty_cold()
-    };
-}
-
-/// Makes a ray [`stage`] put into slot `i` ready for its walks and tests.
-fn load<R: Real>(sh: &mut Shard<R>, i: usize) {
-    sh.live += 1;
-    let (o, d) = od64(&sh.q[i], &sh.cold[i]);
-    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-    sh.q[i] = RayQ::with_inverse(o.cast(), d.cast(), inv.cast());
-}
-
 /// Where a run's rays come from.
 pub enum RaySource<'a> {
     /// In id order, one after the other (a file being read).
@@ -547,163 +322,6 @@ pub enum ResultSink<'a> {
     /// Hits written at their ray's place, with `first` added to the ray
     /// id; the buffer (one entry per ray) holds misses already.
     Dense { v: &'a mut [Outcome], first: u64 },
-}
-
-/// Admission of rays that can be had by id (see [`intersect_rays`]): the
-/// same rays, in the same order, as filling the slots one by one from a
-/// stream, but with the rays made, looked at and loaded by all threads.
-struct ByIdFill<'a> {
-    ray: &'a (dyn Fn(u64) -> RayRec + Sync),
-    total: u64,
-    /// The first id not yet admitted or passed over.
-    next: u64,
-    /// Whether each ray of the window looked at meets no grid (reused).
-    sky: Vec<bool>,
-    /// The ids admitted this pass, in order: shard `k` loads
-    /// `ids[start[k]..start[k + 1]]` into its empty slots, in slot order.
-    ids: Vec<u64>,
-    start: Vec<usize>,
-}
-
-impl ByIdFill<'_> {
-    /// Admits up to `free[k]` rays for shard `k`, in order: the next rays
-    /// that meet some grid, as the serial fill would have given them to
-    /// the empty slots of shard 0, then shard 1, ... Returns the number
-    /// of rays passed over because they meet no grid (misses at once).
-    fn admit(
-        &mut self,
-        free: &[usize],
-        pool: &rayon::ThreadPool,
-        grids: &VoxelGrids,
-        eps: f64,
-    ) -> u64 {
-        let want: usize = free.iter().sum();
-        self.ids.clear();
-        let mut sky = 0;
-        while self.ids.len() < want && self.next < self.total {
-            // A window a little larger than what is missing: few rays are
-            // looked at twice, and a sky-heavy window is followed by
-            // another.
-            let need = want - self.ids.len();
-            let w = ((need + need / 4 + 64) as u64).min(self.total - self.next) as usize;
-            self.sky.resize(w, false);
-            let (ray, base) = (self.ray, self.next);
-            pool.install(|| {
-                self.sky[..w]
-                    .par_iter_mut()
-                    .enumerate()
-                    .with_min_len(1024)
-                    .for_each(|(i, s)| *s = misses_every_grid(&ray(base + i as u64), grids, eps))
-            });
-            let mut used = w;
-            for (i, &s) in self.sky[..w].iter().enumerate() {
-                if self.ids.len() == want {
-                    used = i;
-                    break;
-                }
-                if s {
-                    sky += 1;
-                } else {
-                    self.ids.push(base + i as u64);
-                }
-            }
-            self.next += used as u64;
-        }
-        self.start.clear();
-        let mut at = 0;
-        for &f in free {
-            self.start.push(at);
-            at = (at + f).min(self.ids.len());
-        }
-        self.start.push(at);
-        sky
-    }
-}
-
-/// Writes the finished rays' results into their places in `v` (ids count
-/// from 0; `first` is added), every thread a contiguous part of `v`: each
-/// shard first orders the indices of its finished hits by part (a
-/// counting sort, 4 bytes a hit), so that no part looks at another's (a
-/// sort of the results by id cost more than the writes). Misses are in
-/// `v` already.
-fn put_results<R: Real>(
-    shards: &mut [Shard<R>],
-    v: &mut [Outcome],
-    first: u64,
-    carry: bool,
-    pool: &rayon::ThreadPool,
-) {
-    let parts = pool.current_num_threads().max(1);
-    if parts == 1 {
-        for sh in shards.iter() {
-            for &slot in &sh.done {
-                put(v, 0, sh, slot, carry, first);
-            }
-        }
-        return;
-    }
-    let part = v.len().div_ceil(parts).max(1);
-    pool.install(|| {
-        shards.par_iter_mut().for_each(|sh| {
-            let (done, order, bounds) = (&sh.done, &mut sh.order, &mut sh.bounds);
-            let (hot, cold) = (&sh.hot, &sh.cold);
-            // The id of the ray in `slot`, if it hit.
-            let hit = |slot: u32| {
-                let i = slot as usize;
-                (!hot[i].best.prim.is_none()).then_some(cold[i].id)
-            };
-            bounds.clear();
-            bounds.resize(parts + 1, 0);
-            for id in done.iter().filter_map(|&slot| hit(slot)) {
-                bounds[id as usize / part + 1] += 1;
-            }
-            for k in 0..parts {
-                bounds[k + 1] += bounds[k];
-            }
-            order.clear();
-            order.resize(bounds[parts], 0);
-            // bounds[k] serves as part k's cursor, ending at part k's end
-            // (the old bounds[k + 1]); shifted back by one afterwards.
-            for (j, &slot) in done.iter().enumerate() {
-                if let Some(id) = hit(slot) {
-                    let k = id as usize / part;
-                    order[bounds[k]] = j as u32;
-                    bounds[k] += 1;
-                }
-            }
-            for k in (0..parts).rev() {
-                bounds[k + 1] = bounds[k];
-            }
-            bounds[0] = 0;
-        });
-        let shards = &*shards;
-        v.par_chunks_mut(part).enumerate().for_each(|(k, dst)| {
-            for sh in shards {
-                for &j in &sh.order[sh.bounds[k]..sh.bounds[k + 1]] {
-                    put(
-                        dst,
-                        (k * part) as u64,
-                        sh,
-                        sh.done[j as usize],
-                        carry,
-                        first,
-                    );
-                }
-            }
-        });
-    });
-}
-
-/// Writes the result of the ray that finished in `slot` of `sh` at its
-/// place in `dst`, which starts at id `lo`, if it is a hit.
-#[inline]
-fn put<R: Real>(dst: &mut [Outcome], lo: u64, sh: &Shard<R>, slot: u32, carry: bool, first: u64) {
-    if !sh.hot[slot as usize].best.prim.is_none() {
-        let o = sh.outcome(slot, carry);
-        let at = (o.res.ray - lo) as usize;
-        dst[at] = o;
-        dst[at].res.ray += first;
-    }
 }
 
 /// Intersects the `total` rays of `source` (ids `0, 1, ...`), giving each
@@ -1080,105 +698,4 @@ pub fn intersect_rays<R: Real>(
         }
     }
     Ok(st)
-}
-
-/// Finishes the rays whose result is complete, freeing their slots.
-fn complete<R: Real>(sh: &mut Shard<R>, grids: &VoxelGrids) {
-    let ngrids = grids.grids.len();
-    for (i, ((h, c), q)) in sh
-        .hot
-        .iter_mut()
-        .zip(sh.cold.iter_mut())
-        .zip(sh.q.iter())
-        .enumerate()
-    {
-        if !h.active {
-            continue;
-        }
-        let best_t = h.best.t;
-        // Without a hit (`best_t` infinite), no walk is done by its hit:
-        // the walks need not be worked out again.
-        let r = (best_t < f64::INFINITY).then(|| ray64(q, h, c));
-        let done = h.blocked
-            || (0..ngrids).all(|g| {
-                let w = &mut c.walks[g];
-                if w.state == WALKING
-                    && let Some(r) = &r
-                {
-                    // The far side of the voxel the walk stopped in.
-                    let cell = w.last.map(u32::from);
-                    let spec = &grids.grids[g].spec;
-                    let t_exit = Dda::start_at(spec, r.o, r.d, r.inv, r.t_min, r.t_max, cell)
-                        .map_or(f64::NEG_INFINITY, |d| d.t_exit());
-                    if best_t < t_exit {
-                        w.state = DONE;
-                    }
-                }
-                w.state == DONE
-            });
-        if done {
-            sh.done.push(i as u32);
-            h.active = false;
-        }
-    }
-}
-
-impl<R: Real> Shard<R> {
-    /// The result of the ray that finished in `slot` (which keeps it until
-    /// the slot is filled again), with its surface when `carry`.
-    #[inline]
-    fn outcome(&self, slot: u32, carry: bool) -> Outcome {
-        let (h, c) = (&self.hot[slot as usize], &self.cold[slot as usize]);
-        let res = ResultRec {
-            ray: c.id,
-            prim: h.best.prim,
-            t: h.best.t,
-        };
-        if carry && !h.shadow && h.best.is_some() && c.material != JOIN {
-            Outcome {
-                res,
-                ng: c.ng.to_array(),
-                ns: c.ns.to_array(),
-                material: c.material,
-                has_surface: 1,
-            }
-        } else {
-            Outcome::bare(res)
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The parts of a slot, printed (`--nocapture`) to see what a slot
-    /// spends its bytes on; and the slot of the `f64` tracer kept small.
-    #[test]
-    fn slot_parts() {
-        use std::mem::size_of;
-        for (name, hot, q, cold, total) in [
-            (
-                "f64",
-                size_of::<Hot<f64>>(),
-                size_of::<RayQ<f64>>(),
-                size_of::<Cold<f64>>(),
-                slot_bytes::<f64>(),
-            ),
-            (
-                "f32",
-                size_of::<Hot<f32>>(),
-                size_of::<RayQ<f32>>(),
-                size_of::<Cold<f32>>(),
-                slot_bytes::<f32>(),
-            ),
-        ] {
-            println!(
-                "{name}: Hot {hot}, RayQ {q}, Cold {cold} (Walk {} x {MAX_GRIDS}), Pending {}: slot {total}",
-                size_of::<Walk>(),
-                size_of::<Pending>(),
-            );
-        }
-        assert!(slot_bytes::<f64>() <= 300, "{}", slot_bytes::<f64>());
-    }
 }

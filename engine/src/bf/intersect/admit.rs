@@ -1,0 +1,145 @@
+//! Admission: rays given slots between passes (the paper's ray filling),
+//! from a stream in id order or by id from any thread, with the rays that
+//! meet no grid passed over.
+
+use super::Shard;
+use super::slot::{Cold, Hot, MAX_GRIDS, NONE16, empty_cold, od64};
+use crate::bf::records::{RayKind, RayRec};
+use crate::bf::voxels::VoxelGrids;
+use crate::hit::{Hit, PrimId};
+use crate::intersect::RayQ;
+use crate::math::{Real, Vec3, Vec3Ext};
+use rayon::prelude::*;
+
+/// Whether the ray meets no grid's box within its extent: nothing can
+/// be found along it.
+pub(super) fn misses_every_grid(r: &RayRec, grids: &VoxelGrids, eps: f64) -> bool {
+    let o = Vec3::from_array(r.o);
+    let d = Vec3::from_array(r.d);
+    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    let t_min = if r.kind == RayKind::Eye as u8 {
+        0.0
+    } else {
+        eps
+    };
+    grids
+        .grids
+        .iter()
+        .all(|g| g.spec.clip(o, d, inv, t_min, r.t_max).is_none())
+}
+
+/// Puts what [`load`] needs of ray `r` into slot `i`: the serial part
+/// of giving a ray a slot (see [`Shard::pending`]).
+pub(super) fn stage<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
+    let t_min = if r.kind == RayKind::Eye as u8 {
+        0.0
+    } else {
+        eps
+    };
+    let (o, d) = (Vec3::from_array(r.o), Vec3::from_array(r.d));
+    let shadow = r.is_shadow();
+    sh.hot[i] = Hot {
+        mailbox: PrimId::NONE,
+        best: Hit::NONE,
+        upper: if shadow {
+            R::from_f64(r.t_max)
+        } else {
+            R::INFINITY
+        },
+        t_min: R::from_f64(t_min),
+        prev: [[NONE16; 3]; MAX_GRIDS],
+        active: true,
+        shadow,
+        blocked: false,
+    };
+    let q = &mut sh.q[i];
+    q.o = o.cast();
+    q.d = d.cast();
+    sh.cold[i] = Cold {
+        id,
+        t_max: r.t_max,
+        o: o.to_array().map(R::keep),
+        d: d.to_array().map(R::keep),
+        t_min: R::keep(t_min),
+        ..empty_cold()
+    };
+}
+
+/// Makes a ray [`stage`] put into slot `i` ready for its walks and tests.
+pub(super) fn load<R: Real>(sh: &mut Shard<R>, i: usize) {
+    sh.live += 1;
+    let (o, d) = od64(&sh.q[i], &sh.cold[i]);
+    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+    sh.q[i] = RayQ::with_inverse(o.cast(), d.cast(), inv.cast());
+}
+
+/// Admission of rays that can be had by id (see [`super::intersect_rays`]): the
+/// same rays, in the same order, as filling the slots one by one from a
+/// stream, but with the rays made, looked at and loaded by all threads.
+pub(super) struct ByIdFill<'a> {
+    pub(super) ray: &'a (dyn Fn(u64) -> RayRec + Sync),
+    pub(super) total: u64,
+    /// The first id not yet admitted or passed over.
+    pub(super) next: u64,
+    /// Whether each ray of the window looked at meets no grid (reused).
+    pub(super) sky: Vec<bool>,
+    /// The ids admitted this pass, in order: shard `k` loads
+    /// `ids[start[k]..start[k + 1]]` into its empty slots, in slot order.
+    pub(super) ids: Vec<u64>,
+    pub(super) start: Vec<usize>,
+}
+
+impl ByIdFill<'_> {
+    /// Admits up to `free[k]` rays for shard `k`, in order: the next rays
+    /// that meet some grid, as the serial fill would have given them to
+    /// the empty slots of shard 0, then shard 1, ... Returns the number
+    /// of rays passed over because they meet no grid (misses at once).
+    pub(super) fn admit(
+        &mut self,
+        free: &[usize],
+        pool: &rayon::ThreadPool,
+        grids: &VoxelGrids,
+        eps: f64,
+    ) -> u64 {
+        let want: usize = free.iter().sum();
+        self.ids.clear();
+        let mut sky = 0;
+        while self.ids.len() < want && self.next < self.total {
+            // A window a little larger than what is missing: few rays are
+            // looked at twice, and a sky-heavy window is followed by
+            // another.
+            let need = want - self.ids.len();
+            let w = ((need + need / 4 + 64) as u64).min(self.total - self.next) as usize;
+            self.sky.resize(w, false);
+            let (ray, base) = (self.ray, self.next);
+            pool.install(|| {
+                self.sky[..w]
+                    .par_iter_mut()
+                    .enumerate()
+                    .with_min_len(1024)
+                    .for_each(|(i, s)| *s = misses_every_grid(&ray(base + i as u64), grids, eps))
+            });
+            let mut used = w;
+            for (i, &s) in self.sky[..w].iter().enumerate() {
+                if self.ids.len() == want {
+                    used = i;
+                    break;
+                }
+                if s {
+                    sky += 1;
+                } else {
+                    self.ids.push(base + i as u64);
+                }
+            }
+            self.next += used as u64;
+        }
+        self.start.clear();
+        let mut at = 0;
+        for &f in free {
+            self.start.push(at);
+            at = (at + f).min(self.ids.len());
+        }
+        self.start.push(at);
+        sky
+    }
+}
