@@ -161,6 +161,7 @@ mod tests {
         let grids = VoxelGrids {
             grids: vec![super::super::voxels::VoxelGrid {
                 flags: vec![0; spec.cells()],
+                busy: Default::default(),
                 spec: spec.clone(),
                 objects: 0,
                 aggregates: 0,

@@ -196,6 +196,87 @@ fn a_walk_started_at_a_voxel_is_the_walk_that_got_there() {
     }
 }
 
+#[test]
+fn leaving_a_block_is_stepping_out_of_it() {
+    // A grid whose sides are not multiples of the blocks, cubic voxels
+    // (rays along diagonals tie), and rays that end inside it.
+    for (res, diag) in [([37, 23, 19], false), ([8, 8, 8], true)] {
+        let g = GridSpec::new(&unit_box(), res);
+        let mut rng = Lcg(11);
+        for k in 0..400 {
+            let o = V3::new(
+                f64::from(rng.next()) * 1.6 - 0.3,
+                f64::from(rng.next()),
+                f64::from(rng.next()),
+            );
+            let mut d = V3::new(
+                f64::from(rng.next()) - 0.5,
+                f64::from(rng.next()) - 0.5,
+                f64::from(rng.next()) - 0.5,
+            );
+            if diag {
+                // From a voxel corner along a diagonal: faces met at once.
+                let o = V3::new(1.0, 0.5, 0.0);
+                let s = |v: f64| if v < 0.0 { -1.0 } else { 1.0 };
+                d = V3::new(s(d.x), s(d.y), 1.0);
+                let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+                check_blocks(&g, o, d, inv, f64::INFINITY, k);
+                continue;
+            }
+            let d = match k % 5 {
+                0 => V3::new(d.x, d.y, 0.0),
+                1 => V3::new(0.0, 0.0, d.z),
+                _ => d,
+            };
+            if d.x == 0.0 && d.y == 0.0 && d.z == 0.0 {
+                continue;
+            }
+            let inv = V3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+            let t_max = if k % 3 == 0 {
+                f64::from(rng.next()) * 2.0
+            } else {
+                f64::INFINITY
+            };
+            check_blocks(&g, o, d, inv, t_max, k);
+        }
+    }
+}
+
+/// From every voxel of a walk and for blocks of 2, 4 and 8 voxels a side,
+/// [`Dda::leave_block`] leaves the walk as stepping out of the block does.
+fn check_blocks(g: &GridSpec, o: V3, d: V3, inv: V3, t_max: f64, k: u32) {
+    let Some(mut walk) = Dda::start(g, o, d, inv, 0.0, t_max) else {
+        return;
+    };
+    loop {
+        for shift in 1..=3 {
+            let block = walk.voxel().map(|c| c >> shift);
+            let mut stepped = walk;
+            let mut axis = None;
+            let out = loop {
+                match stepped.advance_axis() {
+                    None => break None,
+                    Some(a) => axis = Some(a),
+                }
+                if stepped.voxel().map(|c| c >> shift) != block {
+                    break axis;
+                }
+            };
+            let mut jumped = walk;
+            let got = jumped.leave_block(shift);
+            assert_eq!(got, out, "ray {k}, shift {shift}, from {:?}", walk.voxel());
+            if got.is_some() {
+                assert_eq!(jumped, stepped, "ray {k}, shift {shift}");
+                assert_eq!(jumped.t_enter.to_bits(), stepped.t_enter.to_bits());
+                assert_eq!(jumped.t_exit().to_bits(), stepped.t_exit().to_bits());
+            }
+        }
+        if !walk.advance() {
+            break;
+        }
+    }
+}
+
 /// A deterministic generator for the scenes below.
 struct Lcg(u64);
 

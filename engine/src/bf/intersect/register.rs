@@ -127,6 +127,20 @@ pub(super) fn register<R: Real>(
                 w.state = DONE; // the best hit lies before this voxel
                 break;
             }
+            if !grid.busy.any(dda.cell) {
+                // Nothing in this voxel's block: no voxel to store in
+                // until the walk leaves it.
+                match dda.leave_block(BLOCK_SHIFT) {
+                    Some(a) => {
+                        entry = Some(a);
+                        continue;
+                    }
+                    None => {
+                        w.state = DONE;
+                        break;
+                    }
+                }
+            }
             let f = grid.flags[dda.index];
             let stored = f & OCCUPIED != 0
                 && match entry {
