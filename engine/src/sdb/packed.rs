@@ -650,6 +650,34 @@ impl Packer {
     }
 }
 
+/// Whether a stored block (`packed`, past its ids) holds only records
+/// stored as they are, `objects` of them in at most `max_words`: then it
+/// is its own expansion, and [`unpack`] would only copy it (mount's
+/// blocks: a copy of every block read was 5 % of an out-of-core render).
+/// `false` for anything else, runs or a corrupt block, which [`unpack`]
+/// expands or describes.
+pub fn is_plain(packed: &[u32], objects: u32, max_words: usize) -> bool {
+    if packed.len() > max_words {
+        return false;
+    }
+    let (mut pos, mut seen) = (0usize, 0u64);
+    while pos < packed.len() {
+        let head = packed[pos];
+        if Face::of_code(head & 0xff).is_some() {
+            return false;
+        }
+        let Some(len) = ShapeKind::from_u8((head & 0xff) as u8)
+            .and_then(|k| k.payload_words(head >> 8))
+            .map(|p| p + RECORD_HEADER_WORDS)
+        else {
+            return false;
+        };
+        pos += len;
+        seen += 1;
+    }
+    pos == packed.len() && seen == objects as u64
+}
+
 /// Expands a stored block (`packed`, holding `objects` objects) into its
 /// records, at most `max_words` of them; describes the first problem of a
 /// corrupt block. Nothing in `packed` can make it panic.
@@ -943,6 +971,43 @@ mod tests {
         // 85 triangles use 255 vertices; the 86th would need 258.
         assert_eq!(counts.runs, 3);
         assert_eq!(counts.run_triangles, 200);
+    }
+
+    #[test]
+    fn a_block_of_plain_records_is_its_own_expansion() {
+        // Triangles whose boxes are not their corners' stay records: a
+        // block with no runs.
+        let mut r = Vec::new();
+        for _ in 0..5 {
+            let at = r.len();
+            strip(1, 0, &mut r);
+            r[at + 2] = (-1000f32).to_bits();
+        }
+        let mut packed = Vec::new();
+        Packer::default().pack(&r, &mut packed);
+        assert_eq!(packed, r);
+        assert!(is_plain(&packed, 5, r.len()));
+        assert!(!is_plain(&packed, 4, r.len()));
+        assert!(!is_plain(&packed, 5, r.len() - 1));
+        assert!(!is_plain(&packed[..packed.len() - 1], 5, r.len()));
+        // A block with runs is not; nor is any change that `unpack` would
+        // not read back as the same words.
+        let mut runs = Vec::new();
+        strip(20, 0, &mut runs);
+        let mut with_runs = Vec::new();
+        Packer::default().pack(&runs, &mut with_runs);
+        assert!(!is_plain(&with_runs, 20, runs.len()));
+        let mut out = Vec::new();
+        for i in 0..packed.len() {
+            for v in [0, 1, 0xff, 0x100, 0xffff_ffff, packed[i] ^ 0x80] {
+                let mut p = packed.clone();
+                p[i] = v;
+                if is_plain(&p, 5, r.len()) {
+                    unpack(&p, 5, r.len(), &mut out).unwrap();
+                    assert_eq!(out, p);
+                }
+            }
+        }
     }
 
     #[test]

@@ -35,7 +35,9 @@ struct Ahead<P> {
     index: u64,
     first_object: u64,
     object_count: u32,
+    /// The block's records: `words[from..]`.
     words: Vec<u32>,
+    from: usize,
     ids: Vec<u32>,
     prepared: P,
 }
@@ -92,6 +94,7 @@ pub fn scan_blocks<P: Default + Send>(
                         first_object: 0,
                         object_count: 0,
                         words: Vec::new(),
+                        from: 0,
                         ids: Vec::new(),
                         prepared: P::default(),
                     });
@@ -101,7 +104,7 @@ pub fn scan_blocks<P: Default + Send>(
                     prepare(&block, &mut a.prepared);
                     // The block's buffers travel with it (a copy was a
                     // tenth of the reader's time).
-                    scan.swap_block_buffers(&mut a.words, &mut a.ids);
+                    a.from = scan.swap_block_buffers(&mut a.words, &mut a.ids);
                     // A closed channel: the caller stopped on an error.
                     Ok(tx.send(Ok(a)).is_ok())
                 };
@@ -144,7 +147,7 @@ pub fn scan_blocks<P: Default + Send>(
                         a.index,
                         a.first_object,
                         a.object_count,
-                        &a.words,
+                        &a.words[a.from..],
                         &a.ids,
                     );
                     (block, &a.prepared)

@@ -58,6 +58,7 @@ impl Database {
             file,
             decompressor,
             words: Vec::with_capacity(self.largest_block / 4),
+            words_from: 0,
             packed: Vec::new(),
             ids: Vec::new(),
             decoded: 0,
@@ -77,8 +78,12 @@ pub struct Scan<'d> {
     db: &'d Database,
     file: File,
     decompressor: Option<zstd::bulk::Decompressor<'static>>,
-    /// The decoded block, as 4-byte words.
+    /// The decoded block, as 4-byte words, from `words_from` on.
     words: Vec<u32>,
+    /// Where the block's records start in `words`: past the stored
+    /// block's ids when the block had no runs to expand, and `words` is
+    /// the block as stored (see [`super::packed::is_plain`]).
+    words_from: usize,
     /// The block as stored, before its runs are expanded (version 4).
     packed: Vec<u32>,
     /// The block's objects' input ids (version 6), else empty.
@@ -148,9 +153,11 @@ impl Scan<'_> {
     /// exchange for `words` and `ids`, which the next block is decoded
     /// into (their contents do not matter): a block kept past the next
     /// read without a copy.
-    pub fn swap_block_buffers(&mut self, words: &mut Vec<u32>, ids: &mut Vec<u32>) {
+    /// Returns where the block's records start in the words handed over.
+    pub fn swap_block_buffers(&mut self, words: &mut Vec<u32>, ids: &mut Vec<u32>) -> usize {
         std::mem::swap(&mut self.words, words);
         std::mem::swap(&mut self.ids, ids);
+        self.words_from
     }
 
     /// The index of the block [`Scan::next_block`] reads next.
@@ -301,19 +308,31 @@ impl Scan<'_> {
             } else {
                 0
             };
-            super::packed::unpack(
+            if super::packed::is_plain(
                 &self.packed[at..],
                 h.object_count,
                 self.db.largest_block / 4,
-                &mut self.words,
-            )
-            .map_err(|m| self.err(m))?;
+            ) {
+                // Nothing to expand: the stored block is its records.
+                std::mem::swap(&mut self.packed, &mut self.words);
+                self.words_from = at;
+            } else {
+                super::packed::unpack(
+                    &self.packed[at..],
+                    h.object_count,
+                    self.db.largest_block / 4,
+                    &mut self.words,
+                )
+                .map_err(|m| self.err(m))?;
+                self.words_from = 0;
+            }
         } else {
             self.words.truncate(raw_len / 4);
+            self.words_from = 0;
         }
         if self.verify {
             validate_records(
-                &self.words,
+                &self.words[self.words_from..],
                 h.object_count,
                 self.db.scene.materials.len(),
                 self.db.models.len(),
@@ -321,7 +340,7 @@ impl Scan<'_> {
             .map_err(|m| self.err(m))?;
         }
         self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
-        self.decoded += self.words.len() as u64 * 4;
+        self.decoded += (self.words.len() - self.words_from) as u64 * 4;
         self.stats.blocks_read += 1;
         self.offset = end;
         let index = self.next_index;
@@ -341,7 +360,7 @@ impl Scan<'_> {
             index,
             first,
             h.object_count,
-            &self.words,
+            &self.words[self.words_from..],
             &self.ids,
         )))
     }
