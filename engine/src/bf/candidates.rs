@@ -4,7 +4,7 @@
 //! block for every shard (see [`super::intersect`]).
 
 use super::MAX_GRIDS;
-use super::voxels::{REGISTERED, VoxelGrid, VoxelGrids};
+use super::voxels::{VoxelGrid, VoxelGrids};
 use crate::grid::aggregate;
 use crate::grid::nested::Hierarchies;
 use crate::math::Aabb;
@@ -240,8 +240,7 @@ fn may_be_registered(grid: &VoxelGrid, lo: [u32; 3], hi: [u32; 3]) -> bool {
     for z in lo[2]..=hi[2] {
         for y in lo[1]..=hi[1] {
             let row = grid.spec.index([0, y, z]);
-            let run = &grid.flags[row + lo[0] as usize..=row + hi[0] as usize];
-            if run.iter().any(|&f| f & REGISTERED != 0) {
+            if (row + lo[0] as usize..=row + hi[0] as usize).any(|v| grid.is_registered(v)) {
                 return true;
             }
         }

@@ -269,11 +269,16 @@ impl<'db, R: Real> Tracer<'db, R> {
             )));
         }
         // The voxel flags, a pass's coarse cells (four bytes per 64
-        // voxels), the busy blocks (a bit per 64 voxels), and per block its voxel boxes (one per grid) and its
+        // voxels), the busy blocks (a bit per 64 voxels), the registered
+        // voxels (a bit each), and per block its voxel boxes (one per grid) and its
         // place in the file (which let passes skip it).
         let voxels: u64 = specs.iter().map(|s| s.cells() as u64).sum();
         let cells = voxels
             + voxels / 16
+            + specs
+                .iter()
+                .map(|s| 8 * (s.cells() as u64).div_ceil(64))
+                .sum::<u64>()
             + specs
                 .iter()
                 .map(super::voxels::BusyBlocks::bytes_for)

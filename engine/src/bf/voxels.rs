@@ -11,8 +11,6 @@ use crate::sdb::{Database, DbStats};
 
 /// Some object's box overlaps the voxel.
 pub const OCCUPIED: u8 = 1;
-/// Set while a pass has rays registered in the voxel.
-pub const REGISTERED: u8 = 1 << 7;
 
 /// The flag of the voxel face on `axis`, at the low (`high = false`) or
 /// high end.
@@ -33,6 +31,11 @@ pub struct VoxelGrid {
     pub flags: Vec<u8>,
     /// Which blocks of voxels have an occupied voxel (see [`BusyBlocks`]).
     pub busy: BusyBlocks,
+    /// A bit per voxel, set while a pass has rays registered in it: read
+    /// for every object of every scan, so kept apart from `flags`, in an
+    /// eighth of their bytes (mount11: 3.6 MiB, where the flags take 29
+    /// and miss the cache).
+    pub registered: Vec<u64>,
     pub objects: u64,
     /// Groups of objects the passes hold as aggregates.
     pub aggregates: u64,
@@ -95,6 +98,25 @@ impl BusyBlocks {
     pub fn bytes_for(spec: &GridSpec) -> u64 {
         let b = spec.res.map(|r| (r as u64).div_ceil(1 << BLOCK_SHIFT));
         (b[0] * b[1] * b[2]).div_ceil(64) * 8
+    }
+}
+
+impl VoxelGrid {
+    /// Whether a pass has rays registered in voxel `v`.
+    #[inline(always)]
+    pub fn is_registered(&self, v: usize) -> bool {
+        self.registered[v / 64] >> (v % 64) & 1 != 0
+    }
+
+    /// Marks voxel `v` as holding registered rays, or not.
+    #[inline(always)]
+    pub fn set_registered(&mut self, v: usize, on: bool) {
+        let bit = 1u64 << (v % 64);
+        if on {
+            self.registered[v / 64] |= bit;
+        } else {
+            self.registered[v / 64] &= !bit;
+        }
     }
 }
 
@@ -204,6 +226,7 @@ impl VoxelGrids {
             .map(|spec| VoxelGrid {
                 flags: vec![0u8; spec.cells()],
                 busy: BusyBlocks::default(),
+                registered: vec![0; spec.cells().div_ceil(64)],
                 spec: spec.clone(),
                 objects: 0,
                 aggregates: 0,
@@ -292,7 +315,11 @@ impl VoxelGrids {
     pub fn bytes(&self) -> u64 {
         self.grids
             .iter()
-            .map(|g| g.flags.len() as u64 + BusyBlocks::bytes_for(&g.spec))
+            .map(|g| {
+                g.flags.len() as u64
+                    + BusyBlocks::bytes_for(&g.spec)
+                    + 8 * g.registered.len() as u64
+            })
             .sum::<u64>()
             + (self.blocks.len() * std::mem::size_of::<CellBox>()) as u64
     }

@@ -39,7 +39,7 @@ use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::skip::Touched;
 use super::store::StorePlan;
-use super::voxels::{BLOCK_SHIFT, OCCUPIED, REGISTERED, VoxelGrid, VoxelGrids, entry_face};
+use super::voxels::{BLOCK_SHIFT, OCCUPIED, VoxelGrid, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::nested::{Entry, high_first, ray_meets};
 use crate::grid::{Dda, GridSpec};
@@ -577,7 +577,7 @@ pub fn intersect_rays<R: Real>(
                 region[g].union(&sh.region[g]);
                 let grid = &mut setup.grids.grids[g];
                 for &v in sh.regs[g].voxels() {
-                    grid.flags[v as usize] |= REGISTERED;
+                    grid.set_registered(v as usize, true);
                     touched.mark(g, &grid.spec, v);
                 }
             }
@@ -667,7 +667,7 @@ pub fn intersect_rays<R: Real>(
         for sh in shards.iter() {
             for g in 0..ngrids {
                 for &v in sh.regs[g].voxels() {
-                    setup.grids.grids[g].flags[v as usize] &= !REGISTERED;
+                    setup.grids.grids[g].set_registered(v as usize, false);
                 }
             }
         }

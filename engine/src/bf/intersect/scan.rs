@@ -206,7 +206,7 @@ impl Iterator for Registered<'_> {
                 self.row = self.grid.spec.index([0, self.at[1], self.at[2]]);
             }
             let v = self.row + self.at[0] as usize;
-            if self.dense || self.grid.flags[v] & REGISTERED != 0 {
+            if self.dense || self.grid.is_registered(v) {
                 self.slots = self.regs.slots_in(v as u32).iter();
             }
         }
