@@ -29,8 +29,10 @@ pub fn entry_face(axis: usize, step_up: bool) -> u8 {
 pub struct VoxelGrid {
     pub spec: GridSpec,
     pub flags: Vec<u8>,
-    /// Which blocks of voxels have an occupied voxel (see [`BusyBlocks`]).
+    /// Which blocks of voxels have an occupied voxel (see [`BusyBlocks`]),
+    /// small and large.
     pub busy: BusyBlocks,
+    pub wide: BusyBlocks,
     /// A bit per voxel, set while a pass has rays registered in it: read
     /// for every object of every scan, so kept apart from `flags`, in an
     /// eighth of their bytes (mount11: 3.6 MiB, where the flags take 29
@@ -41,30 +43,35 @@ pub struct VoxelGrid {
     pub aggregates: u64,
 }
 
-/// Voxels a side of a [`BusyBlocks`] block, as a shift: blocks of 4 x 4 x
-/// 4. Walks cross a block with no occupied voxel in one move
-/// ([`crate::grid::Dda::leave_block`]); blocks of 8 x 8 x 8 measured no
-/// faster on mount11 (fewer of them are empty).
+/// Voxels a side of the small [`BusyBlocks`] blocks, as a shift: blocks
+/// of 4 x 4 x 4. Walks cross a block with no occupied voxel in one move
+/// ([`crate::grid::Dda::leave_block`]); blocks of 8 x 8 x 8 alone
+/// measured no faster on mount11 (fewer of them are empty).
 pub const BLOCK_SHIFT: u32 = 2;
+/// The large blocks' shift (16 x 16 x 16), looked at where a small block
+/// is empty: long walks through empty space cross them in one move.
+pub const WIDE_SHIFT: u32 = 4;
 
-/// A bit per block of voxels ([`BLOCK_SHIFT`]): whether some voxel of it
-/// is occupied. A walk reads it before a voxel's flags: mount11's rays
+/// A bit per block of voxels (of [`BLOCK_SHIFT`] or [`WIDE_SHIFT`]):
+/// whether some voxel of it is occupied. A walk reads it before a voxel's flags: mount11's rays
 /// cross hundreds of empty voxels each, and their flags (a byte each,
 /// 29 MiB) missed the cache at every step, a third of registration's time.
 #[derive(Clone, Debug, Default)]
 pub struct BusyBlocks {
     bits: Vec<u64>,
+    shift: u32,
     /// Blocks along x, and along x and y.
     row: usize,
     slab: usize,
 }
 
 impl BusyBlocks {
-    /// The blocks of `spec`'s voxels `flags`.
-    pub fn of(spec: &GridSpec, flags: &[u8]) -> BusyBlocks {
-        let b = spec.res.map(|r| (r as usize).div_ceil(1 << BLOCK_SHIFT));
+    /// The blocks of `2^shift` voxels a side of `spec`'s voxels `flags`.
+    pub fn of(spec: &GridSpec, flags: &[u8], shift: u32) -> BusyBlocks {
+        let b = spec.res.map(|r| (r as usize).div_ceil(1 << shift));
         let mut busy = BusyBlocks {
             bits: vec![0; (b[0] * b[1] * b[2]).div_ceil(64)],
+            shift,
             row: b[0],
             slab: b[0] * b[1],
         };
@@ -74,9 +81,7 @@ impl BusyBlocks {
                 let row = spec.index([0, y as u32, z as u32]);
                 for (x, &f) in flags[row..row + res[0]].iter().enumerate() {
                     if f & OCCUPIED != 0 {
-                        let i = (x >> BLOCK_SHIFT)
-                            + busy.row * (y >> BLOCK_SHIFT)
-                            + busy.slab * (z >> BLOCK_SHIFT);
+                        let i = (x >> shift) + busy.row * (y >> shift) + busy.slab * (z >> shift);
                         busy.bits[i / 64] |= 1 << (i % 64);
                     }
                 }
@@ -88,16 +93,21 @@ impl BusyBlocks {
     /// Whether the block of voxel `cell` has an occupied voxel.
     #[inline(always)]
     pub fn any(&self, cell: [i32; 3]) -> bool {
-        let i = (cell[0] as usize >> BLOCK_SHIFT)
-            + self.row * (cell[1] as usize >> BLOCK_SHIFT)
-            + self.slab * (cell[2] as usize >> BLOCK_SHIFT);
+        let i = (cell[0] as usize >> self.shift)
+            + self.row * (cell[1] as usize >> self.shift)
+            + self.slab * (cell[2] as usize >> self.shift);
         self.bits[i / 64] >> (i % 64) & 1 != 0
     }
 
-    /// Bytes of a grid's blocks, for the budget.
+    /// Bytes of a grid's blocks, both sizes, for the budget.
     pub fn bytes_for(spec: &GridSpec) -> u64 {
-        let b = spec.res.map(|r| (r as u64).div_ceil(1 << BLOCK_SHIFT));
-        (b[0] * b[1] * b[2]).div_ceil(64) * 8
+        [BLOCK_SHIFT, WIDE_SHIFT]
+            .iter()
+            .map(|&s| {
+                let b = spec.res.map(|r| (r as u64).div_ceil(1 << s));
+                (b[0] * b[1] * b[2]).div_ceil(64) * 8
+            })
+            .sum()
     }
 }
 
@@ -226,6 +236,7 @@ impl VoxelGrids {
             .map(|spec| VoxelGrid {
                 flags: vec![0u8; spec.cells()],
                 busy: BusyBlocks::default(),
+                wide: BusyBlocks::default(),
                 registered: vec![0; spec.cells().div_ceil(64)],
                 spec: spec.clone(),
                 objects: 0,
@@ -279,7 +290,8 @@ impl VoxelGrids {
             },
         )?;
         for g in grids.iter_mut() {
-            g.busy = BusyBlocks::of(&g.spec, &g.flags);
+            g.busy = BusyBlocks::of(&g.spec, &g.flags, BLOCK_SHIFT);
+            g.wide = BusyBlocks::of(&g.spec, &g.flags, WIDE_SHIFT);
         }
         let grids = VoxelGrids {
             grids,

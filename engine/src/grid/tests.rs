@@ -242,14 +242,14 @@ fn leaving_a_block_is_stepping_out_of_it() {
     }
 }
 
-/// From every voxel of a walk and for blocks of 2, 4 and 8 voxels a side,
+/// From every voxel of a walk and for blocks of 2, 4, 8 and 16 voxels a side,
 /// [`Dda::leave_block`] leaves the walk as stepping out of the block does.
 fn check_blocks(g: &GridSpec, o: V3, d: V3, inv: V3, t_max: f64, k: u32) {
     let Some(mut walk) = Dda::start(g, o, d, inv, 0.0, t_max) else {
         return;
     };
     loop {
-        for shift in 1..=3 {
+        for shift in 1..=4 {
             let block = walk.voxel().map(|c| c >> shift);
             let mut stepped = walk;
             let mut axis = None;

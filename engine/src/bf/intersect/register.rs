@@ -130,7 +130,12 @@ pub(super) fn register<R: Real>(
             if !grid.busy.any(dda.cell) {
                 // Nothing in this voxel's block: no voxel to store in
                 // until the walk leaves it.
-                match dda.leave_block(BLOCK_SHIFT) {
+                let shift = if grid.wide.any(dda.cell) {
+                    BLOCK_SHIFT
+                } else {
+                    WIDE_SHIFT
+                };
+                match dda.leave_block(shift) {
                     Some(a) => {
                         entry = Some(a);
                         continue;
