@@ -162,7 +162,6 @@ mod tests {
             grids: vec![super::super::voxels::VoxelGrid {
                 flags: vec![0; spec.cells()],
                 busy: Default::default(),
-                wide: Default::default(),
                 registered: vec![0; spec.cells().div_ceil(64)],
                 spec: spec.clone(),
                 objects: 0,

@@ -29,10 +29,9 @@ pub fn entry_face(axis: usize, step_up: bool) -> u8 {
 pub struct VoxelGrid {
     pub spec: GridSpec,
     pub flags: Vec<u8>,
-    /// Which blocks of voxels have an occupied voxel (see [`BusyBlocks`]),
-    /// small and large.
+    /// Which blocks of voxels have an occupied voxel (see [`BusyBlocks`]);
+    /// empty for grids of fewer than [`SKIP_FROM_CELLS`] voxels.
     pub busy: BusyBlocks,
-    pub wide: BusyBlocks,
     /// A bit per voxel, set while a pass has rays registered in it: read
     /// for every object of every scan, so kept apart from `flags`, in an
     /// eighth of their bytes (mount11: 3.6 MiB, where the flags take 29
@@ -43,35 +42,39 @@ pub struct VoxelGrid {
     pub aggregates: u64,
 }
 
-/// Voxels a side of the small [`BusyBlocks`] blocks, as a shift: blocks
-/// of 4 x 4 x 4. Walks cross a block with no occupied voxel in one move
-/// ([`crate::grid::Dda::leave_block`]); blocks of 8 x 8 x 8 alone
-/// measured no faster on mount11 (fewer of them are empty).
-pub const BLOCK_SHIFT: u32 = 2;
-/// The large blocks' shift (16 x 16 x 16), looked at where a small block
-/// is empty: long walks through empty space cross them in one move.
-pub const WIDE_SHIFT: u32 = 4;
+/// Voxels a side of a [`BusyBlocks`] block, as a shift: 16 x 16 x 16.
+/// Walks cross a block with no occupied voxel in one move
+/// ([`crate::grid::Dda::leave_block`]), looking at a block once, as they
+/// enter it. Measured with callgrind (mount9 from zstd, 256x256, `--memory
+/// 32MiB`, one thread): 4 x 4 x 4 blocks looked at every step 11.20 G
+/// instructions, those and 16 x 16 x 16 blocks 10.86 G, both looked at on
+/// entry 10.73 G, 16 x 16 x 16 alone on entry 10.56 G.
+pub const BLOCK_SHIFT: u32 = 4;
+/// Grids of fewer voxels than this walk voxel by voxel, as before the
+/// blocks: their flags stay in a core's cache, walks through them are
+/// short, and the look on each block's entry cost more than it saved
+/// (mount6 in memory, 32^3 voxels: 1.85 G -> 1.93 G instructions).
+pub const SKIP_FROM_CELLS: usize = 1 << 20;
 
-/// A bit per block of voxels (of [`BLOCK_SHIFT`] or [`WIDE_SHIFT`]):
-/// whether some voxel of it is occupied. A walk reads it before a voxel's flags: mount11's rays
+/// A bit per block of voxels ([`BLOCK_SHIFT`]): whether some voxel of it
+/// is occupied. A walk reads it before a voxel's flags: mount11's rays
 /// cross hundreds of empty voxels each, and their flags (a byte each,
 /// 29 MiB) missed the cache at every step, a third of registration's time.
 #[derive(Clone, Debug, Default)]
 pub struct BusyBlocks {
     bits: Vec<u64>,
-    shift: u32,
     /// Blocks along x, and along x and y.
     row: usize,
     slab: usize,
 }
 
 impl BusyBlocks {
-    /// The blocks of `2^shift` voxels a side of `spec`'s voxels `flags`.
-    pub fn of(spec: &GridSpec, flags: &[u8], shift: u32) -> BusyBlocks {
+    /// The blocks of `spec`'s voxels `flags`.
+    pub fn of(spec: &GridSpec, flags: &[u8]) -> BusyBlocks {
+        let shift = BLOCK_SHIFT;
         let b = spec.res.map(|r| (r as usize).div_ceil(1 << shift));
         let mut busy = BusyBlocks {
             bits: vec![0; (b[0] * b[1] * b[2]).div_ceil(64)],
-            shift,
             row: b[0],
             slab: b[0] * b[1],
         };
@@ -93,21 +96,22 @@ impl BusyBlocks {
     /// Whether the block of voxel `cell` has an occupied voxel.
     #[inline(always)]
     pub fn any(&self, cell: [i32; 3]) -> bool {
-        let i = (cell[0] as usize >> self.shift)
-            + self.row * (cell[1] as usize >> self.shift)
-            + self.slab * (cell[2] as usize >> self.shift);
+        let i = (cell[0] as usize >> BLOCK_SHIFT)
+            + self.row * (cell[1] as usize >> BLOCK_SHIFT)
+            + self.slab * (cell[2] as usize >> BLOCK_SHIFT);
         self.bits[i / 64] >> (i % 64) & 1 != 0
     }
 
-    /// Bytes of a grid's blocks, both sizes, for the budget.
+    /// Bytes of a grid's blocks, for the budget.
     pub fn bytes_for(spec: &GridSpec) -> u64 {
-        [BLOCK_SHIFT, WIDE_SHIFT]
-            .iter()
-            .map(|&s| {
-                let b = spec.res.map(|r| (r as u64).div_ceil(1 << s));
-                (b[0] * b[1] * b[2]).div_ceil(64) * 8
-            })
-            .sum()
+        let b = spec.res.map(|r| (r as u64).div_ceil(1 << BLOCK_SHIFT));
+        (b[0] * b[1] * b[2]).div_ceil(64) * 8
+    }
+
+    /// Whether the grid has blocks (see [`SKIP_FROM_CELLS`]).
+    #[inline(always)]
+    pub fn is_empty(&self) -> bool {
+        self.bits.is_empty()
     }
 }
 
@@ -236,7 +240,6 @@ impl VoxelGrids {
             .map(|spec| VoxelGrid {
                 flags: vec![0u8; spec.cells()],
                 busy: BusyBlocks::default(),
-                wide: BusyBlocks::default(),
                 registered: vec![0; spec.cells().div_ceil(64)],
                 spec: spec.clone(),
                 objects: 0,
@@ -290,8 +293,9 @@ impl VoxelGrids {
             },
         )?;
         for g in grids.iter_mut() {
-            g.busy = BusyBlocks::of(&g.spec, &g.flags, BLOCK_SHIFT);
-            g.wide = BusyBlocks::of(&g.spec, &g.flags, WIDE_SHIFT);
+            if g.spec.cells() >= SKIP_FROM_CELLS {
+                g.busy = BusyBlocks::of(&g.spec, &g.flags);
+            }
         }
         let grids = VoxelGrids {
             grids,

@@ -171,6 +171,14 @@ impl Dda {
         Some(e)
     }
 
+    /// Whether the step just taken along `axis` entered a new block of
+    /// `2^shift` voxels a side (see [`Dda::leave_block`]).
+    #[inline(always)]
+    pub fn entered_block(&self, axis: usize, shift: u32) -> bool {
+        let mask = (1 << shift) - 1;
+        self.cell[axis] & mask == if self.step[axis] > 0 { 0 } else { mask }
+    }
+
     /// Whether the walk moves up (toward higher voxel coordinates) on `axis`.
     #[inline(always)]
     pub fn steps_up(&self, axis: usize) -> bool {

@@ -39,7 +39,7 @@ use super::records::{Outcome, RayRec, ResultRec};
 use super::regmap::RegMap;
 use super::skip::Touched;
 use super::store::StorePlan;
-use super::voxels::{BLOCK_SHIFT, OCCUPIED, VoxelGrid, VoxelGrids, WIDE_SHIFT, entry_face};
+use super::voxels::{BLOCK_SHIFT, OCCUPIED, VoxelGrid, VoxelGrids, entry_face};
 use crate::error::Error;
 use crate::grid::nested::{Entry, high_first, ray_meets};
 use crate::grid::{Dda, GridSpec};
