@@ -252,14 +252,12 @@ fn check_blocks(g: &GridSpec, o: V3, d: V3, inv: V3, t_max: f64, k: u32) {
         for shift in 1..=4 {
             let block = walk.voxel().map(|c| c >> shift);
             let mut stepped = walk;
-            let mut axis = None;
             let out = loop {
-                match stepped.advance_axis() {
-                    None => break None,
-                    Some(a) => axis = Some(a),
-                }
+                let Some(a) = stepped.advance_axis() else {
+                    break None;
+                };
                 if stepped.voxel().map(|c| c >> shift) != block {
-                    break axis;
+                    break Some(a);
                 }
             };
             let mut jumped = walk;
