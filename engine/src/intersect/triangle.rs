@@ -35,7 +35,8 @@ fn edges<R: Real>(v0: [f32; 3], v1: [f32; 3], v2: [f32; 3], ray: &RayQ<R>) -> ([
     let u = cx * by - cy * bx;
     let v = ax * cy - ay * cx;
     let w = bx * ay - by * ax;
-    ([u, v, w], [ray.sz * a[kz], ray.sz * b[kz], ray.sz * c[kz]])
+    let sz = ray.sz();
+    ([u, v, w], [sz * a[kz], sz * b[kz], sz * c[kz]])
 }
 
 /// Watertight ray/triangle test: a ray through a shared edge or vertex hits

@@ -387,7 +387,7 @@ fn a_lane_is_the_ray_the_scalar_tests_take() {
         assert_eq!(g.axes[i], [q.kx, q.ky, q.kz], "lane {i}");
         assert_eq!(
             [g.sx[i], g.sy[i], g.sz[i]].map(f32::to_bits),
-            [q.sx, q.sy, q.sz].map(f32::to_bits),
+            [q.sx, q.sy, q.sz()].map(f32::to_bits),
             "lane {i}"
         );
         assert_eq!(g.kz[i], q.kz as f32);

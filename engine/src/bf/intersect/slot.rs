@@ -212,6 +212,6 @@ mod tests {
                 size_of::<Pending>(),
             );
         }
-        assert!(slot_bytes::<f64>() <= 300, "{}", slot_bytes::<f64>());
+        assert!(slot_bytes::<f64>() <= 288, "{}", slot_bytes::<f64>());
     }
 }
