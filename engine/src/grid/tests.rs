@@ -149,22 +149,8 @@ fn a_walk_started_at_a_voxel_is_the_walk_that_got_there() {
     let g = GridSpec::new(&unit_box(), [7, 5, 3]);
     let mut rng = Lcg(7);
     for k in 0..200 {
-        let o = V3::new(
-            f64::from(rng.next()) * 1.6 - 0.3,
-            f64::from(rng.next()),
-            f64::from(rng.next()),
-        );
-        let d = V3::new(
-            f64::from(rng.next()) - 0.5,
-            f64::from(rng.next()) - 0.5,
-            f64::from(rng.next()) - 0.5,
-        );
-        // Some rays along a plane or an axis.
-        let d = match k % 5 {
-            0 => V3::new(d.x, d.y, 0.0),
-            1 => V3::new(0.0, 0.0, d.z),
-            _ => d,
-        };
+        let (o, d) = random_ray(&mut rng);
+        let d = flattened(d, k);
         if d.x == 0.0 && d.y == 0.0 && d.z == 0.0 {
             continue;
         }
@@ -204,16 +190,7 @@ fn leaving_a_block_is_stepping_out_of_it() {
         let g = GridSpec::new(&unit_box(), res);
         let mut rng = Lcg(11);
         for k in 0..400 {
-            let o = V3::new(
-                f64::from(rng.next()) * 1.6 - 0.3,
-                f64::from(rng.next()),
-                f64::from(rng.next()),
-            );
-            let mut d = V3::new(
-                f64::from(rng.next()) - 0.5,
-                f64::from(rng.next()) - 0.5,
-                f64::from(rng.next()) - 0.5,
-            );
+            let (o, mut d) = random_ray(&mut rng);
             if diag {
                 // From a voxel corner along a diagonal: faces met at once.
                 let o = V3::new(1.0, 0.5, 0.0);
@@ -223,11 +200,7 @@ fn leaving_a_block_is_stepping_out_of_it() {
                 check_blocks(&g, o, d, inv, f64::INFINITY, k);
                 continue;
             }
-            let d = match k % 5 {
-                0 => V3::new(d.x, d.y, 0.0),
-                1 => V3::new(0.0, 0.0, d.z),
-                _ => d,
-            };
+            let d = flattened(d, k);
             if d.x == 0.0 && d.y == 0.0 && d.z == 0.0 {
                 continue;
             }
@@ -239,6 +212,32 @@ fn leaving_a_block_is_stepping_out_of_it() {
             };
             check_blocks(&g, o, d, inv, t_max, k);
         }
+    }
+}
+
+/// A ray for walks through the unit box's grids: an origin in or beside
+/// the box, any direction (six numbers drawn, in this order).
+fn random_ray(rng: &mut Lcg) -> (V3, V3) {
+    let o = V3::new(
+        f64::from(rng.next()) * 1.6 - 0.3,
+        f64::from(rng.next()),
+        f64::from(rng.next()),
+    );
+    let d = V3::new(
+        f64::from(rng.next()) - 0.5,
+        f64::from(rng.next()) - 0.5,
+        f64::from(rng.next()) - 0.5,
+    );
+    (o, d)
+}
+
+/// Ray `k`'s direction `d`, made parallel to a plane (one ray in five) or
+/// an axis (another one in five): the walks whose faces never come.
+fn flattened(d: V3, k: u32) -> V3 {
+    match k % 5 {
+        0 => V3::new(d.x, d.y, 0.0),
+        1 => V3::new(0.0, 0.0, d.z),
+        _ => d,
     }
 }
 

@@ -121,30 +121,26 @@ pub(super) fn register<R: Real>(
             }
         };
         let limit = store.store(g, w.k);
+        // One of the two loops, chosen per grid.
+        macro_rules! store_along {
+            ($skip:literal) => {
+                store_along::<$skip>(
+                    &mut dda,
+                    entry,
+                    grid,
+                    h.best.t,
+                    limit,
+                    &mut regs[g],
+                    &mut region[g],
+                    slot,
+                    w,
+                )
+            };
+        }
         let n = if grid.busy.is_empty() {
-            store_along::<false>(
-                &mut dda,
-                entry,
-                grid,
-                h.best.t,
-                limit,
-                &mut regs[g],
-                &mut region[g],
-                slot,
-                w,
-            )
+            store_along!(false)
         } else {
-            store_along::<true>(
-                &mut dda,
-                entry,
-                grid,
-                h.best.t,
-                limit,
-                &mut regs[g],
-                &mut region[g],
-                slot,
-                w,
-            )
+            store_along!(true)
         };
         if w.state != DONE {
             // Stopped in the voxel just stored in, `w.last`: where the
