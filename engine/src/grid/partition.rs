@@ -76,8 +76,9 @@ impl Partition {
     #[inline]
     pub fn group(&self, b: &Aabb) -> usize {
         if self.splits.is_empty() && self.regions.is_none() {
-            // One grid: every object's (asked for each object of every
-            // scan: 4 % of tetra12's samples went to the size class).
+            // One grid, every object's: no size class to work out (this
+            // is asked for each object of every scan, and the size class
+            // took 4 % of tetra12's samples).
             return 0;
         }
         let c = size_class(b);
