@@ -102,8 +102,12 @@ impl BusyBlocks {
         self.bits[i / 64] >> (i % 64) & 1 != 0
     }
 
-    /// Bytes of a grid's blocks, for the budget.
+    /// Bytes of a grid's blocks, for the budget (none below
+    /// [`SKIP_FROM_CELLS`], where they are not built).
     pub fn bytes_for(spec: &GridSpec) -> u64 {
+        if spec.cells() < SKIP_FROM_CELLS {
+            return 0;
+        }
         let b = spec.res.map(|r| (r as u64).div_ceil(1 << BLOCK_SHIFT));
         (b[0] * b[1] * b[2]).div_ceil(64) * 8
     }

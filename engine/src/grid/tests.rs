@@ -242,7 +242,8 @@ fn flattened(d: V3, k: u32) -> V3 {
 }
 
 /// From every voxel of a walk and for blocks of 2, 4, 8 and 16 voxels a side,
-/// [`Dda::leave_block`] leaves the walk as stepping out of the block does.
+/// [`Dda::leave_block`] leaves the walk as stepping out of the block does,
+/// and [`Dda::entered_block`] tells each step into another block.
 fn check_blocks(g: &GridSpec, o: V3, d: V3, inv: V3, t_max: f64, k: u32) {
     let Some(mut walk) = Dda::start(g, o, d, inv, 0.0, t_max) else {
         return;
@@ -252,10 +253,14 @@ fn check_blocks(g: &GridSpec, o: V3, d: V3, inv: V3, t_max: f64, k: u32) {
             let block = walk.voxel().map(|c| c >> shift);
             let mut stepped = walk;
             let out = loop {
+                let was = stepped.voxel().map(|c| c >> shift);
                 let Some(a) = stepped.advance_axis() else {
                     break None;
                 };
-                if stepped.voxel().map(|c| c >> shift) != block {
+                // A step says whether it entered another block.
+                let now = stepped.voxel().map(|c| c >> shift);
+                assert_eq!(stepped.entered_block(a, shift), now != was, "ray {k}");
+                if now != block {
                     break Some(a);
                 }
             };
