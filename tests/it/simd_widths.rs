@@ -55,11 +55,13 @@ fn widths_here(dir: &Path) -> Vec<&'static str> {
     here
 }
 
-/// A depth-first render's image and statistics with the kernels of
-/// `simd` (forced by flag, or by environment variable when `by_env`).
+/// A render's image and statistics in `mode` (`df` or `bf`) with the
+/// kernels of `simd` (forced by flag, or by environment variable when
+/// `by_env`).
 fn render(
     dir: &Path,
     scene: &str,
+    mode: &str,
     precision: &str,
     simd: &str,
     by_env: bool,
@@ -76,7 +78,7 @@ fn render(
         "--depth",
         "3",
         "--mode",
-        "df",
+        mode,
         "--precision",
         precision,
         "--stats",
@@ -128,11 +130,19 @@ fn every_width_renders_the_same_image_and_counts() {
     }
     for scene in &scenes {
         for precision in ["single", "double"] {
-            let want = render(d, scene, precision, widths[0], false);
+            // Depth-first packets and breadth-first voxels' rays both
+            // test with the kernels; both tracers find the same image.
+            let want = render(d, scene, "df", precision, widths[0], false);
             assert!(want.1["intersection_tests"].as_u64().unwrap() > 0);
+            let bf = render(d, scene, "bf", precision, widths[0], false);
+            assert!(
+                bf.0 == want.0,
+                "{scene} {precision}: breadth-first differs from depth-first"
+            );
             for (k, w) in widths.iter().enumerate().skip(1) {
                 // Every other width by flag, the last by environment.
-                let got = render(d, scene, precision, w, k + 1 == widths.len());
+                let by_env = k + 1 == widths.len();
+                let got = render(d, scene, "df", precision, w, by_env);
                 assert!(
                     got.0 == want.0,
                     "{scene} {precision}: {w} image differs from portable"
@@ -140,10 +150,30 @@ fn every_width_renders_the_same_image_and_counts() {
                 for c in COUNTS {
                     assert_eq!(got.1[c], want.1[c], "{scene} {precision}: {w} {c}");
                 }
+                let got = render(d, scene, "bf", precision, w, by_env);
+                assert!(
+                    got.0 == bf.0,
+                    "{scene} {precision}: breadth-first {w} image differs from portable"
+                );
+                for c in COUNTS.iter().chain(&BF_COUNTS) {
+                    assert_eq!(
+                        got.1[c], bf.1[c],
+                        "{scene} {precision}: breadth-first {w} {c}"
+                    );
+                }
             }
         }
     }
 }
+
+/// Counts of the breadth-first passes that the width must not change
+/// either.
+const BF_COUNTS: [&str; 4] = [
+    "tests_skipped_mailbox",
+    "tests_skipped_last_voxel",
+    "ray_voxel_registrations",
+    "passes",
+];
 
 #[test]
 fn an_unknown_or_missing_width_is_a_clear_error() {

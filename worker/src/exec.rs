@@ -13,10 +13,10 @@ use crate::output::{Encoder, Output};
 use sray_engine::bf::{
     BfOptions, Contribution, Outcome, RayRec, RaySource, ResultReader, ResultRec, Tracer, eye_ray,
 };
-use sray_engine::math::Real;
 use sray_engine::progress::NoProgress;
 use sray_engine::render::{Camera, EyeRays, Precision, RayCounts, RenderOptions};
 use sray_engine::sdb::Database;
+use sray_engine::simd::Elem;
 use sray_engine::spill::{MemoryShare, RecordWriter, Records, SpillDir};
 use sray_proto::v1::{self, RecordKind, task_output::Part};
 use sray_proto::wire::records_per_chunk;
@@ -193,7 +193,7 @@ impl Executor {
     }
 }
 
-fn job_thread<R: Real>(
+fn job_thread<R: Elem>(
     setup: JobSetup,
     rt: tokio::runtime::Handle,
     rx: std::sync::mpsc::Receiver<Msg>,
@@ -303,7 +303,7 @@ fn fail_all(rx: std::sync::mpsc::Receiver<Msg>, e: &str) {
 
 /// Runs a task; returns what to keep of it (when the setup keeps
 /// records).
-fn run_task<R: Real>(
+fn run_task<R: Elem>(
     tracer: &mut Tracer<R>,
     ctx: &mut TaskCtx<'_>,
     task: &v1::Task,
@@ -575,7 +575,7 @@ fn with_rays<T>(
 /// and returns what the executor keeps of them: in memory with their
 /// surfaces while the share allows, else bare in a file. Results not sent
 /// are hashed into `digest` as they would have travelled.
-fn send_results<R: Real>(
+fn send_results<R: Elem>(
     tracer: &mut Tracer<R>,
     ctx: &mut TaskCtx<'_>,
     mut results: ResultReader,
@@ -687,7 +687,7 @@ fn stream_and_keep<T: bytemuck::Pod>(
 /// Keeps a task's output vector: in memory if the share can pay for it
 /// (after dropping older records held in memory), else written to a file
 /// and the vector handed back to the tracer (`give_back`).
-fn keep_vec<R: Real, T: bytemuck::Pod>(
+fn keep_vec<R: Elem, T: bytemuck::Pod>(
     tracer: &mut Tracer<R>,
     ctx: &mut TaskCtx<'_>,
     v: Vec<T>,
@@ -710,7 +710,7 @@ fn keep_vec<R: Real, T: bytemuck::Pod>(
 /// (no pass over the objects); bare ones are joined with the objects.
 /// They are copied into the tracer's result buffer when its budget holds
 /// them all, and else read from a file as they are needed.
-fn result_reader<R: Real>(
+fn result_reader<R: Elem>(
     tracer: &mut Tracer<R>,
     results: ResultSlice,
 ) -> Result<ResultReader, String> {

@@ -5,7 +5,7 @@
 use crate::exec::Input;
 use crate::kept::{KeptStore, ResultSlice, Slice};
 use sray_engine::bf::{Outcome, RayRec, ResultRec, Tracer};
-use sray_engine::math::Real;
+use sray_engine::simd::Elem;
 use sray_engine::spill::{MemoryShare, RecordsWriter, SpillDir};
 use sray_proto::v1::RecordKind;
 use sray_proto::wire::{decode_chunk, records_per_chunk};
@@ -138,7 +138,7 @@ impl GatherResults {
     }
 }
 
-pub(crate) fn read_inputs<R: Real>(
+pub(crate) fn read_inputs<R: Elem>(
     tracer: &Tracer<R>,
     rt: &tokio::runtime::Handle,
     kept: &mut KeptStore,

@@ -37,12 +37,12 @@ pub use voxels::{VoxelGrid, VoxelGrids};
 
 use crate::error::Error;
 use crate::grid::{GridSpec, MAX_CELLS, choose_resolution, plan_groups};
-use crate::math::Real;
 use crate::progress::{Prefixed, Progress};
 use crate::render::{
     Camera, EyeRays, Frame, GridRes, Precision, RayCounts, RenderOptions, RenderStats,
 };
 use crate::sdb::Database;
+use crate::simd::Elem;
 use crate::spill::{self, SpillDir};
 use crate::units::fmt_bytes;
 use intersect::{REGISTRATION_BYTES, slot_bytes};
@@ -194,7 +194,7 @@ impl Budget {
     /// `store` says how many registrations a ray slot plans for, and how
     /// far the last ray a shard admits may overrun its share; `threads`
     /// is the number of shards.
-    pub fn plan<R: Real>(
+    pub fn plan<R: Elem>(
         total: u64,
         frame: u64,
         cells: u64,
@@ -518,7 +518,7 @@ pub fn render(
     }
 }
 
-fn render_in<R: Real>(
+fn render_in<R: Elem>(
     db: &Database,
     opts: &RenderOptions,
     bf: &BfOptions,
@@ -588,6 +588,7 @@ fn render_in<R: Real>(
         depth: opts.max_depth,
         threads: tr.threads,
         precision: format!("{:?}", opts.precision).to_lowercase(),
+        simd: Some(tr.isa().name().into()),
         epsilon: tr.eps,
         rays: counts,
         intersection_tests: tr.tests.total(),

@@ -21,9 +21,9 @@ use super::voxels::VoxelGrids;
 use super::{BfOptions, BfStats, Budget, CACHE_SLOTS, CHEAP_SCAN_BYTES, MAX_GRIDS, ModelHolding};
 use crate::error::Error;
 use crate::hit::PrimId;
-use crate::math::Real;
 use crate::models::Models;
 use crate::progress::Progress;
+use crate::simd::{Elem, Isa};
 
 /// Slots plan for this much more than the last round's rays registered.
 const REGS_MARGIN: f64 = 1.25;
@@ -149,7 +149,7 @@ impl ResultReader {
 const READ_AHEAD_SHARE: u64 = 16;
 
 /// The breadth-first stages over one database.
-pub struct Tracer<'db, R: Real> {
+pub struct Tracer<'db, R: Elem> {
     db: &'db Database,
     grids: VoxelGrids,
     store: StorePlan,
@@ -177,6 +177,8 @@ pub struct Tracer<'db, R: Real> {
     regs_per_ray: f64,
     /// Intersection passes read their blocks on a thread of their own.
     read_ahead: bool,
+    /// The kernels' instruction set.
+    isa: Isa,
     // Buffers reused from call to call: allocating them afresh costs page
     // faults every round.
     dense_buf: Vec<Outcome>,
@@ -195,7 +197,7 @@ pub struct Tracer<'db, R: Real> {
     pub shade_seconds: f64,
 }
 
-impl<'db, R: Real> Tracer<'db, R> {
+impl<'db, R: Elem> Tracer<'db, R> {
     /// Plans the grids and the budget and marks the voxels (one scan).
     /// `frame_corners` is the size of the frame this process holds beside
     /// the tracer (0 for a cluster worker, which holds none).
@@ -325,6 +327,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             shade_scene.textures.clone(),
         ));
 
+        let isa = Isa::choose(opts.simd)?;
         let t0 = Instant::now();
         progress.set_message("preprocess: marking voxels");
         let slack = crate::grid::box_slack(&db.scene().view.from, &specs);
@@ -376,9 +379,15 @@ impl<'db, R: Real> Tracer<'db, R> {
             preprocess_seconds,
             intersect_seconds: 0.0,
             read_ahead,
+            isa,
             aggregates,
             shade_seconds: 0.0,
         })
+    }
+
+    /// The instruction set of the intersection kernels.
+    pub fn isa(&self) -> Isa {
+        self.isa
     }
 
     pub fn grid_stats(&self) -> Vec<crate::grid::GridStat> {
@@ -463,6 +472,7 @@ impl<'db, R: Real> Tracer<'db, R> {
             dense_cells,
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
+            isa: self.isa,
             eps: self.eps,
             aggregates: self.aggregates,
             slack: self.slack,

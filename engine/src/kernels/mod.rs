@@ -18,6 +18,7 @@
 //! - [`ConeLanes`] for cones and cylinders;
 //! - [`BoxLanes`], the conservative box test of a traversal, and
 //!   [`MayHitBox`], the exact box pre-test of polygons and cones;
+//! - [`shape_lanes`], the kernel of an object's kind, for either tracer;
 //! - and the other way round, [`RayTriangles`]: one ray against a batch
 //!   of triangles, for the few rays of a depth-first packet that reach a
 //!   voxel listing many.
@@ -29,6 +30,7 @@ mod boxes;
 mod cone;
 mod polygon;
 mod rays;
+mod shape;
 mod sphere;
 mod triangle;
 
@@ -36,7 +38,8 @@ pub use batch::{BATCH, RayTriangles, TriangleBatch};
 pub use boxes::{BoxLanes, MayHitBox, widen};
 pub use cone::ConeLanes;
 pub use polygon::{Crossings, PlaneLanes};
-pub use rays::{LANES, Lanes, RayLanes, each_lane};
+pub use rays::{LANES, Lanes, Need, RayLanes, each_lane};
+pub use shape::{Found, ShapeLanes, shape_lanes};
 pub use sphere::SphereLanes;
 pub use triangle::Triangle;
 

@@ -22,6 +22,30 @@ pub fn each_lane(mut m: Lanes) -> impl Iterator<Item = usize> {
     })
 }
 
+/// Which of a ray's values a kernel reads (see [`RayLanes::set_q`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Need {
+    /// Origin, direction and `d . d` (spheres).
+    Sphere,
+    /// Origin and the watertight test's axes and shear (triangles, and
+    /// patches' triangles).
+    Triangle,
+    /// Everything.
+    All,
+}
+
+impl Need {
+    /// What the kernel of `kind` reads.
+    pub fn of(kind: crate::shapes::ShapeKind) -> Need {
+        use crate::shapes::ShapeKind;
+        match kind {
+            ShapeKind::Sphere => Need::Sphere,
+            ShapeKind::Patch => Need::Triangle,
+            _ => Need::All,
+        }
+    }
+}
+
 /// The rays of a group. Lane `i` holds the ray given to the `i`th
 /// [`RayLanes::push`]; each is prepared exactly as a single ray is for the
 /// scalar tests ([`crate::intersect::RayQ::with_inverse`]): origin,
@@ -183,6 +207,63 @@ impl<R: Real> RayLanes<R> {
             self.same_axes = true;
         } else {
             self.same_axes &= self.axes[i] == self.axes[0];
+        }
+    }
+
+    /// Puts ray `q`, prepared for the scalar tests, in lane `i`, with the
+    /// interval `t_min < t < t_max`: the very values the scalar tests read
+    /// of `q` (its reciprocal made finite as [`RayLanes::set`] does), so
+    /// that a kernel's lane finds what the scalar test finds on `q`; only
+    /// those the kernels of `need` read. The `f64` copies are left as they
+    /// were: no kernel reads them.
+    #[inline(always)]
+    pub fn set_q(
+        &mut self,
+        i: usize,
+        q: &crate::intersect::RayQ<R>,
+        t_min: R,
+        t_max: R,
+        need: Need,
+    ) {
+        self.t_min[i] = t_min;
+        self.t_max[i] = t_max;
+        for a in 0..3 {
+            self.o[a][i] = q.o[a];
+        }
+        if need != Need::Triangle {
+            for a in 0..3 {
+                self.d[a][i] = q.d[a];
+            }
+            self.a[i] = q.a;
+            self.inv_a[i] = q.inv_a;
+        }
+        if need == Need::Sphere {
+            return;
+        }
+        if need == Need::All {
+            for a in 0..3 {
+                let inv = q.inv[a];
+                self.inv[a][i] = if inv.is_finite() {
+                    inv
+                } else if inv > R::ZERO {
+                    R::MAX
+                } else {
+                    -R::MAX
+                };
+            }
+        }
+        let axes = [q.kx, q.ky, q.kz];
+        self.axes[i] = axes;
+        self.kx[i] = R::from_f64(q.kx as f64);
+        self.ky[i] = R::from_f64(q.ky as f64);
+        self.kz[i] = R::from_f64(q.kz as f64);
+        self.sx[i] = q.sx;
+        self.sy[i] = q.sy;
+        self.sz[i] = q.sz();
+        if i == 0 {
+            self.same_axes = true;
+        } else {
+            self.same_axes &= axes == self.axes[0];
         }
     }
 

@@ -460,3 +460,92 @@ fn batches_of_triangles_match_the_scalar_test() {
     assert!(run::<f64>(&mut rng) > 1000);
     assert!(run::<f32>(&mut rng) > 1000);
 }
+
+/// `rays`' lanes put one by one from each lane's scalar ray with
+/// [`RayLanes::set_q`], as the breadth-first scan gathers its slots'
+/// rays, with the values `need` asks for; the other values are garbage,
+/// which a kernel that read them would show.
+fn gathered<R: Real>(g: &RayLanes<R>, need: Need) -> RayLanes<R> {
+    let mut h = RayLanes::<R>::new();
+    for i in 0..LANES {
+        for a in 0..3 {
+            h.o[a][i] = R::from_f64(1e3);
+            h.d[a][i] = R::from_f64(-7.0);
+            h.inv[a][i] = R::from_f64(0.25);
+        }
+        (h.a[i], h.inv_a[i], h.sx[i], h.sy[i]) = (R::ONE, R::ONE, R::ONE, R::ONE);
+    }
+    for i in 0..g.n {
+        h.set_q(i, &g.ray(i), g.t_min[i], g.t_max[i], need);
+    }
+    h.n = g.n;
+    h
+}
+
+/// Every kind through [`shape_lanes`], on rays gathered from scalar rays
+/// with only what each kind's kernel needs: the scalar test's bits.
+fn gathered_shapes<R: Elem>(rng: &mut Rng) -> usize {
+    let mut hits = 0;
+    for k in 0..200 {
+        let v = polygon(rng, 3 + k % 6);
+        let normals = vec![[0.0, 0.0, 1.0]; v.len()];
+        let sphere = Sphere {
+            center: rng.point(0.8),
+            radius: rng.range(0.05, 0.8) as f32,
+        };
+        let cone = Cone {
+            base: rng.point(0.8),
+            base_radius: rng.range(0.0, 0.5) as f32,
+            apex: rng.point(0.8),
+            apex_radius: rng.range(0.0, 0.5) as f32,
+        };
+        let shapes = [
+            crate::shapes::Shape::Sphere(sphere),
+            crate::shapes::Shape::Polygon(Polygon { vertices: &v }),
+            crate::shapes::Shape::Patch(crate::shapes::Patch {
+                vertices: &v,
+                normals: &normals,
+            }),
+            crate::shapes::Shape::Cone(cone),
+        ];
+        for shape in &shapes {
+            let prep = shape.prepare();
+            let bbox = shape.bounds();
+            let need = match shape {
+                crate::shapes::Shape::Polygon(p) if p.vertices.len() == 3 => Need::Triangle,
+                s => Need::of(s.kind()),
+            };
+            let g = rays::<R>(rng, &v);
+            let lanes = gathered(&g, need);
+            let mut out = Found::<R>::new();
+            hits += check(
+                "gathered",
+                &g,
+                |isa, m, t| {
+                    let hit = isa
+                        .run(ShapeLanes {
+                            shape,
+                            prep: prep.as_ref(),
+                            bbox: &bbox,
+                            rays: &lanes,
+                            m,
+                            limit: &lanes.t_max,
+                            out: &mut out,
+                        })
+                        .expect("a kind with a kernel");
+                    *t = out.t;
+                    hit
+                },
+                |q, lo, hi| shape.intersect(prep.as_ref(), &bbox, q, lo, hi),
+            );
+        }
+    }
+    hits
+}
+
+#[test]
+fn rays_gathered_from_scalar_rays_match_the_scalar_tests() {
+    let mut rng = Rng(11);
+    assert!(gathered_shapes::<f64>(&mut rng) > 1000);
+    assert!(gathered_shapes::<f32>(&mut rng) > 1000);
+}

@@ -189,3 +189,22 @@ impl std::fmt::Display for Isa {
 
 #[cfg(test)]
 mod tests;
+
+/// Asks the CPU to bring the cache line at `p` into its caches, ahead of
+/// a load that would otherwise wait for memory: a hint, which changes no
+/// result and never faults, whatever `p` points at. A no-op where there
+/// is no such instruction.
+#[inline(always)]
+pub fn prefetch<T>(p: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: `_mm_prefetch` needs SSE, which every x86-64 CPU has
+        // (it is in the target's baseline); a prefetch neither reads
+        // memory the program sees nor faults on any address, so any `p`,
+        // dangling or not, is sound.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(p.cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = p;
+}

@@ -8,7 +8,8 @@ use crate::bf::records::{RayKind, RayRec};
 use crate::bf::voxels::VoxelGrids;
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
-use crate::math::{Real, Vec3, Vec3Ext};
+use crate::math::{Vec3, Vec3Ext};
+use crate::simd::Elem;
 use rayon::prelude::*;
 
 /// Whether the ray meets no grid's box within its extent: nothing can
@@ -30,7 +31,7 @@ pub(super) fn misses_every_grid(r: &RayRec, grids: &VoxelGrids, eps: f64) -> boo
 
 /// Puts what [`load`] needs of ray `r` into slot `i`: the serial part
 /// of giving a ray a slot (see [`Shard::pending`]).
-pub(super) fn stage<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
+pub(super) fn stage<R: Elem>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, eps: f64) {
     let t_min = if r.kind == RayKind::Eye as u8 {
         0.0
     } else {
@@ -66,7 +67,7 @@ pub(super) fn stage<R: Real>(sh: &mut Shard<R>, i: usize, id: u64, r: &RayRec, e
 }
 
 /// Makes a ray [`stage`] put into slot `i` ready for its walks and tests.
-pub(super) fn load<R: Real>(sh: &mut Shard<R>, i: usize) {
+pub(super) fn load<R: Elem>(sh: &mut Shard<R>, i: usize) {
     sh.live += 1;
     let (o, d) = od64(&sh.q[i], &sh.cold[i]);
     let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);

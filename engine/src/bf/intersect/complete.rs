@@ -8,7 +8,7 @@ use super::slot::{DONE, JOIN, WALKING, ray64};
 use crate::bf::records::{Outcome, ResultRec};
 use crate::bf::voxels::VoxelGrids;
 use crate::grid::Dda;
-use crate::math::Real;
+use crate::simd::Elem;
 use rayon::prelude::*;
 
 /// Writes the finished rays' results into their places in `v` (ids count
@@ -17,7 +17,7 @@ use rayon::prelude::*;
 /// counting sort, 4 bytes a hit), so that no part looks at another's (a
 /// sort of the results by id cost more than the writes). Misses are in
 /// `v` already.
-pub(super) fn put_results<R: Real>(
+pub(super) fn put_results<R: Elem>(
     shards: &mut [Shard<R>],
     v: &mut [Outcome],
     first: u64,
@@ -88,7 +88,7 @@ pub(super) fn put_results<R: Real>(
 /// Writes the result of the ray that finished in `slot` of `sh` at its
 /// place in `dst`, which starts at id `lo`, if it is a hit.
 #[inline]
-pub(super) fn put<R: Real>(
+pub(super) fn put<R: Elem>(
     dst: &mut [Outcome],
     lo: u64,
     sh: &Shard<R>,
@@ -105,7 +105,7 @@ pub(super) fn put<R: Real>(
 }
 
 /// Finishes the rays whose result is complete, freeing their slots.
-pub(super) fn complete<R: Real>(sh: &mut Shard<R>, grids: &VoxelGrids) {
+pub(super) fn complete<R: Elem>(sh: &mut Shard<R>, grids: &VoxelGrids) {
     let ngrids = grids.grids.len();
     for (i, ((h, c), q)) in sh
         .hot
@@ -145,7 +145,7 @@ pub(super) fn complete<R: Real>(sh: &mut Shard<R>, grids: &VoxelGrids) {
     }
 }
 
-impl<R: Real> Shard<R> {
+impl<R: Elem> Shard<R> {
     /// The result of the ray that finished in `slot` (which keeps it until
     /// the slot is filled again), with its surface when `carry`.
     #[inline]

@@ -45,12 +45,13 @@ use crate::grid::nested::{Entry, high_first, ray_meets};
 use crate::grid::{Dda, GridSpec};
 use crate::hit::{Hit, PrimId};
 use crate::intersect::{Attrs, RayQ};
-use crate::math::Real;
+use crate::kernels::{Found as LaneHits, LANES, RayLanes};
 use crate::models::{Models, Placement};
 use crate::progress::Progress;
 use crate::render::{Cutouts, KindCounts};
 use crate::sdb::{Block, Database, ObjectRef};
 use crate::shapes::{Prepared, Shape};
+use crate::simd::{Elem, Isa};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -63,7 +64,7 @@ use admit::{ByIdFill, load, misses_every_grid, stage};
 use complete::{complete, put_results};
 use register::register;
 pub use register::sample_registrations;
-use scan::{AggregateWalk, pair_bytes, scan_block, test_pairs};
+use scan::{ScanPass, pair_bytes, scan_block, test_pairs};
 use slot::{Cold, DONE, FRESH, Hot, JOIN, NONE16, WALKING, empty_cold, empty_hot, od64, ray64};
 pub use slot::{MAX_GRIDS, REGISTRATION_BYTES, slot_bytes, streamed_extra_bytes};
 
@@ -91,7 +92,7 @@ type Pending = u32;
 /// extra command-line option, a worker process instead of `sray render`)
 /// made the intersection 15-20 % slower at two threads.
 #[repr(align(128))]
-struct Shard<R: Real> {
+struct Shard<R: Elem> {
     hot: Vec<Hot<R>>,
     q: Vec<RayQ<R>>,
     cold: Vec<Cold<R>>,
@@ -125,6 +126,8 @@ struct Shard<R: Real> {
     /// read after the world's objects.
     placed: Vec<(u32, u32, Placement)>,
     pairs: Vec<Pair>,
+    /// One object's rays gathered for its kernel.
+    gather: Box<scan::Gather<R>>,
 }
 
 /// A ray and an instance to test it against (an index into
@@ -196,11 +199,13 @@ pub struct IntersectSetup<'a> {
     /// Read (and decompress) each pass's blocks on a thread of their own,
     /// a block ahead of the shards.
     pub read_ahead: bool,
+    /// The kernels' instruction set.
+    pub isa: Isa,
 }
 
 /// The ray slots, kept from round to round so that their memory is
 /// allocated once.
-pub struct Slots<R: Real> {
+pub struct Slots<R: Elem> {
     shards: Vec<Shard<R>>,
     /// The candidates of a batch of blocks, one per block.
     found: Vec<Found>,
@@ -208,7 +213,7 @@ pub struct Slots<R: Real> {
     touched: Touched,
 }
 
-impl<R: Real> Slots<R> {
+impl<R: Elem> Slots<R> {
     pub fn new(threads: usize) -> Slots<R> {
         Slots {
             shards: (0..threads.max(1))
@@ -229,6 +234,7 @@ impl<R: Real> Slots<R> {
                     registered: 0,
                     placed: Vec::new(),
                     pairs: Vec::new(),
+                    gather: scan::Gather::new(),
                 })
                 .collect(),
             touched: Touched::default(),
@@ -328,7 +334,7 @@ pub enum ResultSink<'a> {
 /// ray's result to `sink`: to its callback in completion order, or into
 /// its place in a dense buffer.
 #[allow(clippy::too_many_arguments)]
-pub fn intersect_rays<R: Real>(
+pub fn intersect_rays<R: Elem>(
     setup: &mut IntersectSetup<'_>,
     pool: &rayon::ThreadPool,
     slots: &mut Slots<R>,
@@ -599,9 +605,10 @@ pub fn intersect_rays<R: Real>(
             // (the reader doing it too held every shard up: on tetra12 it
             // was the busiest thread), then test them.
             let aggregates = setup.aggregates;
-            let walk = AggregateWalk {
+            let walk = ScanPass {
                 pass: st.passes,
                 slack: setup.slack,
+                isa: setup.isa,
             };
             let found = &mut slots.found;
             let stats =

@@ -15,7 +15,7 @@ const SAMPLE_RAYS: u64 = 1024;
 /// of times (mount11's eye rays make 1.3 a pass, rings80's 25), and a
 /// round's shadow rays are unlike its eye rays. Walking a thousand rays
 /// costs a few hundredths of a pass.
-pub fn sample_registrations<R: Real>(
+pub fn sample_registrations<R: Elem>(
     len: u64,
     ray: &(dyn Fn(u64) -> RayRec + Sync),
     grids: &VoxelGrids,
@@ -63,7 +63,7 @@ pub fn sample_registrations<R: Real>(
 /// voxel of its walk if that is occupied. Returns the sum of the store
 /// numbers of the walks it continued, and their number (for statistics).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn register<R: Real>(
+pub(super) fn register<R: Elem>(
     h: &mut Hot<R>,
     q: &RayQ<R>,
     c: &mut Cold<R>,

@@ -4,6 +4,7 @@
 //! to its ray (with its surface when the ray carries one).
 
 use super::*;
+use crate::kernels::{Lanes, Need, ShapeLanes, each_lane};
 
 /// A ray's mailbox value while it walks aggregate `index` in pass
 /// `pass`: no object's (an object's low half is zero), and no other
@@ -17,7 +18,7 @@ fn aggregate_tag(index: u32, pass: u64) -> PrimId {
 
 /// Tests one block's candidate objects and aggregates against the shard's
 /// registered rays.
-pub(super) fn scan_block<R: Real>(
+pub(super) fn scan_block<R: Elem>(
     sh: &mut Shard<R>,
     block: &Block<'_>,
     found: &Found,
@@ -25,21 +26,32 @@ pub(super) fn scan_block<R: Real>(
     models: &Models,
     per_pass: bool,
     carry: bool,
-    walk: &AggregateWalk,
+    walk: &ScanPass,
 ) {
-    scan_singles(sh, block, &found.singles, grids, models, per_pass, carry);
+    scan_singles(
+        sh,
+        block,
+        &found.singles,
+        grids,
+        models,
+        per_pass,
+        carry,
+        walk.isa,
+    );
     if !found.aggregates.is_empty() {
         scan_aggregates(sh, block, found, grids, models.cutouts(), carry, walk);
     }
 }
 
-/// What walking an aggregate needs besides the shard: the pass (which
-/// names the aggregates in the rays' mailboxes) and how far from its box
-/// an object's hit may be computed ([`crate::grid::box_slack`]).
+/// What a pass's scan needs besides the shard: the pass (which names the
+/// aggregates in the rays' mailboxes), how far from its box an object's
+/// hit may be computed ([`crate::grid::box_slack`]) and the kernels'
+/// instruction set.
 #[derive(Clone, Copy, Debug)]
-pub(super) struct AggregateWalk {
+pub(super) struct ScanPass {
     pub(super) pass: u64,
     pub(super) slack: f64,
+    pub(super) isa: Isa,
 }
 
 /// Tests the block's aggregates against the shard's registered rays: a
@@ -50,14 +62,14 @@ pub(super) struct AggregateWalk {
 /// lead it to objects outside the voxels it is stored in: their hits are
 /// hits all the same, and a hit is kept only if it is the nearest so far,
 /// so the ray's final hit, and the image, do not change.
-fn scan_aggregates<R: Real>(
+fn scan_aggregates<R: Elem>(
     sh: &mut Shard<R>,
     block: &Block<'_>,
     found: &Found,
     grids: &VoxelGrids,
     cutouts: Option<&Cutouts>,
     carry: bool,
-    walk: &AggregateWalk,
+    walk: &ScanPass,
 ) {
     // One aggregate's objects, decoded when its first ray meets it.
     let mut objects: Vec<(ObjectRef<'_>, Option<Prepared>)> = Vec::new();
@@ -181,6 +193,19 @@ struct Registered<'a> {
     slots: std::slice::Iter<'a, u32>,
 }
 
+/// How many rays ahead the scan asks for a ray's slot (see
+/// [`crate::simd::prefetch`]).
+const PREFETCH_AHEAD: usize = 12;
+
+impl Registered<'_> {
+    /// The slot `k` places after the one `next` gave last, if it is in the
+    /// same voxel.
+    #[inline(always)]
+    fn ahead(&self, k: usize) -> Option<u32> {
+        self.slots.as_slice().get(k - 1).copied()
+    }
+}
+
 impl Iterator for Registered<'_> {
     type Item = u32;
 
@@ -214,8 +239,10 @@ impl Iterator for Registered<'_> {
 }
 
 /// Tests one block's candidate objects, one by one, against the shard's
-/// registered rays.
-fn scan_singles<R: Real>(
+/// registered rays: an object's rays are gathered [`LANES`] at a time and
+/// tested together by its kind's kernel (an instance's, one at a time).
+#[allow(clippy::too_many_arguments)]
+fn scan_singles<R: Elem>(
     sh: &mut Shard<R>,
     block: &Block<'_>,
     candidates: &[Candidate],
@@ -223,6 +250,7 @@ fn scan_singles<R: Real>(
     models: &Models,
     per_pass: bool,
     carry: bool,
+    isa: Isa,
 ) {
     for c in candidates {
         let g = c.group as usize;
@@ -240,13 +268,28 @@ fn scan_singles<R: Real>(
         let mut placed_at = u32::MAX;
         let index = c.index;
         let prim = PrimId::object(index);
-        for slot in registered(&sh.regs[g], &grids.grids[g], lo, hi) {
+        // Rays gathered for the object's kernel.
+        let mut gathered = 0;
+        let hot_at = sh.hot.as_ptr();
+        let mut rays = registered(&sh.regs[g], &grids.grids[g], lo, hi);
+        while let Some(slot) = rays.next() {
+            // The rays' slots are all over memory: the slot a few rays on
+            // is asked for now, so that it is in cache when its turn comes.
+            if let Some(next) = rays.ahead(PREFETCH_AHEAD) {
+                crate::simd::prefetch(hot_at.wrapping_add(next as usize));
+            }
             let s = &mut sh.hot[slot as usize];
             if s.blocked {
                 continue;
             }
             if s.mailbox == prim {
-                sh.counts.skipped_mailbox += 1;
+                if s.shadow && gathered > 0 {
+                    // Counted once its gathered test is done, unless that
+                    // test blocks it (see `Gather::skipped`).
+                    sh.gather.skipped.push(slot);
+                } else {
+                    sh.counts.skipped_mailbox += 1;
+                }
                 continue;
             }
             s.mailbox = prim;
@@ -281,6 +324,25 @@ fn scan_singles<R: Real>(
                 continue;
             };
             sh.counts.tests.add(o.shape.kind());
+            if placement.is_none() {
+                sh.gather.slots[gathered] = slot;
+                gathered += 1;
+                if gathered == LANES {
+                    let t = ObjectTest {
+                        o,
+                        pr: pr.as_ref(),
+                        prim,
+                        rank: c.rank,
+                        cutouts: models.cutouts(),
+                        carry,
+                        isa,
+                    };
+                    t.run(&mut sh.gather, gathered, &mut sh.hot, &sh.q, &mut sh.cold);
+                    sh.counts.skipped_mailbox += sh.gather.count_skipped(&sh.hot);
+                    gathered = 0;
+                }
+                continue;
+            }
             if placed_at != u32::MAX {
                 // Tested once the model is read, after the
                 // world's objects.
@@ -290,25 +352,19 @@ fn scan_singles<R: Real>(
                 });
                 continue;
             }
+            let Some(pl) = placement else {
+                continue;
+            };
             let q = &sh.q[slot as usize];
-            let found = match placement {
-                None => o
-                    .shape
-                    .intersect(pr.as_ref(), &o.bbox, q, s.t_min, s.upper)
-                    .filter(|_| keeps(models.cutouts(), o, q))
-                    .map(|t| (t, prim)),
-                Some(pl) => {
-                    let (o, d) = od64(q, &sh.cold[slot as usize]);
-                    if s.shadow {
-                        models
-                            .blocks(pl, q, o, d, s.t_min, s.upper, &mut sh.counts.tests)
-                            .then_some((s.upper, prim))
-                    } else {
-                        models
-                            .nearest(pl, q, o, d, s.t_min, s.upper, &mut sh.counts.tests)
-                            .map(|(t, p)| (t, PrimId::instance(index, p)))
-                    }
-                }
+            let (ro, rd) = od64(q, &sh.cold[slot as usize]);
+            let found = if s.shadow {
+                models
+                    .blocks(pl, q, ro, rd, s.t_min, s.upper, &mut sh.counts.tests)
+                    .then_some((s.upper, prim))
+            } else {
+                models
+                    .nearest(pl, q, ro, rd, s.t_min, s.upper, &mut sh.counts.tests)
+                    .map(|(t, p)| (t, PrimId::instance(index, p)))
             };
             if let Some((t, prim)) = found {
                 let t = t.to_f64();
@@ -320,12 +376,152 @@ fn scan_singles<R: Real>(
                     prim,
                     c.rank,
                     carry,
-                    |ray| match (placement, prim.instance_parts()) {
-                        (Some(pl), Some((_, p))) => models.surface(pl, p, ray, t),
-                        _ => Some((o.shape.surface(ray, t), o.material)),
-                    },
+                    |ray| models.surface(pl, prim.instance_parts()?.1, ray, t),
                 );
             }
+        }
+        if gathered > 0
+            && let Some((o, pr, _)) = &object
+        {
+            let t = ObjectTest {
+                o,
+                pr: pr.as_ref(),
+                prim,
+                rank: c.rank,
+                cutouts: models.cutouts(),
+                carry,
+                isa,
+            };
+            t.run(&mut sh.gather, gathered, &mut sh.hot, &sh.q, &mut sh.cold);
+            sh.counts.skipped_mailbox += sh.gather.count_skipped(&sh.hot);
+        }
+    }
+}
+
+/// One object's rays gathered for its kernel: up to [`LANES`] slots,
+/// their rays as lanes, and what the kernel finds.
+pub(super) struct Gather<R> {
+    pub(super) slots: [u32; LANES],
+    rays: RayLanes<R>,
+    found: Box<LaneHits<R>>,
+    /// Shadow rays the mailbox skipped while others waited for their
+    /// test. Tested one by one, a shadow ray the object blocks is passed
+    /// over as blocked wherever else the object's box lists it, not
+    /// counted as a mailbox skip: these are counted once the test is done,
+    /// unless it blocked them, so that counts are what one-by-one tests
+    /// give.
+    pub(super) skipped: Vec<u32>,
+}
+
+impl<R: Elem> Gather<R> {
+    pub(super) fn new() -> Box<Gather<R>> {
+        Box::new(Gather {
+            slots: [0; LANES],
+            rays: RayLanes::new(),
+            found: LaneHits::new(),
+            skipped: Vec::new(),
+        })
+    }
+
+    /// The mailbox skips of `skipped` to count (see there), now that the
+    /// gathered rays are tested; forgets them.
+    pub(super) fn count_skipped(&mut self, hot: &[Hot<R>]) -> u64 {
+        let n = self
+            .skipped
+            .iter()
+            .filter(|&&s| !hot[s as usize].blocked)
+            .count();
+        self.skipped.clear();
+        n as u64
+    }
+}
+
+/// An object tested against the rays gathered for it: the object, its
+/// prepared data, its id and input id, and how hits are offered.
+struct ObjectTest<'a, 'o> {
+    o: &'a ObjectRef<'o>,
+    pr: Option<&'a Prepared>,
+    prim: PrimId,
+    rank: u32,
+    cutouts: Option<&'a Cutouts>,
+    carry: bool,
+    isa: Isa,
+}
+
+impl ObjectTest<'_, '_> {
+    /// Tests the object against the first `n` rays of `g.slots` and offers
+    /// each ray its hit. One ray is tested alone; more go to the kind's
+    /// kernel, which finds the same bits, lane by lane, as the test of one
+    /// ray.
+    fn run<R: Elem>(
+        &self,
+        g: &mut Gather<R>,
+        n: usize,
+        hot: &mut [Hot<R>],
+        q: &[RayQ<R>],
+        cold: &mut [Cold<R>],
+    ) {
+        let Gather {
+            slots, rays, found, ..
+        } = g;
+        let slots = &slots[..n];
+        let o = self.o;
+        let mut hits = None;
+        if n > 1 {
+            rays.clear();
+            let need = match &o.shape {
+                Shape::Polygon(p) if p.vertices.len() == 3 => Need::Triangle,
+                shape => Need::of(shape.kind()),
+            };
+            for (i, &slot) in slots.iter().enumerate() {
+                let s = &hot[slot as usize];
+                rays.set_q(i, &q[slot as usize], s.t_min, s.upper, need);
+            }
+            rays.n = n;
+            let m: Lanes = if n == LANES { Lanes::MAX } else { (1 << n) - 1 };
+            let rays = &*rays;
+            hits = self.isa.run(ShapeLanes {
+                shape: &o.shape,
+                prep: self.pr,
+                bbox: &o.bbox,
+                rays,
+                m,
+                limit: &rays.t_max,
+                out: found,
+            });
+        }
+        let hits = hits.unwrap_or_else(|| {
+            // One ray, or a kind without a kernel: the scalar test.
+            let mut hits = 0;
+            for (i, &slot) in slots.iter().enumerate() {
+                let s = &hot[slot as usize];
+                if let Some(t) =
+                    o.shape
+                        .intersect(self.pr, &o.bbox, &q[slot as usize], s.t_min, s.upper)
+                {
+                    found.t[i] = t;
+                    hits |= 1 << i;
+                }
+            }
+            hits
+        });
+        for i in each_lane(hits) {
+            let slot = slots[i] as usize;
+            let q = &q[slot];
+            if !keeps(self.cutouts, o, q) {
+                continue;
+            }
+            let t = found.t[i].to_f64();
+            offer(
+                &mut hot[slot],
+                q,
+                &mut cold[slot],
+                t,
+                self.prim,
+                self.rank,
+                self.carry,
+                |ray| Some((o.shape.surface(ray, t), o.material)),
+            );
         }
     }
 }
@@ -333,7 +529,7 @@ fn scan_singles<R: Real>(
 /// Whether object `o` is there where ray `q` meets it: not where an
 /// alpha-mask cut-out removes it (see [`Cutouts`]).
 #[inline(always)]
-fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> bool {
+fn keeps<R: Elem>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> bool {
     cutouts.is_none_or(|c| c.keeps(&o.shape, o.material, q))
 }
 
@@ -344,7 +540,7 @@ fn keeps<R: Real>(cutouts: Option<&Cutouts>, o: &ObjectRef<'_>, q: &RayQ<R>) -> 
 /// from the ray.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-fn offer<R: Real>(
+fn offer<R: Elem>(
     s: &mut Hot<R>,
     q: &RayQ<R>,
     c: &mut Cold<R>,
@@ -381,7 +577,7 @@ fn offer<R: Real>(
 }
 
 /// Bytes the shards' pending (ray, instance) pairs and placements take.
-pub(super) fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
+pub(super) fn pair_bytes<R: Elem>(shards: &[Shard<R>]) -> usize {
     use std::mem::size_of;
     shards
         .iter()
@@ -397,7 +593,7 @@ pub(super) fn pair_bytes<R: Real>(shards: &[Shard<R>]) -> usize {
 /// the same tests, hits and surfaces as a model held in memory gives
 /// (see [`crate::models`]), and which hit is nearest does not depend on
 /// the order of the tests.
-pub(super) fn test_pairs<R: Real>(
+pub(super) fn test_pairs<R: Elem>(
     shards: &mut [Shard<R>],
     db: &Database,
     models: &Models,

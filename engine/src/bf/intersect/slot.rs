@@ -5,7 +5,8 @@
 use super::Pending;
 use crate::hit::{Hit, PrimId};
 use crate::intersect::RayQ;
-use crate::math::{Real, Vec3};
+use crate::math::Vec3;
+use crate::simd::Elem;
 
 /// Grids a ray can walk (the main grid, and dense regions or the huge
 /// objects' grid: see [`crate::grid::MAX_GROUPS`]).
@@ -65,7 +66,7 @@ pub(super) struct Hot<R> {
 /// `d` and `t_min` take no room); in `f32` they keep the `f64` values the
 /// walks need (see [`ray64`]).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Cold<R: Real> {
+pub(super) struct Cold<R: Elem> {
     pub(super) id: u64,
     pub(super) t_max: f64,
     pub(super) o: [R::Kept; 3],
@@ -80,7 +81,7 @@ pub(super) struct Cold<R: Real> {
     pub(super) walks: [Walk; MAX_GRIDS],
 }
 
-pub(super) fn empty_hot<R: Real>() -> Hot<R> {
+pub(super) fn empty_hot<R: Elem>() -> Hot<R> {
     Hot {
         mailbox: PrimId::NONE,
         best: Hit::NONE,
@@ -93,7 +94,7 @@ pub(super) fn empty_hot<R: Real>() -> Hot<R> {
     }
 }
 
-pub(super) fn empty_cold<R: Real>() -> Cold<R> {
+pub(super) fn empty_cold<R: Elem>() -> Cold<R> {
     Cold {
         walks: [NEW_WALK; MAX_GRIDS],
         id: 0,
@@ -121,7 +122,7 @@ pub(super) struct Ray64 {
 
 /// The origin and direction of a slot's ray in `f64`.
 #[inline(always)]
-pub(super) fn od64<R: Real>(q: &RayQ<R>, c: &Cold<R>) -> (Vec3, Vec3) {
+pub(super) fn od64<R: Elem>(q: &RayQ<R>, c: &Cold<R>) -> (Vec3, Vec3) {
     (
         Vec3::new(
             q.o.x.unround(|| c.o[0]),
@@ -141,7 +142,7 @@ pub(super) fn od64<R: Real>(q: &RayQ<R>, c: &Cold<R>) -> (Vec3, Vec3) {
 /// values; in `f32`, the kept values, with `1 / d` worked out as `load`
 /// did (the same operations give the same bits).
 #[inline(always)]
-pub(super) fn ray64<R: Real>(q: &RayQ<R>, h: &Hot<R>, c: &Cold<R>) -> Ray64 {
+pub(super) fn ray64<R: Elem>(q: &RayQ<R>, h: &Hot<R>, c: &Cold<R>) -> Ray64 {
     let (o, d) = od64(q, c);
     Ray64 {
         o,
@@ -159,7 +160,7 @@ pub(super) fn ray64<R: Real>(q: &RayQ<R>, h: &Hot<R>, c: &Cold<R>) -> Ray64 {
 /// Bytes one ray slot takes (with its place in the queue of rays loaded
 /// in parallel, see [`super::Shard::pending`], and in the pass's finished rays
 /// and their order, see [`super::put_results`]).
-pub fn slot_bytes<R: Real>() -> usize {
+pub fn slot_bytes<R: Elem>() -> usize {
     std::mem::size_of::<Hot<R>>()
         + std::mem::size_of::<Cold<R>>()
         + std::mem::size_of::<RayQ<R>>()
