@@ -3,6 +3,7 @@
 //! test's of the object's kind, bit for bit.
 
 use super::{Candidate, DfScene};
+use crate::intersect::Ray;
 pub use crate::kernels::Found;
 use crate::kernels::{
     Crossings, LANES, Lanes, PlaneLanes, RayLanes, Triangle, each_lane, shape_lanes,
@@ -48,18 +49,24 @@ pub fn test<R: Elem, L: Simd>(
         Candidate::Instance(_, pl) => {
             let mut hits = 0;
             for i in each_lane(m) {
-                let (q, lo, hi) = (rays.ray(i), rays.t_min[i], limit[i]);
-                let (o, d) = (rays.o(i), rays.d(i));
+                let (q, hi) = (rays.ray(i), limit[i]);
+                let ray = Ray {
+                    q: &q,
+                    o: rays.o(i),
+                    d: rays.d(i),
+                    t_min: rays.t_min[i],
+                    t_max: hi,
+                };
                 match want {
                     Want::Nearest => {
-                        if let Some((t, p)) = s.models.nearest(pl, &q, o, d, lo, hi, tests) {
+                        if let Some((t, p)) = s.models.nearest(pl, ray, tests) {
                             out.t[i] = t;
                             out.prim[i] = p;
                             hits |= 1 << i;
                         }
                     }
                     Want::Any => {
-                        if s.models.blocks(pl, &q, o, d, lo, hi, tests) {
+                        if s.models.blocks(pl, ray, tests) {
                             out.t[i] = hi;
                             hits |= 1 << i;
                         }

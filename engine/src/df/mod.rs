@@ -20,7 +20,7 @@ use crate::grid::{DEFAULT_DENSITY, GridStat, MAX_CELLS, choose_resolution, plan_
 use crate::hit::PrimId;
 use crate::intersect::RayQ;
 use crate::intersect::{Surface, triangle};
-use crate::math::{Real, Vec3};
+use crate::math::Real;
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
 use crate::render::{
@@ -28,7 +28,7 @@ use crate::render::{
 };
 use crate::scene::{Aabb, Material};
 use crate::sdb::Database;
-use crate::shapes::{KindCounts, Patch, Polygon, Prepared, Shape, ShapeKind};
+use crate::shapes::{Patch, Polygon, Prepared, Shape, ShapeKind};
 use models::{Models, Placement};
 use polygon::EdgeBins;
 use std::time::Instant;
@@ -110,58 +110,10 @@ impl Candidate<'_, '_> {
         }
     }
 
-    /// The nearest hit in `(t_min, t_max)` of the ray (`ray`, and its
-    /// origin `o` and direction `d` in `f64`, which an instance's model
-    /// walk takes) on object `id`: the distance and the primitive hit.
-    /// Tests of a placed model's triangles count in `tests`.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn hit<R: Real>(
-        &self,
-        s: &DfScene,
-        ray: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        id: u32,
-        tests: &mut KindCounts,
-    ) -> Option<(R, PrimId)> {
-        match self {
-            Candidate::Instance(_, pl) => s
-                .models
-                .nearest(pl, ray, o, d, t_min, t_max, tests)
-                .map(|(t, p)| (t, PrimId::instance(id, p))),
-            _ => self
-                .intersect(s, ray, t_min, t_max)
-                .map(|t| (t, PrimId::object(id))),
-        }
-    }
-
-    /// Whether the object blocks the ray anywhere in `(t_min, t_max)`
-    /// (see [`Candidate::hit`]).
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn blocks<R: Real>(
-        &self,
-        s: &DfScene,
-        ray: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        tests: &mut KindCounts,
-    ) -> bool {
-        match self {
-            Candidate::Instance(_, pl) => s.models.blocks(pl, ray, o, d, t_min, t_max, tests),
-            _ => self.intersect(s, ray, t_min, t_max).is_some(),
-        }
-    }
-
     /// Nearest `t` in `(t_min, t_max)` at which `ray` meets the object:
     /// its kind's test, through its prepared data. A face's test is a
     /// three-vertex polygon's and a three-vertex patch's. An instance is
-    /// tested by [`Candidate::hit`] alone (this finds nothing).
+    /// tested through [`Models`] (this finds nothing).
     #[inline(always)]
     pub fn intersect<R: Real>(&self, s: &DfScene, ray: &RayQ<R>, t_min: R, t_max: R) -> Option<R> {
         match self {
@@ -401,44 +353,6 @@ impl<'t> DfScene<'t> {
             PLAIN => Candidate::Record(h),
             p => Candidate::Instance(h, &self.placements[p as usize]),
         }
-    }
-
-    /// Tests object `id` (counting the test by kind): the nearest hit in
-    /// `(t_min, t_max)` of the ray (see [`Candidate::hit`]).
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn test<R: Real>(
-        &self,
-        id: u32,
-        ray: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        tests: &mut KindCounts,
-    ) -> Option<(R, PrimId)> {
-        let c = self.candidate(id);
-        tests.add(c.kind());
-        c.hit(self, ray, o, d, t_min, t_max, id, tests)
-    }
-
-    /// Whether object `id` blocks the ray in `(t_min, t_max)` (counting
-    /// the test by kind).
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    pub fn test_blocks<R: Real>(
-        &self,
-        id: u32,
-        ray: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        tests: &mut KindCounts,
-    ) -> bool {
-        let c = self.candidate(id);
-        tests.add(c.kind());
-        c.blocks(self, ray, o, d, t_min, t_max, tests)
     }
 
     /// The surface of primitive `prim` at `ray`'s hit at `t`, and its

@@ -25,7 +25,7 @@
 use super::{Boxes, Entry, NESTED, ObjectGrid, high_first, ray_meets};
 use crate::error::Error;
 use crate::grid::{DEFAULT_DENSITY, Dda, MAX_CELLS, choose_resolution};
-use crate::intersect::{RayQ, Surface, triangle};
+use crate::intersect::{Ray, RayQ, Surface, triangle};
 use crate::math::{Real, Vec3};
 use crate::objects::{ObjectStore, Slot};
 use crate::progress::Progress;
@@ -339,36 +339,20 @@ impl Models {
     }
 
     /// See [`Model::nearest`]; nothing if the model is not held.
-    #[allow(clippy::too_many_arguments)]
     #[inline]
     pub fn nearest<R: Real>(
         &self,
         pl: &Placement,
-        q: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
+        ray: Ray<'_, R>,
         tests: &mut KindCounts,
     ) -> Option<(R, u32)> {
-        self.model(pl)?.nearest(pl, q, o, d, t_min, t_max, tests)
+        self.model(pl)?.nearest(pl, ray, tests)
     }
 
     /// See [`Model::blocks`]; `false` if the model is not held.
-    #[allow(clippy::too_many_arguments)]
     #[inline]
-    pub fn blocks<R: Real>(
-        &self,
-        pl: &Placement,
-        q: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        tests: &mut KindCounts,
-    ) -> bool {
-        self.model(pl)
-            .is_some_and(|m| m.blocks(pl, q, o, d, t_min, t_max, tests))
+    pub fn blocks<R: Real>(&self, pl: &Placement, ray: Ray<'_, R>, tests: &mut KindCounts) -> bool {
+        self.model(pl).is_some_and(|m| m.blocks(pl, ray, tests))
     }
 
     /// See [`Model::surface`]; nothing if the model is not held.
@@ -398,22 +382,23 @@ impl Model {
         self.objects.bytes() + self.grid.bytes()
     }
 
-    /// The nearest hit in `(t_min, t_max)` of the ray (`q`, and its origin
-    /// `o` and direction `d` in `f64`) on this model placed by `pl`: its
-    /// distance and the primitive, ties to the smaller primitive. Each
-    /// triangle tested counts in `tests` by its kind.
-    #[allow(clippy::too_many_arguments)]
+    /// The nearest hit of `ray` on this model placed by `pl`: its distance
+    /// and the primitive, ties to the smaller primitive. Each triangle
+    /// tested counts in `tests` by its kind.
     #[inline]
     pub fn nearest<R: Real>(
         &self,
         pl: &Placement,
-        q: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
+        ray: Ray<'_, R>,
         tests: &mut KindCounts,
     ) -> Option<(R, u32)> {
+        let Ray {
+            q,
+            o,
+            d,
+            t_min,
+            t_max,
+        } = ray;
         let mut best: Option<(R, u32)> = None;
         let mut upper = t_max;
         self.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
@@ -433,20 +418,17 @@ impl Model {
         best
     }
 
-    /// Whether this model placed by `pl` blocks the ray anywhere in
-    /// `(t_min, t_max)`.
-    #[allow(clippy::too_many_arguments)]
+    /// Whether this model placed by `pl` blocks `ray` anywhere in its
+    /// interval.
     #[inline]
-    pub fn blocks<R: Real>(
-        &self,
-        pl: &Placement,
-        q: &RayQ<R>,
-        o: Vec3,
-        d: Vec3,
-        t_min: R,
-        t_max: R,
-        tests: &mut KindCounts,
-    ) -> bool {
+    pub fn blocks<R: Real>(&self, pl: &Placement, ray: Ray<'_, R>, tests: &mut KindCounts) -> bool {
+        let Ray {
+            q,
+            o,
+            d,
+            t_min,
+            t_max,
+        } = ray;
         let mut hit = false;
         self.walk(pl, o, d, t_min.to_f64(), t_max.to_f64(), &mut |id| {
             if self.test(pl, id, q, t_min, t_max, tests).is_some() {

@@ -7,5 +7,5 @@ mod ray;
 mod surface;
 pub mod triangle;
 
-pub use ray::RayQ;
+pub use ray::{Ray, RayQ};
 pub use surface::{Attrs, Surface};

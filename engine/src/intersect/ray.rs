@@ -109,3 +109,17 @@ impl<R: Real> RayQ<R> {
         true
     }
 }
+
+/// A ray as a placed model's walk and tests take it: prepared for the
+/// tests in their precision (`q`), with its origin and direction as given
+/// in `f64` (a model's grid is walked in `f64`, whatever the tests'
+/// precision), and the open interval `t_min < t < t_max` of distances
+/// that count.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray<'q, R> {
+    pub q: &'q RayQ<R>,
+    pub o: crate::math::Vec3,
+    pub d: crate::math::Vec3,
+    pub t_min: R,
+    pub t_max: R,
+}

@@ -4,6 +4,7 @@
 //! to its ray (with its surface when the ray carries one).
 
 use super::*;
+use crate::intersect::Ray;
 use crate::kernels::{Lanes, Need, ShapeLanes, each_lane};
 
 /// A ray's mailbox value while it walks aggregate `index` in pass
@@ -356,14 +357,14 @@ fn scan_singles<R: Elem>(
                 continue;
             };
             let q = &sh.q[slot as usize];
-            let (ro, rd) = od64(q, &sh.cold[slot as usize]);
+            let ray = slot_ray(q, s, &sh.cold[slot as usize]);
             let found = if s.shadow {
                 models
-                    .blocks(pl, q, ro, rd, s.t_min, s.upper, &mut sh.counts.tests)
+                    .blocks(pl, ray, &mut sh.counts.tests)
                     .then_some((s.upper, prim))
             } else {
                 models
-                    .nearest(pl, q, ro, rd, s.t_min, s.upper, &mut sh.counts.tests)
+                    .nearest(pl, ray, &mut sh.counts.tests)
                     .map(|(t, p)| (t, PrimId::instance(index, p)))
             };
             if let Some((t, prim)) = found {
@@ -526,6 +527,21 @@ impl ObjectTest<'_, '_> {
     }
 }
 
+/// A slot's ray as a placed model's tests take it: its prepared ray `q`,
+/// its origin and direction in `f64`, and the interval its tests look in
+/// now (up to just above its best hit).
+#[inline(always)]
+fn slot_ray<'q, R: Elem>(q: &'q RayQ<R>, s: &Hot<R>, c: &Cold<R>) -> Ray<'q, R> {
+    let (o, d) = od64(q, c);
+    Ray {
+        q,
+        o,
+        d,
+        t_min: s.t_min,
+        t_max: s.upper,
+    }
+}
+
 /// Whether object `o` is there where ray `q` meets it: not where an
 /// alpha-mask cut-out removes it (see [`Cutouts`]).
 #[inline(always)]
@@ -641,14 +657,14 @@ pub(super) fn test_pairs<R: Elem>(
                         continue;
                     }
                     let q = &q[slot];
-                    let (o, d) = od64(q, c);
+                    let ray = slot_ray(q, s, c);
                     let found = if s.shadow {
                         model
-                            .blocks(pl, q, o, d, s.t_min, s.upper, &mut counts.tests)
+                            .blocks(pl, ray, &mut counts.tests)
                             .then(|| (s.upper.to_f64(), PrimId::object(*index)))
                     } else {
                         model
-                            .nearest(pl, q, o, d, s.t_min, s.upper, &mut counts.tests)
+                            .nearest(pl, ray, &mut counts.tests)
                             .map(|(t, k)| (t.to_f64(), PrimId::instance(*index, k)))
                     };
                     if let Some((t, prim)) = found {
