@@ -6,7 +6,7 @@ use super::{Candidate, DfScene};
 use crate::intersect::Ray;
 pub use crate::kernels::Found;
 use crate::kernels::{
-    Crossings, LANES, Lanes, PlaneLanes, RayLanes, Triangle, each_lane, shape_lanes,
+    Crossings, LANES, Lanes, RayLanes, Triangle, each_lane, on_plane, shape_lanes,
 };
 use crate::render::KindCounts;
 use crate::shapes::{Prepared, Shape};
@@ -81,18 +81,7 @@ pub fn test<R: Elem, L: Simd>(
             (Shape::Polygon(p), Some(Prepared::Polygon(plane)), Some(bins))
                 if p.vertices.len() > 3 =>
             {
-                let on = PlaneLanes {
-                    v: p.vertices,
-                    plane,
-                    bbox: &h.bbox,
-                    rays,
-                    m,
-                    limit,
-                    t_out: &mut out.t,
-                    pu: &mut out.pu,
-                    pv: &mut out.pv,
-                }
-                .run::<L>();
+                let on = on_plane::<R, L>(p.vertices, plane, &h.bbox, rays, m, limit, out);
                 if on.count_ones() <= 4 || p.vertices.len() > 32 {
                     let mut inside = 0;
                     for i in each_lane(on) {

@@ -9,7 +9,7 @@ use super::{
 };
 use crate::math::Real;
 use crate::scene::Aabb;
-use crate::shapes::{Prepared, Shape};
+use crate::shapes::{PolygonPlane, Prepared, Shape};
 use crate::simd::{Elem, Job, Lanes as Simd};
 
 /// What a test of one object leaves for its hit lanes: the distance and,
@@ -77,18 +77,7 @@ pub fn shape_lanes<R: Elem, L: Simd>(
             .run::<L>()
         }
         (Shape::Polygon(p), Some(Prepared::Polygon(plane))) => {
-            let on = PlaneLanes {
-                v: p.vertices,
-                plane,
-                bbox,
-                rays,
-                m,
-                limit,
-                t_out: &mut out.t,
-                pu: &mut out.pu,
-                pv: &mut out.pv,
-            }
-            .run::<L>();
+            let on = on_plane::<R, L>(p.vertices, plane, bbox, rays, m, limit, out);
             Crossings {
                 v: p.vertices,
                 plane,
@@ -134,6 +123,35 @@ pub fn shape_lanes<R: Elem, L: Simd>(
         .run::<L>(),
         _ => return None,
     })
+}
+
+/// The lanes of `m` that meet the plane of polygon `v` inside its box
+/// before `limit`, with their distances in `out.t` and where they meet it
+/// in `out.pu`, `out.pv`: the first half of a polygon's test, whose
+/// second asks whether that point is inside ([`Crossings`], or a
+/// tracer's binned edges).
+#[inline(always)]
+pub(crate) fn on_plane<R: Elem, L: Simd>(
+    v: &[[f32; 3]],
+    plane: &PolygonPlane,
+    bbox: &Aabb,
+    rays: &RayLanes<R>,
+    m: Lanes,
+    limit: &[R; LANES],
+    out: &mut Found<R>,
+) -> Lanes {
+    PlaneLanes {
+        v,
+        plane,
+        bbox,
+        rays,
+        m,
+        limit,
+        t_out: &mut out.t,
+        pu: &mut out.pu,
+        pv: &mut out.pv,
+    }
+    .run::<L>()
 }
 
 /// [`shape_lanes`] as a job for [`crate::simd::Isa::run`].

@@ -271,6 +271,24 @@ fn scan_singles<R: Elem>(
         let prim = PrimId::object(index);
         // Rays gathered for the object's kernel.
         let mut gathered = 0;
+        // Tests the gathered rays against the decoded object and counts
+        // the mailbox skips that waited for it (a macro, not a function:
+        // the registered rays' iterator holds `sh.regs` meanwhile).
+        macro_rules! test_gathered {
+            ($o:expr, $pr:expr) => {{
+                let t = ObjectTest {
+                    o: $o,
+                    pr: $pr.as_ref(),
+                    prim,
+                    rank: c.rank,
+                    cutouts: models.cutouts(),
+                    carry,
+                    isa,
+                };
+                t.run(&mut sh.gather, gathered, &mut sh.hot, &sh.q, &mut sh.cold);
+                sh.counts.skipped_mailbox += sh.gather.count_skipped(&sh.hot);
+            }};
+        }
         let hot_at = sh.hot.as_ptr();
         let mut rays = registered(&sh.regs[g], &grids.grids[g], lo, hi);
         while let Some(slot) = rays.next() {
@@ -329,17 +347,7 @@ fn scan_singles<R: Elem>(
                 sh.gather.slots[gathered] = slot;
                 gathered += 1;
                 if gathered == LANES {
-                    let t = ObjectTest {
-                        o,
-                        pr: pr.as_ref(),
-                        prim,
-                        rank: c.rank,
-                        cutouts: models.cutouts(),
-                        carry,
-                        isa,
-                    };
-                    t.run(&mut sh.gather, gathered, &mut sh.hot, &sh.q, &mut sh.cold);
-                    sh.counts.skipped_mailbox += sh.gather.count_skipped(&sh.hot);
+                    test_gathered!(o, pr);
                     gathered = 0;
                 }
                 continue;
@@ -384,17 +392,7 @@ fn scan_singles<R: Elem>(
         if gathered > 0
             && let Some((o, pr, _)) = &object
         {
-            let t = ObjectTest {
-                o,
-                pr: pr.as_ref(),
-                prim,
-                rank: c.rank,
-                cutouts: models.cutouts(),
-                carry,
-                isa,
-            };
-            t.run(&mut sh.gather, gathered, &mut sh.hot, &sh.q, &mut sh.cold);
-            sh.counts.skipped_mailbox += sh.gather.count_skipped(&sh.hot);
+            test_gathered!(o, pr);
         }
     }
 }
