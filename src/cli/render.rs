@@ -102,7 +102,11 @@ pub struct RenderArgs {
     /// default: half of the available memory)
     #[arg(long, value_parser = parse_memory)]
     pub memory: Option<u64>,
-    /// Breadth-first store number: adaptive, or a fixed number of voxels
+    /// Breadth-first store number: adaptive (the paper's), budget (the
+    /// adaptive one, and a round's last pass gives the walks it cut short
+    /// what its rays left of the memory: fewer scans for a round's last
+    /// few rays, the same image; the work counts then depend on the
+    /// budget), or a fixed number of voxels
     #[arg(long, default_value = "adaptive", value_parser = parse_store)]
     pub store_number: StoreNumber,
     /// Breadth-first shading: carry (surfaces found with the hits) or join
@@ -180,13 +184,15 @@ fn parse_memory(s: &str) -> Result<u64, String> {
 }
 
 fn parse_store(s: &str) -> Result<StoreNumber, String> {
-    if s == "adaptive" {
-        return Ok(StoreNumber::Adaptive);
+    match s {
+        "adaptive" => return Ok(StoreNumber::Adaptive),
+        "budget" => return Ok(StoreNumber::Budget),
+        _ => {}
     }
     match s.parse::<u32>() {
         Ok(n) if (1..=65_536).contains(&n) => Ok(StoreNumber::Fixed(n)),
         _ => Err(format!(
-            "--store-number takes adaptive or a number from 1 to 65536, not '{s}'"
+            "--store-number takes budget, adaptive or a number from 1 to 65536, not '{s}'"
         )),
     }
 }

@@ -236,6 +236,51 @@ fn options_reach_the_renderer() {
     assert!(err.contains("--grids"), "{err}");
 }
 
+/// `--store-number budget`: the image of the paper's adaptive store
+/// number, in fewer scans of the objects (a round's last few rays walk on
+/// in the pass before instead of costing one each), embedded and on a
+/// local worker, which is told the policy with the job.
+#[test]
+fn the_budget_store_number_gives_the_same_image_in_fewer_scans() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    ok(d, &["convert", "spd:rings:2", "-o", "r.sdb", "-q"]);
+    let render = |png: &str, extra: &[&str]| {
+        let mut a = vec![
+            "render", "r.sdb", "-o", png, "--mode", "bf", "--width", "48", "--height", "48",
+            "--stats", "s.json", "-q",
+        ];
+        a.extend_from_slice(extra);
+        ok(d, &a);
+        json(&std::fs::read_to_string(d.join("s.json")).unwrap())
+    };
+    let adaptive = render("a.png", &[]);
+    let budget = render("b.png", &["--store-number", "budget"]);
+    assert_eq!(adaptive["store_number"], "adaptive");
+    assert_eq!(budget["store_number"], "budget");
+    let scans = |s: &serde_json::Value| s["db_scans"].as_u64().unwrap();
+    assert!(scans(&budget) < scans(&adaptive), "{budget} {adaptive}");
+    let png = |f: &str| std::fs::read(d.join(f)).unwrap();
+    assert_eq!(png("a.png"), png("b.png"));
+    render(
+        "w.png",
+        &["--store-number", "budget", "--local-workers", "1"],
+    );
+    assert_eq!(png("a.png"), png("w.png"));
+    let err = fails(
+        d,
+        &[
+            "render",
+            "r.sdb",
+            "-o",
+            "x.png",
+            "--store-number",
+            "budgets",
+        ],
+    );
+    assert!(err.contains("budget, adaptive"), "{err}");
+}
+
 /// The breadth-first render stays within its memory budget over the
 /// process's fixed footprint, in a scene with two grids, reflections and
 /// spilling (before the phases gave their buffers back, 48 MiB peaked at

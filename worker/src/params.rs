@@ -26,8 +26,9 @@ pub fn to_proto(o: &RenderOptions, store: StoreNumber) -> v1::RenderParams {
         } as i32,
         store_number: match store {
             StoreNumber::Fixed(n) => n.max(1),
-            StoreNumber::Adaptive => 0,
+            StoreNumber::Adaptive | StoreNumber::Budget => 0,
         },
+        store_budget: store == StoreNumber::Budget,
         samples: o.samples,
         no_aggregates: o.aggregates == Aggregates::Off,
     }
@@ -71,9 +72,10 @@ pub fn from_proto(
         simd: None,
     };
     o.validate().map_err(|e| e.to_string())?;
-    let store = match p.store_number {
-        0 => StoreNumber::Adaptive,
-        n => StoreNumber::Fixed(n),
+    let store = match (p.store_number, p.store_budget) {
+        (0, false) => StoreNumber::Adaptive,
+        (0, true) => StoreNumber::Budget,
+        (n, _) => StoreNumber::Fixed(n),
     };
     Ok((o, store))
 }
@@ -100,8 +102,10 @@ mod tests {
         let (back, store) = from_proto(&to_proto(&o, StoreNumber::Fixed(3)), 7).unwrap();
         assert_eq!(format!("{o:?}"), format!("{back:?}"));
         assert_eq!(store, StoreNumber::Fixed(3));
+        for store in [StoreNumber::Budget, StoreNumber::Adaptive] {
+            assert_eq!(from_proto(&to_proto(&o, store), 1).unwrap().1, store);
+        }
         let mut p = to_proto(&o, StoreNumber::Adaptive);
-        assert_eq!(from_proto(&p, 1).unwrap().1, StoreNumber::Adaptive);
         p.max_depth = 1000;
         assert!(from_proto(&p, 1).is_err());
         p.max_depth = 2;

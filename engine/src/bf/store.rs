@@ -1,5 +1,7 @@
 //! How many voxels a ray stores itself in per pass: the paper's store
-//! number, fixed or adaptive (Section 2.2), per grid.
+//! number, fixed or adaptive (Section 2.2), per grid; or the adaptive one
+//! with what a pass's rays leave of the memory for registrations given to
+//! the walks it cut short ([`StoreNumber::Budget`]).
 
 use super::MAX_GRIDS;
 use crate::grid::GridSpec;
@@ -9,13 +11,25 @@ use serde::Serialize;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum StoreNumber {
     Fixed(u32),
+    /// The paper's adaptive store number (Section 2.2), per ray.
     Adaptive,
+    /// The adaptive store number, and then the registrations a pass's
+    /// rays leave unused go to the walks it stopped, shared evenly, so
+    /// that a ray walks as far in one pass as memory allows: the last
+    /// few rays of a round finish in the pass with the others instead of
+    /// costing a scan of the objects each. What a ray registers then
+    /// depends on the pass it is in: on the budget, and where a pass
+    /// cannot register all its rays, on which waited (the threads). The
+    /// image and hits do not.
+    Budget,
 }
 
 /// Store numbers per grid.
 #[derive(Clone, Copy, Debug)]
 pub struct StorePlan {
     fixed: Option<u32>,
+    /// Walks cut short take what the pass leaves ([`StoreNumber::Budget`]).
+    extends: bool,
     grids: usize,
     base: [u32; MAX_GRIDS],
     max: [u32; MAX_GRIDS],
@@ -37,8 +51,9 @@ impl StorePlan {
         StorePlan {
             fixed: match policy {
                 StoreNumber::Fixed(n) => Some(n.max(1)),
-                StoreNumber::Adaptive => None,
+                StoreNumber::Adaptive | StoreNumber::Budget => None,
             },
+            extends: policy == StoreNumber::Budget,
             grids: grids.len().min(MAX_GRIDS),
             base,
             max,
@@ -61,6 +76,12 @@ impl StorePlan {
         (0..self.grids)
             .map(|g| self.store(g, 30).min(self.walk[g]) as u64)
             .sum()
+    }
+
+    /// Whether walks the store number stopped go on with what the pass
+    /// leaves of the registrations.
+    pub fn extends(&self) -> bool {
+        self.extends
     }
 
     /// Store number in grid `g` for a ray's pass number `k` there.

@@ -346,6 +346,7 @@ impl<'db, R: Elem> Tracer<'db, R> {
             store_number: match bf.store {
                 super::StoreNumber::Fixed(n) => n.to_string(),
                 super::StoreNumber::Adaptive => "adaptive".into(),
+                super::StoreNumber::Budget => "budget".into(),
             },
             budget: Some(budget.clone()),
             models: (!models.is_empty()).then_some(holding),

@@ -66,6 +66,7 @@ fn every_store_number_gives_the_depth_first_image() {
             StoreNumber::Fixed(1),
             StoreNumber::Fixed(2),
             StoreNumber::Adaptive,
+            StoreNumber::Budget,
         ] {
             let got = bf_render(&db, &opts(2, true), store, PLENTY);
             assert_same(name, &format!("store {store:?}"), &reference, &got);
@@ -172,6 +173,83 @@ fn counts_do_not_depend_on_threads_or_budget() {
             }
         }
     }
+}
+
+fn passes_of(st: &RenderStats) -> Vec<u64> {
+    st.details.as_ref().unwrap()["passes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_u64().unwrap())
+        .collect()
+}
+
+/// The budget's store number: a round's last pass gives the walks it cut
+/// short what its rays left of the registrations, so a round whose rays
+/// all fit takes one or two passes (the paper's rule: up to four here,
+/// the last ones for a few long walks), with the depth-first image at every budget and
+/// threads, and (with room for every ray) work counts that do not depend
+/// on the threads.
+#[test]
+fn the_budget_store_number_saves_a_round_s_last_passes() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut saved = 0;
+    for (name, size) in [("mount", 6), ("rings", 7), ("tetra", 6), ("gears", 4)] {
+        let path = convert(
+            &common::spd_fixtures().join(format!("{name}{size}.nff")),
+            dir.path(),
+            Compression::None,
+        );
+        let db = Database::open(&path).unwrap();
+        let reference = df_render(&db);
+        let adaptive = bf_render(&db, &opts(2, true), StoreNumber::Adaptive, PLENTY);
+        let budget = bf_render(&db, &opts(2, true), StoreNumber::Budget, PLENTY);
+        assert_same(name, "budget", &reference, &budget);
+        assert_eq!(budget.1.details.as_ref().unwrap()["store_number"], "budget");
+        // Every round's rays fit in the slots here: at most two passes
+        // each (one, unless the walks cut short need more than is left).
+        let (a, b) = (passes_of(&adaptive.1), passes_of(&budget.1));
+        assert!(
+            b.iter().all(|&p| p <= 2),
+            "{name}: passes {b:?} (adaptive {a:?})"
+        );
+        saved += a.iter().sum::<u64>() - b.iter().sum::<u64>();
+        for memory in [1 << 20, 4 << 20, PLENTY] {
+            let one = bf_render(&db, &opts(1, true), StoreNumber::Budget, memory);
+            assert_same(name, &format!("budget, {memory} bytes"), &reference, &one);
+            for threads in [2, 3] {
+                let b = bf_render(&db, &opts(threads, true), StoreNumber::Budget, memory);
+                assert_same(name, &format!("budget, {threads} threads"), &one, &b);
+                if memory < PLENTY {
+                    // Where a round's last pass cannot register all its
+                    // rays, which wait depends on the threads, and so do
+                    // the work counts (not the image or the hits).
+                    continue;
+                }
+                assert_eq!(
+                    one.1.intersection_tests_by_kind, b.1.intersection_tests_by_kind,
+                    "{name}: tests with {threads} threads, {memory} bytes"
+                );
+                let (x, y) = (
+                    one.1.details.as_ref().unwrap(),
+                    b.1.details.as_ref().unwrap(),
+                );
+                for k in [
+                    "ray_voxel_registrations",
+                    "tests_skipped_last_voxel",
+                    "tests_skipped_mailbox",
+                    "passes",
+                    "db_scans",
+                ] {
+                    assert_eq!(
+                        x[k], y[k],
+                        "{name}: {k} with {threads} threads, {memory} bytes"
+                    );
+                }
+            }
+        }
+    }
+    assert!(saved > 0, "the budget's store number saved no pass");
 }
 
 #[test]

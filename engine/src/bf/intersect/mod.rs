@@ -23,7 +23,9 @@
 //! finished rays pays for the larger numbers: the paper's two adaptive
 //! methods, applied per ray. Because a ray's registrations depend only on
 //! the ray, every count is the same whatever the number of threads,
-//! workers, slots or memory.
+//! workers, slots or memory. (The budget's store number,
+//! [`StoreNumber::Budget`](crate::bf::StoreNumber::Budget), trades that for
+//! fewer passes: a round's last pass extends the walks it cut short.)
 //!
 //! Slots are split into shards, one per thread; every thread scans the same
 //! decoded block for its own rays, so no ray is touched by two threads
@@ -62,8 +64,8 @@ mod scan;
 mod slot;
 use admit::{ByIdFill, load, misses_every_grid, stage};
 use complete::{complete, put_results};
-use register::register;
 pub use register::sample_registrations;
+use register::{extend, register};
 use scan::{ScanPass, pair_bytes, scan_block, test_pairs};
 use slot::{Cold, DONE, FRESH, Hot, JOIN, NONE16, WALKING, empty_cold, empty_hot, od64, ray64};
 pub use slot::{MAX_GRIDS, REGISTRATION_BYTES, slot_bytes, streamed_extra_bytes};
@@ -121,6 +123,13 @@ struct Shard<R: Elem> {
     store_walks: u64,
     /// Rays registered this pass.
     registered: u64,
+    /// Registrations this pass, before any walk is extended.
+    used: u64,
+    /// Some active ray did not register this pass (its share was used).
+    left_out: bool,
+    /// Walks stopped by their store number this pass (counted with the
+    /// budget's store number only).
+    cut: u64,
     /// When models are read per pass: the instances met this pass, and
     /// the rays (slots) registered near each, tested once the model is
     /// read after the world's objects.
@@ -232,6 +241,9 @@ impl<R: Elem> Slots<R> {
                     store_sum: 0,
                     store_walks: 0,
                     registered: 0,
+                    used: 0,
+                    left_out: false,
+                    cut: 0,
                     placed: Vec::new(),
                     pairs: Vec::new(),
                     gather: scan::Gather::new(),
@@ -533,10 +545,16 @@ pub fn intersect_rays<R: Elem>(
                 sh.store_sum = 0;
                 sh.store_walks = 0;
                 sh.registered = 0;
+                sh.left_out = false;
+                sh.cut = 0;
                 let mut used = 0u64;
                 for i in 0..sh.hot.len() {
                     let h = &sh.hot[i];
-                    if !h.active || h.blocked || used >= share {
+                    if !h.active || h.blocked {
+                        continue;
+                    }
+                    if used >= share {
+                        sh.left_out = true;
                         continue;
                     }
                     let before: usize = sh.regs.iter().map(RegMap::len).sum();
@@ -554,6 +572,51 @@ pub fn intersect_rays<R: Elem>(
                     sh.store_walks += walks;
                     sh.registered += 1;
                     used += (sh.regs.iter().map(RegMap::len).sum::<usize>() - before) as u64;
+                    if store.extends() {
+                        sh.cut += sh.cold[i].walks[..ngrids]
+                            .iter()
+                            .filter(|w| w.state == WALKING)
+                            .count() as u64;
+                    }
+                }
+                sh.used = used;
+            })
+        });
+        // With the budget's store number: in a round's last pass (no ray
+        // waits for a slot), what the pass's rays left of the
+        // registrations goes to the walks their store numbers cut short,
+        // shared evenly, so that they need no pass (and scan) of their
+        // own. Not before: a pass follows anyway, and a longer walk
+        // registered before the scan costs tests wherever the ray finds
+        // its hit early. Only when every ray registered (none waits for
+        // room), so the share is the same whatever the number of threads.
+        let waiting = total - finished - active;
+        let extra = if store.extends() && waiting == 0 && !shards.iter().any(|sh| sh.left_out) {
+            let used: u64 = shards.iter().map(|sh| sh.used).sum();
+            let cut: u64 = shards.iter().map(|sh| sh.cut).sum();
+            let left = (setup.registrations as u64).saturating_sub(used);
+            (left / cut.max(1)).min(u32::MAX as u64) as u32
+        } else {
+            0
+        };
+        pool.install(|| {
+            shards.par_iter_mut().for_each(|sh| {
+                if extra > 0 && sh.cut > 0 {
+                    for i in 0..sh.hot.len() {
+                        let h = &sh.hot[i];
+                        if h.active && !h.blocked {
+                            extend(
+                                h,
+                                &sh.q[i],
+                                &mut sh.cold[i],
+                                i as u32,
+                                grids,
+                                extra,
+                                &mut sh.regs,
+                                &mut sh.region,
+                            );
+                        }
+                    }
                 }
                 for r in sh.regs.iter_mut() {
                     r.finish();

@@ -2,6 +2,7 @@
 //! itself in up to its store number of voxels; and the sample of a
 //! round's rays that plans its slots by the registrations they make.
 
+use super::slot::{Ray64, Walk};
 use super::*;
 
 /// Rays [`sample_registrations`] walks at most.
@@ -107,41 +108,23 @@ pub(super) fn register<R: Elem>(
                 }
             }
         } else {
-            // Where the walk stopped last pass (see `Walk`).
-            let cell = w.last.map(u32::from);
-            // (It started, so it starts again.)
-            let mut d = Dda::start_at(spec, r.o, r.d, r.inv, r.t_min, r.t_max, cell)
-                .expect("a walk that started starts again");
-            match d.advance_axis() {
-                Some(a) => (d, Some(a)),
-                None => {
-                    w.state = DONE;
-                    continue;
-                }
+            match resume(spec, &r, w) {
+                Some(x) => x,
+                None => continue,
             }
         };
         let limit = store.store(g, w.k);
-        // One of the two loops, chosen per grid.
-        macro_rules! store_along {
-            ($skip:literal) => {
-                store_along::<$skip>(
-                    &mut dda,
-                    entry,
-                    grid,
-                    h.best.t,
-                    limit,
-                    &mut regs[g],
-                    &mut region[g],
-                    slot,
-                    w,
-                )
-            };
-        }
-        let n = if grid.busy.is_empty() {
-            store_along!(false)
-        } else {
-            store_along!(true)
-        };
+        let n = walk_storing(
+            &mut dda,
+            entry,
+            grid,
+            h.best.t,
+            limit,
+            &mut regs[g],
+            &mut region[g],
+            slot,
+            w,
+        );
         if w.state != DONE {
             // Stopped in the voxel just stored in, `w.last`: where the
             // next pass starts its walk again.
@@ -153,6 +136,88 @@ pub(super) fn register<R: Elem>(
         }
     }
     (store_sum, walks)
+}
+
+/// The walks of a ray [`register`] stopped at their store number this
+/// pass (`WALKING`) go on, each storing the ray in up to `extra` more
+/// voxels ([`StoreNumber::Budget`](crate::bf::StoreNumber::Budget)): as if
+/// the store number had been larger. The last-voxel rule's voxel of the
+/// previous pass, and the walks' pass counts, stay as `register` left
+/// them.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn extend<R: Elem>(
+    h: &Hot<R>,
+    q: &RayQ<R>,
+    c: &mut Cold<R>,
+    slot: u32,
+    grids: &VoxelGrids,
+    extra: u32,
+    regs: &mut [RegMap; MAX_GRIDS],
+    region: &mut [Region; MAX_GRIDS],
+) {
+    let r = ray64(q, h, c);
+    for (g, grid) in grids.grids.iter().enumerate() {
+        let w = &mut c.walks[g];
+        if w.state != WALKING {
+            continue;
+        }
+        let Some((mut dda, entry)) = resume(&grid.spec, &r, w) else {
+            continue;
+        };
+        walk_storing(
+            &mut dda,
+            entry,
+            grid,
+            h.best.t,
+            extra,
+            &mut regs[g],
+            &mut region[g],
+            slot,
+            w,
+        );
+        if w.state != DONE {
+            debug_assert_eq!(w.last.map(u32::from), dda.voxel());
+        }
+    }
+}
+
+/// A walk that stopped in the voxel it last stored the ray in, `w.last`,
+/// started again and moved into the next voxel (with the face it entered
+/// by); `None`, and the walk done, when that voxel was the grid's last.
+fn resume(spec: &GridSpec, r: &Ray64, w: &mut Walk) -> Option<(Dda, Option<usize>)> {
+    let cell = w.last.map(u32::from);
+    // (It started, so it starts again.)
+    let mut d = Dda::start_at(spec, r.o, r.d, r.inv, r.t_min, r.t_max, cell)
+        .expect("a walk that started starts again");
+    match d.advance_axis() {
+        Some(a) => Some((d, Some(a))),
+        None => {
+            w.state = DONE;
+            None
+        }
+    }
+}
+
+/// [`store_along`], with the loop that skips empty blocks when the grid
+/// has them.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn walk_storing(
+    dda: &mut Dda,
+    entry: Option<usize>,
+    grid: &VoxelGrid,
+    best: f64,
+    limit: u32,
+    regs: &mut RegMap,
+    region: &mut Region,
+    slot: u32,
+    w: &mut Walk,
+) -> u32 {
+    if grid.busy.is_empty() {
+        store_along::<false>(dda, entry, grid, best, limit, regs, region, slot, w)
+    } else {
+        store_along::<true>(dda, entry, grid, best, limit, regs, region, slot, w)
+    }
 }
 
 /// The walk `dda` (entered through `entry`'s face, `None` at its first
@@ -172,7 +237,7 @@ fn store_along<const SKIP: bool>(
     regs: &mut RegMap,
     region: &mut Region,
     slot: u32,
-    w: &mut super::slot::Walk,
+    w: &mut Walk,
 ) -> u32 {
     let mut n = 0;
     // Whether the walk has just entered a block not looked at yet.
