@@ -588,8 +588,11 @@ pub fn intersect_rays<R: Elem>(
         // shared evenly, so that they need no pass (and scan) of their
         // own. Not before: a pass follows anyway, and a longer walk
         // registered before the scan costs tests wherever the ray finds
-        // its hit early. Only when every ray registered (none waits for
-        // room), so the share is the same whatever the number of threads.
+        // its hit early. Only when every ray registered (none waited for
+        // room: its walk would go on from where the last pass left it,
+        // before the last-voxel rule's voxel moved on). Which rays wait
+        // when room runs short depends on the threads' shares, so then
+        // the work counts do too.
         let waiting = total - finished - active;
         let extra = if store.extends() && waiting == 0 && !shards.iter().any(|sh| sh.left_out) {
             let used: u64 = shards.iter().map(|sh| sh.used).sum();
