@@ -769,14 +769,17 @@ pub fn unpack(
         }
         let index: &[u8] = bytemuck::cast_slice(&body[corner_words..]);
         let words = face.record_words();
-        let mut rec = [0u32; RECORD_HEADER_WORDS + 30];
-        // Triangles' records are copied at a length known when compiling
-        // (a copy of a length known only at run time was a library call a
-        // record).
-        const TRIANGLE: usize = RECORD_HEADER_WORDS + 9;
-        debug_assert_eq!(Face::Triangle.record_words(), TRIANGLE);
-        out.reserve(n * words);
-        for t in index[..3 * n].chunks_exact(3) {
+        // Each record is written where it goes. (Written on the stack word
+        // by word and then copied in 16-byte moves, each load of the copy
+        // spanned 4-byte stores still in the store buffer, which cannot
+        // be forwarded to it, and waited for them to reach the cache:
+        // half of this function's samples were that copy's first load.)
+        let at = out.len();
+        out.resize(at + n * words, 0);
+        for (t, rec) in index[..3 * n]
+            .chunks_exact(3)
+            .zip(out[at..].chunks_exact_mut(words))
+        {
             if t.iter().any(|&i| i as usize >= nv) {
                 return Err(format!(
                     "the run at object {seen} names a corner it does not have"
@@ -787,13 +790,7 @@ pub fn unpack(
                 corners[t[1] as usize],
                 corners[t[2] as usize],
             ];
-            write_record(&mut rec[..words], face, material, &c);
-            if face == Face::Triangle {
-                let r: [u32; TRIANGLE] = rec[..TRIANGLE].try_into().expect("a triangle");
-                out.extend(r);
-            } else {
-                out.extend_from_slice(&rec[..words]);
-            }
+            write_record(rec, face, material, &c);
         }
         pos = start + corner_words + index_words;
         plain_from = pos;
