@@ -263,7 +263,12 @@ fn scan_singles<R: Elem>(
             continue;
         }
         // Decoded on the first ray to test, and then kept.
-        let mut object: Option<(ObjectRef<'_>, Option<Prepared>, Option<Placement>)> = None;
+        // (The three apart, each written where it stays: a tuple built and
+        // then moved into place was copied with loads wider than the
+        // stores that had just written it, which wait for them.)
+        let mut object: Option<ObjectRef<'_>> = None;
+        let mut prepared: Option<Prepared> = None;
+        let mut placement: Option<Placement> = None;
         // Where this instance went in `sh.placed`, when models are read
         // per pass.
         let mut placed_at = u32::MAX;
@@ -329,7 +334,7 @@ fn scan_singles<R: Elem>(
                 let Some(o) = block.object_at(c.at, c.index, c.rank) else {
                     return;
                 };
-                let placement = match &o.shape {
+                placement = match &o.shape {
                     Shape::Instance(i) => Some(Placement::of(i)),
                     _ => None,
                 };
@@ -337,11 +342,13 @@ fn scan_singles<R: Elem>(
                     placed_at = sh.placed.len() as u32;
                     sh.placed.push((index, c.rank, pl));
                 }
-                object = Some((o, o.shape.prepare(), placement));
+                prepared = o.shape.prepare();
+                object = Some(o);
             }
-            let Some((o, pr, placement)) = &object else {
+            let Some(o) = &object else {
                 continue;
             };
+            let pr = &prepared;
             sh.counts.tests.add(o.shape.kind());
             if placement.is_none() {
                 sh.gather.slots[gathered] = slot;
@@ -361,7 +368,7 @@ fn scan_singles<R: Elem>(
                 });
                 continue;
             }
-            let Some(pl) = placement else {
+            let Some(pl) = &placement else {
                 continue;
             };
             let q = &sh.q[slot as usize];
@@ -390,9 +397,9 @@ fn scan_singles<R: Elem>(
             }
         }
         if gathered > 0
-            && let Some((o, pr, _)) = &object
+            && let Some(o) = &object
         {
-            test_gathered!(o, pr);
+            test_gathered!(o, &prepared);
         }
     }
 }
