@@ -90,6 +90,12 @@ fn mod_p(x: u128) -> u64 {
     if x >= P { x - P } else { x }
 }
 
+/// `v` modulo `P`, in `0..P`: that of `v + 8P`, which is never negative
+/// (8P > 2^63), with no division.
+fn residue(v: i64) -> u64 {
+    mod_p((v as i128 + 8 * P as i128) as u128)
+}
+
 /// The fingerprint of the colour contributions add to each frame slot:
 /// per channel, the sum over slots of the slot's colour sum times a
 /// pseudo-random weight of the slot (keyed by `key`), modulo `P`. Linear
@@ -100,7 +106,7 @@ fn colour_print(o: &TaskOutput, key: u64) -> anyhow::Result<[u64; 3]> {
     // 2^125 (and at the end): the same remainder, fewer folds.
     let mut acc = [0u128; 3];
     o.for_each_contribution(|x| {
-        let v = x.rgb.map(|v| v.rem_euclid(P as i64) as u128);
+        let v = x.rgb.map(|v| residue(v) as u128);
         for slot in x.corner as u64..x.end() {
             let w = mod_p(splitmix(slot ^ key) as u128) as u128;
             for (a, v) in acc.iter_mut().zip(v) {
@@ -169,6 +175,18 @@ mod tests {
             u64::MAX as u128,
         ] {
             assert_eq!(mod_p(x) as u128, x % P as u128);
+        }
+        for v in [
+            i64::MIN,
+            i64::MIN + 1,
+            -(P as i64),
+            -1,
+            0,
+            1,
+            P as i64,
+            i64::MAX,
+        ] {
+            assert_eq!(super::residue(v) as i64, v.rem_euclid(P as i64), "{v}");
         }
     }
 
