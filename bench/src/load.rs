@@ -36,6 +36,9 @@ struct Scenario {
     workers: usize,
     /// Records stay at the workers (`--records-at-workers`).
     keep: bool,
+    /// With `keep`: the colour stays there too (the simulated workers
+    /// send none; a bound, see `SimConfig::send_colour`).
+    colour_kept: bool,
     /// Rays per shard (0: the coordinator's choice).
     shard_rays: u64,
     side: u32,
@@ -72,10 +75,11 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
     } else {
         (100, 1000, 1024)
     };
-    let sc = |label, workers, keep, shard_rays, rate| Scenario {
+    let sc = |label: &'static str, workers, keep, shard_rays, rate| Scenario {
         label,
         workers,
         keep,
+        colour_kept: label.contains("colour kept"),
         shard_rays,
         side,
         rate,
@@ -100,6 +104,27 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
         sc("records at workers, small shards", few, true, 8_192, 0.0),
         half(sc(
             "records at workers, large shards, half side",
+            few,
+            true,
+            65_536,
+            0.0,
+        )),
+        sc(
+            "records at workers, colour kept there (a bound), large shards",
+            few,
+            true,
+            65_536,
+            0.0,
+        ),
+        sc(
+            "records at workers, colour kept there (a bound), small shards",
+            few,
+            true,
+            8_192,
+            0.0,
+        ),
+        half(sc(
+            "records at workers, colour kept there (a bound), large shards, half side",
             few,
             true,
             65_536,
@@ -159,10 +184,10 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     // CPU per ray, per task and per job, by mode: three runs (large and
     // small shards, and large shards on a frame of a quarter the rays),
     // CPU = a·rays + b·tasks + c.
-    let fit = |keep: bool| -> Option<(f64, f64, f64)> {
+    let fit = |keep: bool, colour_kept: bool| -> Option<(f64, f64, f64)> {
         let runs: Vec<&Outcome> = out
             .iter()
-            .filter(|(s, _)| s.keep == keep && s.shard_rays > 0)
+            .filter(|(s, _)| s.keep == keep && s.colour_kept == colour_kept && s.shard_rays > 0)
             .map(|(_, o)| o)
             .collect();
         let [x, y, z] = runs.as_slice() else {
@@ -174,7 +199,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             [z.rays, z.tasks, 1.0, z.cpu],
         ])
     };
-    let (travel, keep) = (fit(false), fit(true));
+    let (travel, keep, colour_kept) = (fit(false, false), fit(true, false), fit(true, true));
     // A paced run: 100 (20) workers at a rate this machine can feed,
     // records at the workers.
     let (few, paced_rate) = if ctx.quick {
@@ -186,6 +211,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         label: "records at workers, paced",
         workers: few,
         keep: true,
+        colour_kept: false,
         shard_rays: 0,
         side: if ctx.quick { 256 } else { 1024 },
         rate: paced_rate,
@@ -247,7 +273,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     // workers measured (both stages and verification samples).
     let sized = |keep: bool| {
         out.iter()
-            .filter(|(s, _)| s.keep == keep && s.shard_rays == 0 && s.rate == 0.0)
+            .filter(|(s, _)| s.keep == keep && !s.colour_kept && s.shard_rays == 0 && s.rate == 0.0)
             .map(|(_, o)| o.tasks / o.rays)
             .next_back()
     };
@@ -267,6 +293,12 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             sized(false),
         ),
         ("records at the workers", "keep", keep, sized(true)),
+        (
+            "records and colour at the workers (a bound: no colour sent)",
+            "keep_colour",
+            colour_kept,
+            None,
+        ),
     ] {
         let Some((a, b, c)) = fitted else { continue };
         let ceiling = 1.0 / (a + b * 2.0 / 65_536.0);
@@ -325,6 +357,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 "setup": s.label,
                 "workers": s.workers,
                 "records_at_workers": s.keep,
+                "colour_kept_at_workers": s.colour_kept,
                 "shard_rays": s.shard_rays,
                 "side": s.side,
                 "rate": s.rate,
@@ -522,6 +555,7 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
         token: Some(sray_proto::auth::Token::from_file(&token).map_err(anyhow::Error::msg)?),
         rate: sc.rate,
         objects,
+        send_colour: !sc.colour_kept,
     });
     let stats = Arc::new(SimStats::default());
     for i in 0..sc.workers {

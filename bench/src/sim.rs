@@ -44,6 +44,11 @@ pub struct SimConfig {
     pub rate: f64,
     /// Objects of the scene (results name objects below it).
     pub objects: u64,
+    /// Whether a worker that keeps its records sends the colour its
+    /// shadings add (false: none is sent, as if colour stayed at the
+    /// workers too; the frame stays black; a bound on what the
+    /// coordinator would save).
+    pub send_colour: bool,
 }
 
 /// What the simulated workers measured, together.
@@ -241,9 +246,10 @@ async fn serve(
         tokio::time::sleep(left).await;
     }
     let objects = cfg.objects;
+    let send_colour = cfg.send_colour || !task.keep_output;
     let t2 = task.clone();
     let tr = tref.clone();
-    let msgs = tokio::task::spawn_blocking(move || output(&t2, tr, objects, started))
+    let msgs = tokio::task::spawn_blocking(move || output(&t2, tr, objects, send_colour, started))
         .await
         .map_err(|e| e.to_string())??;
     let bytes: u64 = msgs
@@ -339,6 +345,8 @@ fn output(
     task: &v1::Task,
     tref: v1::TaskRef,
     objects: u64,
+    // Send the colour shadings add (false: keep it, see `SimConfig`).
+    send_colour: bool,
     started: Instant,
 ) -> Result<Vec<v1::TaskOutput>, String> {
     let params = task.params.as_ref().ok_or("a task without settings")?;
@@ -400,7 +408,7 @@ fn output(
         let mut contribs: Vec<Contribution> = Vec::new();
         let per = records_per_chunk::<Contribution>();
         for id in first..first + n {
-            if !coloured(task.round, id) {
+            if !send_colour || !coloured(task.round, id) {
                 continue;
             }
             let c = corner(task.round, id, per_slot, slots);
