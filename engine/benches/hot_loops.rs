@@ -148,5 +148,32 @@ fn block_decoding(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, intersection_tests, dda_steps, block_decoding);
+/// A frame's corners made pixels (the mean of four, in f64), as every
+/// image is written: what a coordinator does per pixel at a job's end.
+fn frame_to_pixels(c: &mut Criterion) {
+    let mut frame = sray_engine::render::Frame::new(1024, 1024);
+    for (i, s) in frame.slots.iter_mut().enumerate() {
+        *s = sray_engine::render::to_fixed([(i % 1031) as f32 / 1031.0, 0.5, 0.25]);
+    }
+    let mut g = c.benchmark_group("frame");
+    g.throughput(Throughput::Elements(1024 * 1024));
+    let mut row = vec![[0.0; 3]; 1024];
+    g.bench_function("corners to pixels, 1024x1024", |b| {
+        b.iter(|| {
+            for y in 0..1024 {
+                frame.pixel_row(y, &mut row);
+                black_box(&row);
+            }
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(
+    benches,
+    intersection_tests,
+    dda_steps,
+    block_decoding,
+    frame_to_pixels
+);
 criterion_main!(benches);

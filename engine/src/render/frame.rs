@@ -181,28 +181,16 @@ impl Frame {
 
     /// Row `y` of [`Frame::to_rgb_f64`], into `out` (a row's pixels): what
     /// the PNG writer takes a row at a time, with no image-sized buffer.
-    fn pixel_row(&self, y: usize, out: &mut [[f64; 3]]) {
+    pub fn pixel_row(&self, y: usize, out: &mut [[f64; 3]]) {
         let w = self.width as usize;
-        // Each slot is clamped to a sane range first, so that a sum of
-        // four fits in an i64.
-        let v = |j: usize, k: usize| self.slots[j][k].clamp(-(1 << 60), 1 << 60);
-        let spp = self.sampling.per_slot() as f64;
-        for (x, px) in out.iter_mut().enumerate() {
-            *px = std::array::from_fn(|k| {
-                let mean = match self.sampling {
-                    Sampling::Corners => {
-                        let i = y * (w + 1) + x;
-                        let sum: i64 = [i, i + 1, i + w + 1, i + w + 2]
-                            .iter()
-                            .map(|&j| v(j, k))
-                            .sum();
-                        sum as f64 * (1.0 / 4.0)
-                    }
-                    Sampling::Jittered { .. } => v(y * w + x, k) as f64 / spp,
-                };
-                mean * (1.0 / FIXED_ONE)
-            });
-        }
+        let (upper, lower) = match self.sampling {
+            Sampling::Corners => (
+                &self.slots[y * (w + 1)..(y + 1) * (w + 1)],
+                &self.slots[(y + 1) * (w + 1)..(y + 2) * (w + 1)],
+            ),
+            Sampling::Jittered { .. } => (&self.slots[y * w..(y + 1) * w], &[][..]),
+        };
+        pixel_means(self.sampling, upper, lower, out);
     }
 
     /// 8-bit RGB: each pixel the average of its four corners (or of its
@@ -402,23 +390,8 @@ impl PixelRows {
         if self.y == self.height {
             return Ok(false);
         }
-        let v = |s: &[i64; 3], k: usize| s[k].clamp(-(1 << 60), 1 << 60);
-        let spp = self.sampling.per_slot() as f64;
-        for (x, px) in out.iter_mut().enumerate().take(self.width) {
-            *px = std::array::from_fn(|k| {
-                let mean = match self.sampling {
-                    Sampling::Corners => {
-                        let sum: i64 = v(&self.upper[x], k)
-                            + v(&self.upper[x + 1], k)
-                            + v(&self.lower[x], k)
-                            + v(&self.lower[x + 1], k);
-                        sum as f64 * (1.0 / 4.0)
-                    }
-                    Sampling::Jittered { .. } => v(&self.upper[x], k) as f64 / spp,
-                };
-                mean * (1.0 / FIXED_ONE)
-            });
-        }
+        let n = self.width.min(out.len());
+        pixel_means(self.sampling, &self.upper, &self.lower, &mut out[..n]);
         self.y += 1;
         if self.y < self.height {
             match self.sampling {
@@ -430,6 +403,39 @@ impl PixelRows {
             }
         }
         Ok(true)
+    }
+}
+
+/// A row of pixel means into `out`: of the corners in `upper` and
+/// `lower` (the rows of slots above and below the pixels), or of the
+/// samples in `upper` (jittered sampling; `lower` unused). The one place
+/// a frame's pixels are computed, in memory or spilled.
+fn pixel_means(sampling: Sampling, upper: &[[i64; 3]], lower: &[[i64; 3]], out: &mut [[f64; 3]]) {
+    // Each slot is clamped to a sane range first, so that a sum of four
+    // fits in an i64.
+    let v = |s: &[i64; 3], k: usize| s[k].clamp(-(1 << 60), 1 << 60);
+    // The sampling is matched once a row, not per channel, and the
+    // channels are spelled out (`array::from_fn` was left a call per
+    // channel, 80 % of the time): this runs for every pixel of every
+    // image (a coordinator's whole frame at a job's end).
+    match sampling {
+        Sampling::Corners => {
+            let corners = upper.windows(2).zip(lower.windows(2));
+            for ((t, b), px) in corners.zip(out.iter_mut()) {
+                let mean = |k| {
+                    let sum = v(&t[0], k) + v(&t[1], k) + v(&b[0], k) + v(&b[1], k);
+                    sum as f64 * (1.0 / 4.0) * (1.0 / FIXED_ONE)
+                };
+                *px = [mean(0), mean(1), mean(2)];
+            }
+        }
+        Sampling::Jittered { .. } => {
+            let spp = sampling.per_slot() as f64;
+            for (s, px) in upper.iter().zip(out.iter_mut()) {
+                let mean = |k| v(s, k) as f64 / spp * (1.0 / FIXED_ONE);
+                *px = [mean(0), mean(1), mean(2)];
+            }
+        }
     }
 }
 
