@@ -75,11 +75,11 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
     } else {
         (100, 1000, 1024)
     };
-    let sc = |label: &'static str, workers, keep, shard_rays, rate| Scenario {
+    let sc = |label, workers, keep, shard_rays, rate| Scenario {
         label,
         workers,
         keep,
-        colour_kept: label.contains("colour kept"),
+        colour_kept: false,
         shard_rays,
         side,
         rate,
@@ -88,6 +88,10 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
     let only = std::env::var("SRAY_BENCH_LOAD_ONLY").unwrap_or_default();
     let half = |mut s: Scenario| {
         s.side /= 2;
+        s
+    };
+    let colour_kept = |mut s: Scenario| {
+        s.colour_kept = true;
         s
     };
     let all = vec![
@@ -109,27 +113,27 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
             65_536,
             0.0,
         )),
-        sc(
+        colour_kept(sc(
             "records at workers, colour kept there (a bound), large shards",
             few,
             true,
             65_536,
             0.0,
-        ),
-        sc(
+        )),
+        colour_kept(sc(
             "records at workers, colour kept there (a bound), small shards",
             few,
             true,
             8_192,
             0.0,
-        ),
-        half(sc(
+        )),
+        colour_kept(half(sc(
             "records at workers, colour kept there (a bound), large shards, half side",
             few,
             true,
             65_536,
             0.0,
-        )),
+        ))),
         sc("records travel, sized shards", many, false, 0, 0.0),
         sc("records at workers, sized shards", many, true, 0, 0.0),
     ];
