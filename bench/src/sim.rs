@@ -142,24 +142,36 @@ async fn worker(i: usize, cfg: &SimConfig, stats: &Arc<SimStats>) -> Result<(), 
     // Whether the last call was made right after a task ended (its round
     // trip is the coordinator's scheduling, not a wait for work).
     let mut after_task = false;
+    // The next task, when the last output's reply brought one, and how
+    // long that call took (the output's sending and the scheduling: the
+    // worker's wait between two tasks).
+    let mut given: Option<(v1::NextTaskReply, Duration)> = None;
     while !stopped() {
         let t0 = Instant::now();
-        let r = c
-            .next_task(v1::NextTaskRequest {
-                session: session.clone(),
-            })
-            .await;
-        let task = match r {
-            Ok(r) => r.into_inner().task,
-            Err(_) if stopped() => break,
-            Err(s) => {
-                stats.errors.fetch_add(1, Ordering::Relaxed);
-                eprintln!("simulated worker {i}: {}", s.message());
-                tokio::time::sleep(Duration::from_millis(200)).await;
-                continue;
+        let mut waited = None;
+        let reply = match given.take() {
+            Some((r, took)) => {
+                waited = Some(took);
+                r
             }
+            None => match c
+                .next_task(v1::NextTaskRequest {
+                    session: session.clone(),
+                    held: held.iter().copied().collect(),
+                })
+                .await
+            {
+                Ok(r) => r.into_inner(),
+                Err(_) if stopped() => break,
+                Err(s) => {
+                    stats.errors.fetch_add(1, Ordering::Relaxed);
+                    eprintln!("simulated worker {i}: {}", s.message());
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                    continue;
+                }
+            },
         };
-        let Some(task) = task else {
+        let Some(task) = reply.task else {
             after_task = false;
             continue;
         };
@@ -168,14 +180,17 @@ async fn worker(i: usize, cfg: &SimConfig, stats: &Arc<SimStats>) -> Result<(), 
                 .next_task_ms
                 .lock()
                 .unwrap()
-                .push(t0.elapsed().as_secs_f32() * 1e3);
+                .push(waited.unwrap_or_else(|| t0.elapsed()).as_secs_f32() * 1e3);
         }
         after_task = true;
-        if let Err(e) = serve(&mut c, &session, task, cfg, stats, &mut held).await
-            && !stopped()
-        {
-            stats.errors.fetch_add(1, Ordering::Relaxed);
-            eprintln!("simulated worker {i}: {e}");
+        let input = reply.input_inline.then_some(reply.input);
+        match serve(&mut c, &session, task, input, cfg, stats, &mut held).await {
+            Ok((next, took)) => given = next.filter(|r| r.task.is_some()).map(|r| (r, took)),
+            Err(e) if !stopped() => {
+                stats.errors.fetch_add(1, Ordering::Relaxed);
+                eprintln!("simulated worker {i}: {e}");
+            }
+            Err(_) => {}
         }
     }
     beat.abort();
@@ -203,16 +218,18 @@ async fn heartbeat(mut c: Client, session: String, every: Duration, stats: Arc<S
     }
 }
 
-/// Runs one task: reads its input, waits as long as tracing would take,
-/// sends its output.
+/// Runs one task: reads its input (unless `inline` brought it), waits as
+/// long as tracing would take, sends its output and asks for the next
+/// task with it, as a real worker does; returns the reply's next task.
 async fn serve(
     c: &mut Client,
     session: &str,
     task: v1::Task,
+    inline: Option<Vec<v1::RecordChunk>>,
     cfg: &SimConfig,
     stats: &SimStats,
     held: &mut VecDeque<u64>,
-) -> Result<(), String> {
+) -> Result<(Option<v1::NextTaskReply>, Duration), String> {
     let started = Instant::now();
     let tref = v1::TaskRef {
         task_id: task.task_id,
@@ -221,7 +238,10 @@ async fn serve(
         held: Vec::new(),
     };
     let shade = task.stage == v1::Stage::Shade as i32;
-    if shade || !task.eye_rays {
+    if let Some(chunks) = inline {
+        let bytes: usize = chunks.iter().map(prost::Message::encoded_len).sum();
+        stats.input_bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+    } else if shade || !task.eye_rays {
         let mut r = tref.clone();
         r.held = held.iter().copied().collect();
         let mut s = c
@@ -257,15 +277,25 @@ async fn serve(
         .map(|m| prost::Message::encoded_len(m) as u64)
         .sum();
     stats.output_bytes.fetch_add(bytes, Ordering::Relaxed);
-    c.complete_task(tokio_stream::iter(msgs))
-        .await
-        .map_err(|s| format!("output: {}", s.message()))?;
-    stats.tasks.fetch_add(1, Ordering::Relaxed);
     held.push_back(task.task_id);
     if held.len() > HELD {
         held.pop_front();
     }
-    Ok(())
+    let mut msgs = msgs;
+    msgs.push(v1::TaskOutput {
+        part: Some(Part::Next(v1::NextTaskRequest {
+            session: session.to_string(),
+            held: held.iter().copied().collect(),
+        })),
+    });
+    let sent = Instant::now();
+    let reply = c
+        .complete_task(tokio_stream::iter(msgs))
+        .await
+        .map_err(|s| format!("output: {}", s.message()))?
+        .into_inner();
+    stats.tasks.fetch_add(1, Ordering::Relaxed);
+    Ok((reply.next, sent.elapsed()))
 }
 
 /// The rays of round `round`'s ray `i` spawns: how many, and its first

@@ -217,6 +217,26 @@ pub fn metrics_text(shared: &Shared) -> Result<String, std::fmt::Error> {
             ("shade", load(&c.rays_shaded)),
         ],
     );
+    counters(
+        &mut reg,
+        "tasks_given",
+        "Tasks given to workers, by how the worker asked: a NextTask call, or with its previous output",
+        "asked",
+        &[
+            ("next_task", load(&c.given_on_request)),
+            ("with_output", load(&c.given_with_output)),
+        ],
+    );
+    counters(
+        &mut reg,
+        "task_inputs",
+        "Task inputs sent, by how: with the task (records the worker holds), or streamed by a TaskInput call",
+        "how",
+        &[
+            ("inline", load(&c.inputs_inline)),
+            ("streamed", load(&c.inputs_streamed)),
+        ],
+    );
     counter(
         &mut reg,
         "verification_tasks",

@@ -26,6 +26,11 @@ use tonic::{Request, Response, Status, Streaming};
 /// How long a worker's `NextTask` waits for work before answering "none".
 const POLL: Duration = Duration::from_secs(10);
 
+/// How long an output's stream is read past its summary for the
+/// worker's request for its next task (sent right after it, or never by a
+/// worker that calls `NextTask` instead).
+const NEXT_ASKED: Duration = Duration::from_secs(5);
+
 /// What clients are told while the coordinator stops.
 pub const RESTARTING: &str = "coordinator restarting";
 
@@ -48,6 +53,59 @@ fn internal(e: impl std::fmt::Display) -> Status {
 }
 
 impl Service {
+    /// `NextTask`'s answer for the worker `session`, which keeps the
+    /// outputs of the tasks `held`: its next task, waiting up to [`POLL`]
+    /// for one, with the task's input when all of it is held there.
+    /// `with_output`: asked at the end of the worker's previous output.
+    async fn next_reply(
+        &self,
+        session: &str,
+        held: &[u64],
+        with_output: bool,
+    ) -> Result<v1::NextTaskReply, Status> {
+        let next = self
+            .shared
+            .next_task(session, POLL)
+            .await
+            .map_err(refused)?;
+        let Some((task, input)) = next else {
+            return Ok(v1::NextTaskReply::default());
+        };
+        tracing::debug!(
+            worker = %self.shared.worker_name(session),
+            job = %task.job_id,
+            task = task.task_id,
+            attempt = task.attempt,
+            stage = task.stage,
+            round = task.round,
+            verification = task.verification,
+            "task assigned"
+        );
+        let c = &self.shared.counters;
+        let given = if with_output {
+            &c.given_with_output
+        } else {
+            &c.given_on_request
+        };
+        given.fetch_add(1, Ordering::Relaxed);
+        let inline = task_input::inline(&task, &input, session, held);
+        let input_inline = inline.is_some();
+        if input_inline {
+            c.inputs_inline.fetch_add(1, Ordering::Relaxed);
+        }
+        let input = inline.unwrap_or_default();
+        let bytes: usize = input.iter().map(prost::Message::encoded_len).sum();
+        self.shared
+            .traffic
+            .to_workers
+            .fetch_add(bytes as u64, Ordering::Relaxed);
+        Ok(v1::NextTaskReply {
+            task: Some(task),
+            input,
+            input_inline,
+        })
+    }
+
     /// An output not taken: a bad one fails the attempt (the worker's
     /// fault); one the coordinator could not keep (its own disk) ends it
     /// without blame, and the task waits a moment.
@@ -157,25 +215,10 @@ impl Coordinator for Service {
         req: Request<v1::NextTaskRequest>,
     ) -> Result<Response<v1::NextTaskReply>, Status> {
         require(&req, Role::Worker, "NextTask")?;
-        let session = req.into_inner().session;
-        let task = self
-            .shared
-            .next_task(&session, POLL)
-            .await
-            .map_err(refused)?;
-        if let Some(t) = &task {
-            tracing::debug!(
-                worker = %self.shared.worker_name(&session),
-                job = %t.job_id,
-                task = t.task_id,
-                attempt = t.attempt,
-                stage = t.stage,
-                round = t.round,
-                verification = t.verification,
-                "task assigned"
-            );
-        }
-        Ok(Response::new(v1::NextTaskReply { task }))
+        let r = req.into_inner();
+        Ok(Response::new(
+            self.next_reply(&r.session, &r.held, false).await?,
+        ))
     }
 
     type TaskInputStream = Stream_<v1::RecordChunk>;
@@ -186,6 +229,10 @@ impl Coordinator for Service {
     ) -> Result<Response<Self::TaskInputStream>, Status> {
         require(&req, Role::Worker, "TaskInput")?;
         let (task, input) = self.shared.task_input(req.get_ref()).map_err(refused)?;
+        self.shared
+            .counters
+            .inputs_streamed
+            .fetch_add(1, Ordering::Relaxed);
         let r = req.into_inner();
         let (session, held) = (r.session, r.held);
         let (tx, rx) = mpsc::channel(4);
@@ -208,7 +255,10 @@ impl Coordinator for Service {
             ));
         };
         let Ok((task, input)) = self.shared.task_input(&tref) else {
-            return Ok(Response::new(v1::CompleteTaskReply { accepted: false }));
+            return Ok(Response::new(v1::CompleteTaskReply {
+                accepted: false,
+                next: None,
+            }));
         };
         let t0 = std::time::Instant::now();
         let mut rx = Receiver::new(&self.shared, &task, &input);
@@ -247,7 +297,16 @@ impl Coordinator for Service {
                         seconds = t0.elapsed().as_secs_f64(),
                         "output received"
                     );
-                    return Ok(Response::new(v1::CompleteTaskReply { accepted }));
+                    // A worker that asks for its next task here (after the
+                    // summary, as its last message) is answered with it; a
+                    // refusal is left to its next NextTask call to say.
+                    let next = match tokio::time::timeout(NEXT_ASKED, stream.message()).await {
+                        Ok(Ok(Some(v1::TaskOutput {
+                            part: Some(Part::Next(n)),
+                        }))) => self.next_reply(&tref.session, &n.held, true).await.ok(),
+                        _ => None,
+                    };
+                    return Ok(Response::new(v1::CompleteTaskReply { accepted, next }));
                 }
                 _ => return Err(Status::invalid_argument("a second header")),
             }

@@ -10,6 +10,122 @@ use std::sync::atomic::Ordering;
 use tokio::sync::mpsc;
 use tonic::Status;
 
+/// One piece of a task's input, in the order the worker reads them.
+enum Piece {
+    /// Records the worker holds already, named by the task that left
+    /// them there.
+    Named(v1::RecordChunk),
+    /// Rays `at .. at + len` of the round, from the coordinator's files.
+    Rays { at: u64, len: u64 },
+    /// The task's results, from the coordinator's files.
+    Results,
+}
+
+/// What the worker `session`, which holds the outputs of the tasks
+/// `held`, is sent as the input of `task`: the records it holds named,
+/// the others streamed. Err names records that are only at another
+/// worker (`records_at_workers`): the task cannot run here.
+fn plan(
+    task: &v1::Task,
+    input: &TaskInput,
+    session: &str,
+    held: &[u64],
+) -> Result<Vec<Piece>, &'static str> {
+    // What the worker holds of a task's output, if the output taken
+    // was this worker's.
+    let holds = |t: u64, s: &str| {
+        held.contains(&t) && sray_proto::ids::same(s.as_bytes(), session.as_bytes())
+    };
+    let named = |kind: v1::RecordKind, task_id: u64, offset: u64, count: u64| {
+        Piece::Named(v1::RecordChunk {
+            kind: kind as i32,
+            data: Vec::new(),
+            held: Some(v1::HeldRecords {
+                task_id,
+                offset,
+                count,
+            }),
+            raw: false,
+        })
+    };
+    let mut pieces = Vec::new();
+    let (first, n) = (task.first_ray, task.ray_count);
+    let by_intersect = input
+        .held
+        .intersect
+        .as_ref()
+        .filter(|(t, s)| holds(*t, s))
+        .map(|(t, _)| *t);
+    if !task.eye_rays && (input.rays.is_some() || input.held.pinned) {
+        if let Some(t) = by_intersect {
+            let off = first - input.held.shard_first;
+            pieces.push(named(v1::RecordKind::Rays, t, off, n));
+        } else {
+            // Runs of the range held by the worker are named, the
+            // rest sent.
+            let mut at = first;
+            let end = first + n;
+            let mut next = input
+                .held
+                .rays
+                .iter()
+                .filter(|g| g.start + g.len > first && g.start < end)
+                .peekable();
+            while at < end {
+                let (upto, mine) = match next.peek() {
+                    Some(g) if g.start <= at => {
+                        let hi = (g.start + g.len).min(end);
+                        let m = holds(g.task, &g.session).then_some((g.task, at - g.start));
+                        next.next();
+                        (hi, m)
+                    }
+                    Some(g) => (g.start.min(end), None),
+                    None => (end, None),
+                };
+                if upto <= at {
+                    break;
+                }
+                match mine {
+                    Some((t, off)) => pieces.push(named(v1::RecordKind::Rays, t, off, upto - at)),
+                    None if input.rays.is_none() => return Err("rays"),
+                    None => pieces.push(Piece::Rays { at, len: upto - at }),
+                }
+                at = upto;
+            }
+        }
+    }
+    let shade = task.stage == v1::Stage::Shade as i32;
+    match (&input.results, by_intersect) {
+        (_, Some(t)) if shade => {
+            pieces.push(named(v1::RecordKind::Results, t, input.results_offset, n));
+        }
+        (Some(_), _) => pieces.push(Piece::Results),
+        (None, None) if shade && input.held.pinned => return Err("results"),
+        (None, _) => {}
+    }
+    Ok(pieces)
+}
+
+/// The input of `task` for the worker `session` (holding the outputs of
+/// the tasks `held`) when all of it is records the worker holds: small
+/// enough to go with the task itself, which saves the worker a call.
+/// None when records must be streamed, or the task cannot run there.
+pub(crate) fn inline(
+    task: &v1::Task,
+    input: &TaskInput,
+    session: &str,
+    held: &[u64],
+) -> Option<Vec<v1::RecordChunk>> {
+    plan(task, input, session, held)
+        .ok()?
+        .into_iter()
+        .map(|p| match p {
+            Piece::Named(c) => Some(c),
+            Piece::Rays { .. } | Piece::Results => None,
+        })
+        .collect()
+}
+
 /// Sends the input of `task` to the worker `session`, which holds the
 /// outputs of the tasks `held`: records it holds are named, the others
 /// streamed from the coordinator's files. Runs on a blocking thread.
@@ -43,102 +159,42 @@ pub(crate) fn send(
             "the coordinator cannot read the task's input: {msg}"
         ))));
     };
-    // What the worker holds of a task's output, if the output taken
-    // was this worker's.
-    let holds = |t: u64, s: &str| {
-        held.contains(&t) && sray_proto::ids::same(s.as_bytes(), session.as_bytes())
+    let pieces = match plan(task, input, session, held) {
+        Ok(p) => p,
+        Err(what) => {
+            let _ = tx.blocking_send(Err(Status::failed_precondition(format!(
+                "this worker does not hold the {what} of this task, and the coordinator keeps no copy"
+            ))));
+            return;
+        }
     };
-    let named = |kind: v1::RecordKind, task_id: u64, offset: u64, count: u64| v1::RecordChunk {
-        kind: kind as i32,
-        data: Vec::new(),
-        held: Some(v1::HeldRecords {
-            task_id,
-            offset,
-            count,
-        }),
-        raw: false,
-    };
-    let (first, n) = (task.first_ray, task.ray_count);
-    let by_intersect = input
-        .held
-        .intersect
-        .as_ref()
-        .filter(|(t, s)| holds(*t, s))
-        .map(|(t, _)| *t);
-    // Records that are only at the workers (`records_at_workers`)
-    // and not at this one: the task cannot run here.
-    let lost = |what: &str| {
-        let _ = tx.blocking_send(Err(Status::failed_precondition(format!(
-            "this worker does not hold the {what} of this task, and the coordinator keeps no copy"
-        ))));
-    };
-    if !task.eye_rays && (input.rays.is_some() || input.held.pinned) {
-        if let Some(t) = by_intersect {
-            let off = first - input.held.shard_first;
-            if !send(named(v1::RecordKind::Rays, t, off, n)) {
-                return;
-            }
-        } else {
-            // Runs of the range held by the worker are named, the
-            // rest sent.
-            let mut at = first;
-            let end = first + n;
-            let segs = input.held.rays.clone();
-            let mut next = segs
-                .iter()
-                .filter(|g| g.start + g.len > first && g.start < end)
-                .peekable();
-            while at < end {
-                let (upto, mine) = match next.peek() {
-                    Some(g) if g.start <= at => {
-                        let hi = (g.start + g.len).min(end);
-                        let m = holds(g.task, &g.session).then_some((g.task, at - g.start));
-                        next.next();
-                        (hi, m)
-                    }
-                    Some(g) => (g.start.min(end), None),
-                    None => (end, None),
-                };
-                if upto <= at {
-                    break;
-                }
-                match mine {
-                    Some((t, off)) => {
-                        if !send(named(v1::RecordKind::Rays, t, off, upto - at)) {
-                            return;
-                        }
-                    }
-                    None => {
-                        let Some(rays) = &input.rays else {
-                            return lost("rays");
-                        };
-                        let mut rd = match rays.reader_range(at, upto - at) {
-                            Ok(r) => r,
-                            Err(e) => return fail(e),
-                        };
-                        if !stream_records(&mut rd, v1::RecordKind::Rays, &send, &fail) {
-                            return;
-                        }
+    for piece in pieces {
+        let sent = match piece {
+            Piece::Named(c) => send(c),
+            Piece::Rays { at, len } => {
+                let rays = input.rays.as_ref().expect("planned from the files");
+                match rays.reader_range(at, len) {
+                    Ok(mut rd) => stream_records(&mut rd, v1::RecordKind::Rays, &send, &fail),
+                    Err(e) => {
+                        fail(e);
+                        false
                     }
                 }
-                at = upto;
             }
+            Piece::Results => {
+                let results = input.results.as_ref().expect("planned from the files");
+                match results.reader_range(input.results_offset, task.ray_count) {
+                    Ok(mut rd) => stream_records(&mut rd, v1::RecordKind::Results, &send, &fail),
+                    Err(e) => {
+                        fail(e);
+                        false
+                    }
+                }
+            }
+        };
+        if !sent {
+            return;
         }
-    }
-    let shade = task.stage == v1::Stage::Shade as i32;
-    match (&input.results, by_intersect) {
-        (Some(_), Some(t)) | (None, Some(t)) if shade => {
-            send(named(v1::RecordKind::Results, t, input.results_offset, n));
-        }
-        (Some(results), _) => {
-            let mut rd = match results.reader_range(input.results_offset, n) {
-                Ok(r) => r,
-                Err(e) => return fail(e),
-            };
-            stream_records(&mut rd, v1::RecordKind::Results, &send, &fail);
-        }
-        (None, None) if shade && input.held.pinned => lost("results"),
-        (None, _) => {}
     }
 }
 

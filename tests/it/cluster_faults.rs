@@ -379,7 +379,10 @@ fn a_worker_that_never_answers_costs_one_backup() {
             tokio::spawn(async move {
                 loop {
                     let r = c
-                        .next_task(v1::NextTaskRequest { session: s.clone() })
+                        .next_task(v1::NextTaskRequest {
+                            session: s.clone(),
+                            held: vec![],
+                        })
                         .await;
                     if r.is_ok_and(|r| r.into_inner().task.is_some()) {
                         t.fetch_add(1, std::sync::atomic::Ordering::Relaxed);

@@ -270,6 +270,18 @@ fn status_json_healthz_metrics_and_preview() {
     assert_eq!(metric(&m, "sray_verification_mismatches_total"), 0.0);
     assert_eq!(metric(&m, "sray_queue_depth"), 0.0);
     assert!(m.contains("# TYPE sray_rays_total counter"), "{m}");
+    // The worker asks for its next task with its output, and a shading of
+    // results it holds comes with its input: one call a task, not three.
+    let with_output = metric(&m, "sray_tasks_given_total{asked=\"with_output\"}");
+    let on_request = metric(&m, "sray_tasks_given_total{asked=\"next_task\"}");
+    assert!(
+        with_output >= 1.0 && with_output > on_request,
+        "{with_output} tasks given with an output, {on_request} on request: {m}"
+    );
+    assert!(
+        metric(&m, "sray_task_inputs_total{how=\"inline\"}") >= 1.0,
+        "{m}"
+    );
 
     // The preview of a finished job is its image.
     let (code, png) = get(&http, &format!("/jobs/{job}/preview.png"));

@@ -124,6 +124,7 @@ fn keep_beating(c: &Client, session: &str) {
 async fn next(c: &mut Client, session: &str) -> Option<v1::Task> {
     c.next_task(v1::NextTaskRequest {
         session: session.into(),
+        held: vec![],
     })
     .await
     .ok()?
@@ -1009,6 +1010,7 @@ fn roles_sessions_and_job_secrets_are_enforced() {
 async fn next_err(c: &mut Client, session: &str) -> tonic::Code {
     c.next_task(v1::NextTaskRequest {
         session: session.into(),
+        held: vec![],
     })
     .await
     .err()

@@ -70,6 +70,10 @@ pub struct Work {
     /// The executor was started for this task (its grids were built for
     /// it): said in the task's summary.
     pub fresh: bool,
+    /// Asks for the next task at the end of the output (the records this
+    /// executor keeps added to those named): the coordinator answers it
+    /// with the output's reply, and the worker makes no NextTask call.
+    pub next: Option<v1::NextTaskRequest>,
 }
 
 /// A task's input records.
@@ -78,6 +82,9 @@ pub enum Input {
     None,
     /// From the coordinator.
     Stream(tonic::Streaming<v1::RecordChunk>),
+    /// Sent with the task (`NextTaskReply.input`): records kept here,
+    /// named.
+    Chunks(Vec<v1::RecordChunk>),
     /// Files already here (the coordinator tracing a sample itself).
     Files(Inputs),
 }
@@ -242,6 +249,7 @@ fn job_thread<R: Elem>(
             out,
             done,
             fresh,
+            next,
         } = w;
         let run = std::panic::AssertUnwindSafe(|| {
             let mut ctx = TaskCtx {
@@ -278,6 +286,13 @@ fn job_thread<R: Elem>(
         // After every task, failed or not: a task may have dropped kept
         // records to make room before it failed.
         publish(&held, &kept);
+        // The request for the next task goes after the summary, through
+        // the same queue, naming what is kept here now.
+        // (A stream already closed drops it, as it drops the output.)
+        if let (Ok(()), Some(mut req)) = (&r, next) {
+            req.held.extend(kept.ids());
+            let _ = encoder.output(out).part(Part::Next(req));
+        }
         let _ = done.send(r);
     }
 }

@@ -146,18 +146,22 @@ pub(crate) fn read_inputs<R: Elem>(
     input: Input,
 ) -> Result<Inputs, String> {
     let mut inputs = Inputs::default();
-    let mut stream = match input {
+    let (mut stream, mut chunks) = match input {
         Input::None => return Ok(inputs),
         Input::Files(f) => return Ok(f),
-        Input::Stream(s) => s,
+        Input::Stream(s) => (Some(s), Vec::new().into_iter()),
+        Input::Chunks(c) => (None, c.into_iter()),
     };
     let mut rays = Gather::<RayRec>::Empty;
     let mut results = GatherResults::Bare(Gather::Empty);
     let spill = &tracer.spill;
     loop {
-        let msg = rt
-            .block_on(stream.message())
-            .map_err(|s| format!("task input: {}", s.message()))?;
+        let msg = match &mut stream {
+            Some(s) => rt
+                .block_on(s.message())
+                .map_err(|s| format!("task input: {}", s.message()))?,
+            None => chunks.next(),
+        };
         let Some(chunk) = msg else { break };
         let kind = RecordKind::try_from(chunk.kind);
         if let Some(h) = &chunk.held {

@@ -312,6 +312,8 @@ impl Node {
     }
 
     async fn take_tasks(&mut self, session: &str, lost: &AtomicBool) -> anyhow::Result<()> {
+        // The next task, when the last output's reply brought one.
+        let mut given: Option<v1::NextTaskReply> = None;
         loop {
             if lost.load(Ordering::Relaxed) {
                 return Ok(());
@@ -326,31 +328,50 @@ impl Node {
                     e.jobs_running(jobs.clone(), asked);
                 }
             }
-            match self
-                .client
-                .next_task(v1::NextTaskRequest {
-                    session: session.to_string(),
-                })
-                .await
-            {
-                Ok(r) => {
-                    if let Some(task) = r.into_inner().task {
-                        self.serve_task(session, task).await?;
+            let reply = match given.take() {
+                Some(r) => r,
+                None => match self.client.next_task(self.next_request(session)).await {
+                    Ok(r) => r.into_inner(),
+                    Err(s) if s.code() == Code::NotFound => return Ok(()),
+                    Err(s) if fatal(&s) => {
+                        anyhow::bail!("the coordinator refused this worker: {}", s.message())
                     }
-                }
-                Err(s) if s.code() == Code::NotFound => return Ok(()),
-                Err(s) if fatal(&s) => {
-                    anyhow::bail!("the coordinator refused this worker: {}", s.message())
-                }
-                Err(_) => tokio::time::sleep(retry_wait()).await,
+                    Err(_) => {
+                        tokio::time::sleep(retry_wait()).await;
+                        continue;
+                    }
+                },
+            };
+            if let Some(task) = reply.task {
+                let input = reply.input_inline.then_some(reply.input);
+                given = self
+                    .serve_task(session, task, input)
+                    .await?
+                    .filter(|r| r.task.is_some());
             }
         }
     }
 
-    /// Runs one task. Task failures are reported to the coordinator (which
-    /// gives the task to another worker); only local faults that would
-    /// fail every task end the worker.
-    async fn serve_task(&mut self, session: &str, task: v1::Task) -> anyhow::Result<()> {
+    /// A request for this worker's next task, naming the records its
+    /// executors keep (a task whose input is all here comes with it).
+    fn next_request(&self, session: &str) -> v1::NextTaskRequest {
+        v1::NextTaskRequest {
+            session: session.to_string(),
+            held: self.execs.iter().flat_map(|e| e.held()).collect(),
+        }
+    }
+
+    /// Runs one task (`input`: its input, when it came with it). Task
+    /// failures are reported to the coordinator (which gives the task to
+    /// another worker); only local faults that would fail every task end
+    /// the worker. Returns the next task when the output's reply brought
+    /// one.
+    async fn serve_task(
+        &mut self,
+        session: &str,
+        task: v1::Task,
+        input: Option<Vec<v1::RecordChunk>>,
+    ) -> anyhow::Result<Option<v1::NextTaskReply>> {
         let tref = v1::TaskRef {
             session: session.to_string(),
             task_id: task.task_id,
@@ -359,25 +380,33 @@ impl Node {
         };
         self.running.store(task.task_id, Ordering::Relaxed);
         self.now.set_task(Some(tref.clone()));
-        let r = self.try_task(&tref, task).await;
+        let r = self.try_task(&tref, task, input).await;
         self.now.set_task(None);
         self.running.store(0, Ordering::Relaxed);
-        if let Err(e) = r {
-            let msg = format!("{e:#}");
-            tracing::warn!(task = tref.task_id, error = %msg, "task failed");
-            let _ = self
-                .client
-                .fail_task(v1::FailTaskRequest {
-                    task: Some(tref.clone()),
-                    kind: failure_kind(&msg) as i32,
-                    error: msg,
-                })
-                .await;
+        match r {
+            Ok(next) => Ok(next),
+            Err(e) => {
+                let msg = format!("{e:#}");
+                tracing::warn!(task = tref.task_id, error = %msg, "task failed");
+                let _ = self
+                    .client
+                    .fail_task(v1::FailTaskRequest {
+                        task: Some(tref.clone()),
+                        kind: failure_kind(&msg) as i32,
+                        error: msg,
+                    })
+                    .await;
+                Ok(None)
+            }
         }
-        Ok(())
     }
 
-    async fn try_task(&mut self, tref: &v1::TaskRef, task: v1::Task) -> anyhow::Result<()> {
+    async fn try_task(
+        &mut self,
+        tref: &v1::TaskRef,
+        task: v1::Task,
+        inline: Option<Vec<v1::RecordChunk>>,
+    ) -> anyhow::Result<Option<v1::NextTaskReply>> {
         if let Some(Fault::StallFromRound(n)) = self.cfg.fault
             && task.round >= n
             && !task.job_id.contains('.')
@@ -468,12 +497,14 @@ impl Node {
         exec.jobs.insert(task.job_id.clone());
         let exec = &*exec;
         let shade = task.stage == v1::Stage::Shade as i32;
-        let input = if shade || !task.eye_rays {
-            let mut r = tref.clone();
-            r.held = exec.held();
-            Input::Stream(self.client.task_input(r).await?.into_inner())
-        } else {
-            Input::None
+        let input = match inline {
+            _ if !shade && task.eye_rays => Input::None,
+            Some(chunks) => Input::Chunks(chunks),
+            None => {
+                let mut r = tref.clone();
+                r.held = exec.held();
+                Input::Stream(self.client.task_input(r).await?.into_inner())
+            }
         };
         // The output stream: our sender stays alive until the outcome is
         // known, so that a failure is reported before the stream ends.
@@ -491,12 +522,20 @@ impl Node {
             client.complete_task(stream).await
         });
         let (done, outcome) = oneshot::channel();
+        // The request for the next task, which the executor completes
+        // with the records it keeps once this task's are among them.
+        let (_, others) = self.execs.split_last().context("no executor")?;
+        let next = Some(v1::NextTaskRequest {
+            session: tref.session.clone(),
+            held: others.iter().flat_map(|e| e.held()).collect(),
+        });
         let work = Work {
             task,
             input,
             out: out.clone(),
             done,
             fresh,
+            next,
         };
         // Only the setup at work holds more than its grids: the others give
         // their buffers back, so that kept setups stay within --memory
@@ -517,16 +556,16 @@ impl Node {
             Ok(()) => {
                 drop(out);
                 let reply = call.await.context("output stream")?;
-                let accepted = reply
-                    .map(|r| r.into_inner().accepted)
+                let reply = reply
+                    .map(|r| r.into_inner())
                     .map_err(|s| anyhow::anyhow!("output stream: {}", s.message()))?;
-                if !accepted {
+                if !reply.accepted {
                     tracing::info!(
                         task = tref.task_id,
                         "output not needed any more (the task was done elsewhere)"
                     );
                 }
-                Ok(())
+                Ok(reply.next)
             }
             Err(e) => {
                 // Report first; then end the output stream unfinished.
@@ -541,7 +580,7 @@ impl Node {
                 drop(out);
                 call.abort();
                 tracing::warn!(task = tref.task_id, error = %e, "task failed");
-                Ok(())
+                Ok(None)
             }
         }
     }

@@ -179,6 +179,7 @@ async fn run_here(
         out: out_tx,
         done: done_tx,
         fresh: false,
+        next: None,
     };
     if !exec.submit(work) {
         bail!("the coordinator's tracer has stopped");

@@ -43,4 +43,12 @@ pub struct Counters {
     /// Verification samples that disagreed with the shard's output.
     pub mismatches: AtomicU64,
     pub workers_registered: AtomicU64,
+    /// Tasks given in answer to a NextTask call, and in the reply to the
+    /// worker's previous output (`TaskOutput.next`).
+    pub given_on_request: AtomicU64,
+    pub given_with_output: AtomicU64,
+    /// Task inputs sent with their task (`NextTaskReply.input`), and
+    /// streamed by a TaskInput call.
+    pub inputs_inline: AtomicU64,
+    pub inputs_streamed: AtomicU64,
 }

@@ -172,12 +172,13 @@ impl Shared {
         (queued, running, g.requeued_total)
     }
 
-    /// The next task for the worker `session`, waiting up to `wait`.
+    /// The next task for the worker `session`, and its input, waiting up
+    /// to `wait`.
     pub async fn next_task(
         &self,
         session: &str,
         wait: Duration,
-    ) -> Result<Option<v1::Task>, Refusal> {
+    ) -> Result<Option<(v1::Task, Arc<TaskInput>)>, Refusal> {
         let deadline = tokio::time::Instant::now() + wait;
         loop {
             let notified = self.task_ready.notified();
@@ -219,7 +220,12 @@ impl Shared {
     /// the job with the fewest attempts running (so that a small job is
     /// not held to the pace of a large one), its first task, unless a
     /// later one's input is held here.
-    fn pick(&self, g: &mut Inner, tag: &WorkerTag, now: Instant) -> Option<v1::Task> {
+    fn pick(
+        &self,
+        g: &mut Inner,
+        tag: &WorkerTag,
+        now: Instant,
+    ) -> Option<(v1::Task, Arc<TaskInput>)> {
         let room_retry = self.cfg.room_retry;
         // Per job with a task this worker may take: its first such task,
         // and the first whose input is here (by order of first appearance).
@@ -294,10 +300,11 @@ impl Shared {
         );
         let mut task = t.task.clone();
         task.attempt = attempt;
+        let input = t.input.clone();
         if let Some(w) = g.workers.get_mut(&tag.session) {
             w.running.insert((id, attempt));
         }
-        Some(task)
+        Some((task, input))
     }
 
     /// The input of a task the worker is running.
