@@ -13,8 +13,9 @@
 //! agrees with its shard), and a round's rays are the spawned rays of the
 //! one before, in key order, as the coordinator expects.
 
-use sray_engine::bf::{Contribution, RayRec, ResultRec, SPAWN_SLOTS};
+use sray_engine::bf::{Contribution, IntersectStats, RayRec, ResultRec, SPAWN_SLOTS, ShadeStats};
 use sray_engine::hit::PrimId;
+use sray_engine::shapes::{KindCounts, ShapeKind};
 use sray_proto::auth::Token;
 use sray_proto::net::{Client, Target};
 use sray_proto::v1::{self, task_output::Part};
@@ -398,10 +399,13 @@ fn output(
     };
     let (first, n) = (task.first_ray, task.ray_count);
     let mut summary = v1::TaskSummary {
-        stats_json: "{}".into(),
+        stats_json: stats_json(task),
         ..Default::default()
     };
-    summary.tests_by_kind.insert("sphere".into(), n);
+    // Every kind, as a real worker names them.
+    let mut tests = KindCounts::default();
+    tests.add_n(ShapeKind::Sphere, 10 * n);
+    summary.tests_by_kind = tests.named().map(|(k, n)| (k.to_string(), n)).collect();
     if task.stage == v1::Stage::Intersect as i32 {
         let hit = |id: u64| coloured(task.round + 7, id);
         let hits = (first..first + n).filter(|&id| hit(id)).count() as u64;
@@ -521,6 +525,44 @@ fn output(
 
 /// A chunk of contributions: packed per slot where the records stay at
 /// the worker (`keep`), else as records.
+/// A task's statistics as a real worker sends them, with counts of the
+/// right size (the coordinator reads every task's): an intersection in
+/// three passes, or a shading's join.
+fn stats_json(task: &v1::Task) -> String {
+    let n = task.ray_count;
+    let scan = 12 << 20;
+    let r = if task.stage == v1::Stage::Intersect as i32 {
+        let mut tests = KindCounts::default();
+        tests.add_n(ShapeKind::Sphere, 10 * n);
+        serde_json::to_string(&IntersectStats {
+            rays: n,
+            passes: 3,
+            remaining_rays_per_pass: vec![n, n / 3, n / 20],
+            store_numbers: vec![4.25, 3.5, 2.75],
+            registrations: 6 * n,
+            registered_rays: n + n / 3 + n / 20,
+            intersection_tests: tests,
+            tests_skipped_mailbox: n / 2,
+            tests_skipped_last_voxel: n / 4,
+            aggregate_walks: 0,
+            db_scans: 3,
+            db_bytes_read: 3 * scan,
+            db_blocks_skipped: 7,
+            model_reads: 0,
+        })
+    } else {
+        serde_json::to_string(&ShadeStats {
+            hits: n / 2,
+            sets: 1,
+            db_scans: 1,
+            db_bytes_read: scan,
+            db_blocks_skipped: 3,
+            model_reads: 0,
+        })
+    };
+    r.unwrap_or_default()
+}
+
 fn push_colour(msgs: &mut Vec<v1::TaskOutput>, keep: bool, recs: &[Contribution]) {
     let (kind, data) = if keep {
         (

@@ -8,7 +8,7 @@ use super::prints;
 use super::recover::{Lineage, RoundLog, run_stage};
 use super::shards::{Fleet, cut, shard_size};
 use super::stages::{RecordsLost, Stage};
-use super::stats::{Totals, job_stats, passes_of, stat_of};
+use super::stats::{TaskCounts, Totals, job_stats};
 use super::verify::Arbiter;
 use crate::jobs::{self, JobEntry, Record, Resume};
 use crate::state::Shared;
@@ -172,7 +172,7 @@ pub(super) async fn drive(
             let results: Vec<Option<Arc<Records<ResultRec>>>> = outs
                 .into_iter()
                 .map(|(o, w)| {
-                    round_passes.push(passes_of(&o.summary.stats_json));
+                    round_passes.push(TaskCounts::of(&o.summary.stats_json).passes);
                     winners.push(w.session);
                     if keep {
                         iprints.push(prints::print_of(v1::Stage::Intersect, &o, 0)?);
@@ -225,7 +225,7 @@ pub(super) async fn drive(
             let mut start = 0;
             let mut last_key: Option<u64> = None;
             for ((o, w), &id) in outs.iter().zip(&stage.main_ids) {
-                tot.shading_scans += stat_of(&o.summary.stats_json, "db_scans").unwrap_or(0);
+                tot.shading_scans += TaskCounts::of(&o.summary.stats_json).db_scans.unwrap_or(0);
                 let len = o.rays.as_ref().map_or(o.kept_rays, |r| r.len());
                 if o.rays.is_none() && len > 0 {
                     // Kept at the worker: the keys as it reports them.

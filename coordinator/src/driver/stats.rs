@@ -80,15 +80,23 @@ impl Totals {
     }
 }
 
-pub(super) fn passes_of(stats_json: &str) -> Option<u64> {
-    stat_of(stats_json, "passes")
+/// The counts the coordinator reads from a task's statistics (which it
+/// keeps as they are otherwise): read into these fields alone, every task's
+/// statistics are skimmed, not built into a tree.
+#[derive(serde::Deserialize, Default)]
+#[serde(default)]
+pub(super) struct TaskCounts {
+    /// An intersection's passes over the objects.
+    pub passes: Option<u64>,
+    /// Scans of the objects (a shading's joins).
+    pub db_scans: Option<u64>,
 }
 
-/// A count from a task's statistics.
-pub(super) fn stat_of(stats_json: &str, key: &str) -> Option<u64> {
-    serde_json::from_str::<serde_json::Value>(stats_json)
-        .ok()
-        .and_then(|v| v[key].as_u64())
+impl TaskCounts {
+    /// The counts of a task's statistics; none if they do not parse.
+    pub fn of(stats_json: &str) -> TaskCounts {
+        serde_json::from_str(stats_json).unwrap_or_default()
+    }
 }
 
 pub(super) fn job_stats(
