@@ -58,16 +58,16 @@ pub struct TaskEntry {
 }
 
 impl TaskEntry {
-    pub(super) fn excludes(&self, w: &WorkerTag) -> bool {
-        self.excluded.contains(&w.session)
-            || self.excluded.contains(&w.name)
-            || (self.pinned && self.prefer.as_deref() != Some(w.session.as_str()))
+    pub(super) fn excludes(&self, session: &str, name: &str) -> bool {
+        (self.pinned && self.prefer.as_deref() != Some(session))
+            || self.excluded.contains(session)
+            || self.excluded.contains(name)
     }
 
     /// Why the worker `w` may not take this task at `now`, if it may not
     /// (quarantine aside): it failed it, or lacked room for it lately.
     pub(super) fn refuses(&self, w: &WorkerTag, now: Instant, room_retry: Duration) -> bool {
-        self.excludes(w)
+        self.excludes(&w.session, &w.name)
             || self
                 .no_room
                 .get(&w.session)

@@ -52,17 +52,23 @@ impl Shared {
 
     /// Whether the worker is quarantined now.
     pub fn is_quarantined(&self, worker: &WorkerTag) -> bool {
-        quarantined_now(&self.lock().quarantined, worker, Instant::now())
+        quarantined_now(
+            &self.lock().quarantined,
+            &worker.session,
+            &worker.name,
+            Instant::now(),
+        )
     }
 }
 
 /// Whether `tag` (by session or by name) is quarantined at `now`.
 pub(super) fn quarantined_now(
     quarantined: &HashMap<String, Quarantine>,
-    tag: &WorkerTag,
+    session: &str,
+    name: &str,
     now: Instant,
 ) -> bool {
-    [&tag.session, &tag.name]
+    [session, name]
         .iter()
         .any(|k| quarantined.get(*k).is_some_and(|q| q.until > now))
 }

@@ -199,7 +199,7 @@ impl Shared {
                     name: w.name.clone(),
                 };
                 if w.free()
-                    && !quarantined_now(&g.quarantined, &tag, now)
+                    && !quarantined_now(&g.quarantined, &tag.session, &tag.name, now)
                     && let Some(task) = self.pick(&mut g, &tag, now)
                 {
                     return Ok(Some(task));

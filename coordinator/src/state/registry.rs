@@ -56,7 +56,7 @@ impl Shared {
                     session: session.clone(),
                     name: w.name.clone(),
                 };
-                let quarantined = quarantined_now(&g.quarantined, &tag, now);
+                let quarantined = quarantined_now(&g.quarantined, &tag.session, &tag.name, now);
                 let mut tasks: Vec<String> = w
                     .running
                     .iter()
@@ -132,7 +132,7 @@ impl Shared {
                     session: (*s).clone(),
                     name: w.name.clone(),
                 };
-                !avoid.contains(s) && !quarantined_now(&g.quarantined, &tag, now)
+                !avoid.contains(s) && !quarantined_now(&g.quarantined, &tag.session, &tag.name, now)
             })
             .min_by_key(|(_, w)| (w.running.len() + w.overdue.len(), w.tasks_done))
             .map(|(s, _)| s.clone())
@@ -162,7 +162,7 @@ impl Shared {
                     session: (*s).clone(),
                     name: w.name.clone(),
                 };
-                !quarantined_now(&g.quarantined, &tag, now)
+                !quarantined_now(&g.quarantined, &tag.session, &tag.name, now)
                     && !excluded
                         .iter()
                         .any(|e| e.session == tag.session || e.name == tag.name)

@@ -5,7 +5,6 @@
 use super::Shared;
 use super::inner::{TaskState, lose};
 use super::quarantine::quarantined_now;
-use crate::task::WorkerTag;
 use std::time::{Duration, Instant};
 
 impl Shared {
@@ -122,20 +121,32 @@ impl Shared {
             if t.state != TaskState::Queued {
                 continue;
             }
+            // Whether the worker `s` may take it now: asked every quarter
+            // second of every queued task, so without a string built. A
+            // task pinned to its records' holder asks that worker alone.
+            let may = |s: &str, w: &super::inner::Worker| {
+                !quarantined_now(&g.quarantined, s, &w.name, now)
+                    && !t.excludes(s, &w.name)
+                    && !t.no_room.contains_key(s)
+            };
+            let open = match (t.pinned, t.prefer.as_deref()) {
+                (true, Some(p)) => g.workers.get(p).is_some_and(|w| may(p, w)),
+                _ => g.workers.iter().any(|(s, w)| may(s, w)),
+            };
+            if open {
+                t.blocked_since = None;
+                continue;
+            }
+            // Blocked: why, worker by worker.
             let mut reasons = Vec::new();
-            let mut open = false;
             for (s, w) in &g.workers {
-                let tag = WorkerTag {
-                    session: s.clone(),
-                    name: w.name.clone(),
-                };
-                if quarantined_now(&g.quarantined, &tag, now) {
-                    let why = [&tag.session, &tag.name]
+                if quarantined_now(&g.quarantined, s, &w.name, now) {
+                    let why = [s, &w.name]
                         .iter()
                         .find_map(|k| g.quarantined.get(*k))
                         .map_or("", |q| q.why.as_str());
                     reasons.push(format!("{}: quarantined ({why})", w.name));
-                } else if t.excludes(&tag) {
+                } else if t.excludes(s, &w.name) {
                     let failed = t
                         .failures
                         .iter()
@@ -148,13 +159,7 @@ impl Shared {
                 } else if let Some((_, why)) = t.no_room.get(s) {
                     // Retried after `room_retry`, but blocked still.
                     reasons.push(why.clone());
-                } else {
-                    open = true;
                 }
-            }
-            if open {
-                t.blocked_since = None;
-                continue;
             }
             let since = *t.blocked_since.get_or_insert(now);
             if reasons.is_empty() {
