@@ -52,11 +52,7 @@ impl Shared {
             .workers
             .iter()
             .map(|(session, w)| {
-                let tag = WorkerTag {
-                    session: session.clone(),
-                    name: w.name.clone(),
-                };
-                let quarantined = quarantined_now(&g.quarantined, &tag.session, &tag.name, now);
+                let quarantined = quarantined_now(&g.quarantined, session, &w.name, now);
                 let mut tasks: Vec<String> = w
                     .running
                     .iter()
@@ -123,16 +119,15 @@ impl Shared {
     /// quarantined, not among `avoid` (sessions); the one running the
     /// fewest tasks, then the one that has done the fewest.
     pub fn recompute_worker(&self, avoid: &[String]) -> Option<String> {
+        // A round's checks each avoid more workers: a set, not a search of
+        // the list for every worker.
+        let avoid: HashSet<&str> = avoid.iter().map(String::as_str).collect();
         let g = self.lock();
         let now = Instant::now();
         g.workers
             .iter()
             .filter(|(s, w)| {
-                let tag = WorkerTag {
-                    session: (*s).clone(),
-                    name: w.name.clone(),
-                };
-                !avoid.contains(s) && !quarantined_now(&g.quarantined, &tag.session, &tag.name, now)
+                !avoid.contains(s.as_str()) && !quarantined_now(&g.quarantined, s, &w.name, now)
             })
             .min_by_key(|(_, w)| (w.running.len() + w.overdue.len(), w.tasks_done))
             .map(|(s, _)| s.clone())
@@ -158,14 +153,10 @@ impl Shared {
         g.workers
             .iter()
             .filter(|(s, w)| {
-                let tag = WorkerTag {
-                    session: (*s).clone(),
-                    name: w.name.clone(),
-                };
-                !quarantined_now(&g.quarantined, &tag.session, &tag.name, now)
+                !quarantined_now(&g.quarantined, s, &w.name, now)
                     && !excluded
                         .iter()
-                        .any(|e| e.session == tag.session || e.name == tag.name)
+                        .any(|e| e.session == **s || e.name == w.name)
             })
             .count()
     }
