@@ -7,7 +7,7 @@ use sray_proto::v1;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::mpsc;
+use tokio::sync::{Notify, mpsc};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TaskState {
@@ -120,6 +120,9 @@ pub struct Worker {
     /// Attempts of this worker that ran past their deadline and have not
     /// ended: while there is one, the worker is given no other task.
     pub(super) overdue: HashSet<(u64, u32)>,
+    /// Wakes this worker's wait for a task alone (a task pinned to it was
+    /// queued), where `Shared::task_ready` wakes every worker waiting.
+    pub(super) wake: Arc<Notify>,
 }
 
 impl Worker {

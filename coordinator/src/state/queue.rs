@@ -9,7 +9,7 @@ use sray_proto::v1;
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tokio::sync::mpsc;
+use tokio::sync::{Notify, mpsc};
 
 impl Shared {
     /// Queues tasks; their outcomes go to `events`. Returns their ids.
@@ -71,8 +71,23 @@ impl Shared {
                 lose(&mut g, id, "the worker holding its input is gone");
             }
         }
+        // Tasks pinned to the worker holding their input wake that worker
+        // alone: no other may take them, and waking a thousand workers to
+        // search the queue for nothing costs more than the tasks.
+        let holders: Option<Vec<Arc<Notify>>> = ids
+            .iter()
+            .filter_map(|id| g.tasks.get(id))
+            .map(|t| match (t.pinned, &t.prefer) {
+                (true, Some(p)) => Some(g.workers.get(p).map(|w| w.wake.clone())),
+                _ => None,
+            })
+            .collect::<Option<Vec<_>>>()
+            .map(|v| v.into_iter().flatten().collect());
         drop(g);
-        self.task_ready.notify_waiters();
+        match holders {
+            Some(h) => h.iter().for_each(|w| w.notify_one()),
+            None => self.task_ready.notify_waiters(),
+        }
         ids
     }
 
@@ -187,13 +202,16 @@ impl Shared {
             if self.is_stopping() {
                 return Err(Refusal::Stopping);
             }
-            {
+            // This worker's own wake-up keeps a permit if it comes before
+            // the wait does (`notify_one`): none is lost.
+            let mine = {
                 let mut g = self.lock();
                 let now = Instant::now();
                 let Some(w) = g.workers.get_mut(session) else {
                     return Err(Refusal::UnknownWorker);
                 };
                 w.last_beat = now;
+                let mine = w.wake.clone();
                 let tag = WorkerTag {
                     session: session.to_string(),
                     name: w.name.clone(),
@@ -204,13 +222,15 @@ impl Shared {
                 {
                     return Ok(Some(task));
                 }
-            }
+                mine
+            };
             tokio::select! {
                 r = tokio::time::timeout_at(deadline, notified) => {
                     if r.is_err() {
                         return Ok(None);
                     }
                 }
+                _ = mine.notified() => {}
                 _ = self.stop.notified() => return Err(Refusal::Stopping),
             }
         }

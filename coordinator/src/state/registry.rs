@@ -39,6 +39,7 @@ impl Shared {
                 last_beat: Instant::now(),
                 running: HashSet::new(),
                 overdue: HashSet::new(),
+                wake: Default::default(),
             },
         );
         (session, id)
