@@ -336,3 +336,95 @@ impl Shared {
         Ok((task, t.input.clone()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Config;
+    use crate::task::Held;
+
+    fn shared(dir: &std::path::Path) -> Arc<Shared> {
+        Shared::new(Config {
+            data_dir: dir.join("data"),
+            tmp_dir: Some(dir.join("tmp")),
+            ..Config::default()
+        })
+        .unwrap()
+    }
+
+    /// A shading's input, held by `pinned_to` alone if given.
+    fn input(pinned_to: Option<&str>) -> Arc<TaskInput> {
+        Arc::new(TaskInput {
+            rays: None,
+            results: None,
+            results_offset: 0,
+            objects: 1,
+            model_triangles: 0,
+            corners: 4,
+            held: Held {
+                at: pinned_to.map(str::to_string),
+                pinned: pinned_to.is_some(),
+                ..Held::default()
+            },
+        })
+    }
+
+    fn task(shard: u64) -> v1::Task {
+        v1::Task {
+            job_id: "job".into(),
+            stage: v1::Stage::Shade as i32,
+            first_ray: shard * 4,
+            ray_count: 4,
+            ..Default::default()
+        }
+    }
+
+    /// Waits for a task for `session` in the background.
+    fn wait_for_task(
+        s: &Arc<Shared>,
+        session: &str,
+    ) -> tokio::task::JoinHandle<Option<(v1::Task, Arc<TaskInput>)>> {
+        let (s, session) = (s.clone(), session.to_string());
+        tokio::spawn(async move {
+            s.next_task(&session, Duration::from_secs(30))
+                .await
+                .ok()
+                .flatten()
+        })
+    }
+
+    /// A task pinned to the worker holding its input wakes that worker
+    /// (and no other takes it); a task any worker may take wakes the
+    /// others waiting. A wake-up lost would leave a worker waiting out its
+    /// poll (30 s here).
+    #[tokio::test]
+    async fn a_pinned_task_wakes_its_holder_and_others_wake_every_worker() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = shared(dir.path());
+        let (a, _) = s.register("a".into(), "here".into(), 1, 1 << 30);
+        let (b, _) = s.register("b".into(), "here".into(), 1, 1 << 30);
+        let (got_a, got_b) = (wait_for_task(&s, &a), wait_for_task(&s, &b));
+        // Both wait before anything is queued.
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let (tx, _rx) = mpsc::unbounded_channel();
+        let soon = Duration::from_secs(5);
+
+        s.enqueue(vec![(task(0), 0, input(Some(&a)))], &tx, &[]);
+        let (t, _) = tokio::time::timeout(soon, got_a)
+            .await
+            .expect("the holder was not woken")
+            .unwrap()
+            .expect("a task");
+        assert_eq!(t.first_ray, 0);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        assert!(!got_b.is_finished(), "another worker took a pinned task");
+
+        s.enqueue(vec![(task(1), 1, input(None))], &tx, &[]);
+        let (t, _) = tokio::time::timeout(soon, got_b)
+            .await
+            .expect("a waiting worker was not woken")
+            .unwrap()
+            .expect("a task");
+        assert_eq!(t.first_ray, 4);
+    }
+}
