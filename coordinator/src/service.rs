@@ -308,6 +308,11 @@ impl Coordinator for Service {
                     };
                     return Ok(Response::new(v1::CompleteTaskReply { accepted, next }));
                 }
+                Some(Part::Next(_)) => {
+                    return Err(Status::invalid_argument(
+                        "a request for the next task before the output's summary",
+                    ));
+                }
                 _ => return Err(Status::invalid_argument("a second header")),
             }
         }

@@ -393,6 +393,20 @@ mod tests {
         })
     }
 
+    /// The first ray of the task `waiting` got within five seconds; panics
+    /// with `why` if it got none by then.
+    async fn first_ray_given(
+        waiting: tokio::task::JoinHandle<Option<(v1::Task, Arc<TaskInput>)>>,
+        why: &str,
+    ) -> u64 {
+        let (t, _) = tokio::time::timeout(Duration::from_secs(5), waiting)
+            .await
+            .expect(why)
+            .unwrap()
+            .expect("a task");
+        t.first_ray
+    }
+
     /// A task pinned to the worker holding its input wakes that worker
     /// (and no other takes it); a task any worker may take wakes the
     /// others waiting. A wake-up lost would leave a worker waiting out its
@@ -407,24 +421,16 @@ mod tests {
         // Both wait before anything is queued.
         tokio::time::sleep(Duration::from_millis(200)).await;
         let (tx, _rx) = mpsc::unbounded_channel();
-        let soon = Duration::from_secs(5);
 
         s.enqueue(vec![(task(0), 0, input(Some(&a)))], &tx, &[]);
-        let (t, _) = tokio::time::timeout(soon, got_a)
-            .await
-            .expect("the holder was not woken")
-            .unwrap()
-            .expect("a task");
-        assert_eq!(t.first_ray, 0);
+        assert_eq!(first_ray_given(got_a, "the holder was not woken").await, 0);
         tokio::time::sleep(Duration::from_millis(100)).await;
         assert!(!got_b.is_finished(), "another worker took a pinned task");
 
         s.enqueue(vec![(task(1), 1, input(None))], &tx, &[]);
-        let (t, _) = tokio::time::timeout(soon, got_b)
-            .await
-            .expect("a waiting worker was not woken")
-            .unwrap()
-            .expect("a task");
-        assert_eq!(t.first_ray, 4);
+        assert_eq!(
+            first_ray_given(got_b, "a waiting worker was not woken").await,
+            4
+        );
     }
 }
