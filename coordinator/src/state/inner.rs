@@ -147,7 +147,11 @@ pub(super) struct Inner {
     /// Recent failures by worker name.
     pub(super) failures: HashMap<String, Vec<Instant>>,
     pub(super) queue: VecDeque<u64>,
-    pub(super) tasks: HashMap<u64, TaskEntry>,
+    /// By task id. Every request for a task looks up each queued task
+    /// here, so the hash is foldhash's, not SipHash: the ids are the
+    /// coordinator's own random numbers, so no caller can choose keys
+    /// that collide.
+    pub(super) tasks: HashMap<u64, TaskEntry, foldhash::fast::RandomState>,
     pub(super) requeued: HashMap<String, u64>,
     /// When each job was last given a task (fair turns between jobs).
     pub(super) last_given: HashMap<String, Instant>,

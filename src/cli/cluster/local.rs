@@ -47,7 +47,7 @@ pub async fn render(
     // The records in flight take an eighth of the render's memory in the
     // coordinator (beyond it they spill); the workers share the rest.
     let records_memory = plan.memory / 8;
-    let token = random_token()?;
+    let token = sray_proto::ids::random_hex(32);
     let token_file = dir.path().join("token");
     std::fs::write(&token_file, &token).context("cannot write the token file")?;
     let shared = Shared::new(Config {
@@ -86,7 +86,7 @@ pub async fn render(
     let url = format!("http://{}", listener.local_addr()?);
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     // One random token for the workers, another for this client.
-    let client_token = Token::new(&random_token()?).map_err(anyhow::Error::msg)?;
+    let client_token = Token::new(&sray_proto::ids::random_hex(32)).map_err(anyhow::Error::msg)?;
     let sec = Security {
         worker_token: Some(Token::new(&token).map_err(anyhow::Error::msg)?),
         client_token: Some(client_token.clone()),
@@ -245,14 +245,4 @@ async fn stop_all(children: &mut [Child]) {
             let _ = c.kill().await;
         }
     }
-}
-
-/// 32 random bytes from the kernel, as hex.
-fn random_token() -> anyhow::Result<String> {
-    let mut b = [0u8; 32];
-    use std::io::Read;
-    std::fs::File::open("/dev/urandom")
-        .and_then(|mut f| f.read_exact(&mut b))
-        .context("cannot read /dev/urandom")?;
-    Ok(b.iter().map(|x| format!("{x:02x}")).collect())
 }
