@@ -146,7 +146,14 @@ pub(super) struct Inner {
     pub(super) quarantined: HashMap<String, Quarantine>,
     /// Recent failures by worker name.
     pub(super) failures: HashMap<String, Vec<Instant>>,
+    /// Tasks any worker may take (or some: see [`TaskEntry::refuses`]),
+    /// in the order they go out; re-queued ones go to the front.
     pub(super) queue: VecDeque<u64>,
+    /// Tasks only one worker may take (pinned to the worker holding
+    /// their input), by that worker's session: a worker asking for a task
+    /// searches its own and the shared queue, not every worker's pinned
+    /// tasks (with records at the workers, nearly every task is pinned).
+    pub(super) pinned_queue: HashMap<String, VecDeque<u64>>,
     /// By task id. Every request for a task looks up each queued task
     /// here, so the hash is foldhash's, not SipHash: the ids are the
     /// coordinator's own random numbers, so no caller can choose keys
@@ -204,6 +211,22 @@ pub(super) fn requeue_if_idle(g: &mut Inner, id: u64) {
         *g.requeued.entry(job).or_default() += 1;
         g.requeued_total += 1;
         // To the front: a re-queued task holds up its whole stage.
-        g.queue.push_front(id);
+        push_queued(g, id, true);
+    }
+}
+
+/// Queues task `id` (already in `g.tasks`) where the workers that may
+/// take it look: its holder's queue if it is pinned, else the shared
+/// one; at the front (`front`) or the back.
+pub(super) fn push_queued(g: &mut Inner, id: u64, front: bool) {
+    let Some(t) = g.tasks.get(&id) else { return };
+    let q = match (t.pinned, &t.prefer) {
+        (true, Some(holder)) => g.pinned_queue.entry(holder.clone()).or_default(),
+        _ => &mut g.queue,
+    };
+    if front {
+        q.push_front(id);
+    } else {
+        q.push_back(id);
     }
 }

@@ -252,7 +252,7 @@ impl Shared {
         tracing::info!(job = %job, task = id, round = t.task.round, stage = t.task.stage, "task requeued: its output is redone elsewhere");
         *g.requeued.entry(job).or_default() += 1;
         g.requeued_total += 1;
-        g.queue.push_front(id);
+        super::inner::push_queued(&mut g, id, true);
         drop(g);
         self.task_ready.notify_waiters();
         true

@@ -1,12 +1,12 @@
 //! The task queue: tasks in (a stage's shards, their samples), the next
 //! one out to a worker that asks, and a running task's input.
 
-use super::inner::{Attempt, Inner, TaskEntry, TaskState, live_attempt, lose};
+use super::inner::{Attempt, Inner, TaskEntry, TaskState, live_attempt, lose, push_queued};
 use super::quarantine::quarantined_now;
 use super::{Refusal, Shared};
 use crate::task::{TaskEvent, TaskInput, WorkerTag};
 use sray_proto::v1;
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::{Notify, mpsc};
@@ -65,7 +65,7 @@ impl Shared {
                     blocked_since: None,
                 },
             );
-            g.queue.push_back(id);
+            push_queued(&mut g, id, false);
             ids.push(id);
             if holder_gone {
                 lose(&mut g, id, "the worker holding its input is gone");
@@ -105,6 +105,10 @@ impl Shared {
         }
         let tasks = std::mem::take(&mut g.tasks);
         g.queue.retain(|t| tasks.contains_key(t));
+        g.pinned_queue.retain(|_, q| {
+            q.retain(|t| tasks.contains_key(t));
+            !q.is_empty()
+        });
         g.tasks = tasks;
     }
 
@@ -251,29 +255,37 @@ impl Shared {
         // and the first whose input is here (by order of first appearance).
         let mut jobs: Vec<(&str, u64, Option<u64>)> = Vec::new();
         let tasks = &g.tasks;
-        g.queue.retain(|id| {
-            let Some(t) = tasks.get(id) else {
-                return false;
-            };
-            if t.state == TaskState::Done {
-                return false;
-            }
-            if t.refuses(tag, now, room_retry)
-                || t.live.values().any(|a| a.worker.session == tag.session)
-            {
-                return true;
-            }
-            let mine = t.prefer.as_deref() == Some(tag.session.as_str());
-            match jobs.iter_mut().find(|j| j.0 == t.task.job_id) {
-                Some(j) => {
-                    if mine && j.2.is_none() {
-                        j.2 = Some(*id);
-                    }
+        // Drops what is done or gone; notes the tasks the worker may take.
+        let mut search = |q: &mut VecDeque<u64>| {
+            q.retain(|id| {
+                let Some(t) = tasks.get(id) else {
+                    return false;
+                };
+                if t.state == TaskState::Done {
+                    return false;
                 }
-                None => jobs.push((&t.task.job_id, *id, mine.then_some(*id))),
-            }
-            true
-        });
+                if t.refuses(tag, now, room_retry)
+                    || t.live.values().any(|a| a.worker.session == tag.session)
+                {
+                    return true;
+                }
+                let mine = t.prefer.as_deref() == Some(tag.session.as_str());
+                match jobs.iter_mut().find(|j| j.0 == t.task.job_id) {
+                    Some(j) => {
+                        if mine && j.2.is_none() {
+                            j.2 = Some(*id);
+                        }
+                    }
+                    None => jobs.push((&t.task.job_id, *id, mine.then_some(*id))),
+                }
+                true
+            })
+        };
+        // Its own pinned tasks first: each is one whose input is here.
+        if let Some(q) = g.pinned_queue.get_mut(&tag.session) {
+            search(q);
+        }
+        search(&mut g.queue);
         if jobs.is_empty() {
             return None;
         }
@@ -301,8 +313,12 @@ impl Shared {
         let id = mine.unwrap_or(first);
         let job = job.to_string();
         g.last_given.insert(job, now);
-        if let Some(i) = g.queue.iter().position(|&x| x == id) {
-            g.queue.remove(i);
+        let q = match g.pinned_queue.get_mut(&tag.session) {
+            Some(q) if q.contains(&id) => q,
+            _ => &mut g.queue,
+        };
+        if let Some(i) = q.iter().position(|&x| x == id) {
+            q.remove(i);
         }
         let t = g.tasks.get_mut(&id).expect("picked");
         let attempt = t.next_attempt;
@@ -432,5 +448,50 @@ mod tests {
             first_ray_given(got_b, "a waiting worker was not woken").await,
             4
         );
+    }
+
+    /// Pinned tasks wait in their holder's own queue: the holder gets
+    /// them (before a shared task queued earlier, since their input is
+    /// there), another worker gets only shared tasks, and tasks forgotten
+    /// leave no queue behind.
+    #[tokio::test]
+    async fn pinned_tasks_wait_in_their_holders_queue() {
+        let dir = tempfile::tempdir().unwrap();
+        let s = shared(dir.path());
+        let (a, _) = s.register("a".into(), "here".into(), 1, 1 << 30);
+        let (b, _) = s.register("b".into(), "here".into(), 1, 1 << 30);
+        let (tx, _rx) = mpsc::unbounded_channel();
+        let ids = s.enqueue(
+            vec![
+                (task(0), 0, input(None)),
+                (task(1), 1, input(Some(&a))),
+                (task(2), 2, input(Some(&a))),
+            ],
+            &tx,
+            &[],
+        );
+        {
+            let g = s.lock();
+            assert_eq!(g.queue.len(), 1);
+            assert_eq!(g.pinned_queue[&a].len(), 2);
+        }
+        let given = async |who: &str| -> Option<u64> {
+            s.next_task(who, Duration::from_millis(50))
+                .await
+                .ok()
+                .expect("the worker is known")
+                .map(|(t, _)| t.first_ray)
+        };
+        assert_eq!(given(&a).await, Some(4), "the holder's pinned task first");
+        assert_eq!(
+            given(&b).await,
+            Some(0),
+            "the other worker gets the shared task"
+        );
+        assert_eq!(given(&b).await, None, "and never a pinned one");
+        assert_eq!(s.lock().pinned_queue[&a].len(), 1, "a's other task waits");
+        s.forget_tasks(&ids);
+        let g = s.lock();
+        assert!(g.queue.is_empty() && g.pinned_queue.is_empty());
     }
 }

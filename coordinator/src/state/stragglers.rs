@@ -63,7 +63,7 @@ impl Shared {
                     }
                 }
                 *g.backups.entry(job).or_default() += 1;
-                g.queue.push_front(*id);
+                super::inner::push_queued(&mut g, *id, true);
                 backed.push((*id, ran));
             }
         }
