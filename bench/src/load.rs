@@ -69,6 +69,13 @@ struct Outcome {
 /// Seconds the coordinator is watched idle with its workers.
 const IDLE_SECONDS: f64 = 5.0;
 
+/// `SRAY_BENCH_LOAD_ONLY=TEXT[|TEXT...]`: whether a setup's label has one
+/// of the texts (every setup without the variable).
+fn only() -> impl Fn(&str) -> bool {
+    let only = std::env::var("SRAY_BENCH_LOAD_ONLY").unwrap_or_default();
+    move |label| only.split('|').any(|o| label.contains(o))
+}
+
 fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
     let (few, many, side) = if ctx.quick {
         (20, 200, 256)
@@ -84,8 +91,7 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
         side,
         rate,
     };
-    // SRAY_BENCH_LOAD_ONLY=TEXT: only the setups whose label has TEXT.
-    let only = std::env::var("SRAY_BENCH_LOAD_ONLY").unwrap_or_default();
+    let only = only();
     let half = |mut s: Scenario| {
         s.side /= 2;
         s
@@ -137,9 +143,7 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
         sc("records travel, sized shards", many, false, 0, 0.0),
         sc("records at workers, sized shards", many, true, 0, 0.0),
     ];
-    all.into_iter()
-        .filter(|s| s.label.contains(&only))
-        .collect()
+    all.into_iter().filter(|s| only(s.label)).collect()
 }
 
 pub(super) fn plan(ctx: &Ctx) -> Plan {
@@ -223,8 +227,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     ctx.step(&format!(
         "{few} simulated workers at {paced_rate} rays/s each, records at the workers"
     ));
-    let only = std::env::var("SRAY_BENCH_LOAD_ONLY").unwrap_or_default();
-    let po = if paced.label.contains(&only) {
+    let po = if only()(paced.label) {
         let po = scenario(ctx, &paced, &scene, objects)?;
         rows.push(row(&paced, &po));
         out.push((paced.clone(), po.clone()));
@@ -244,7 +247,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
          0): a ray tree measured on balls 4 (each round's rays spawn 3.03, 0.20, 0.55, 0.62, 0.44 \
          rays), three in five rays adding colour. Clients are real `sray render` processes ({side}x{side}, \
          one job at a time, verification at its default 2 % where records travel). CPU and memory are the \
-         coordinator process's (`/proc/PID/stat`, `/proc/PID/status`); latencies are round trips seen by \
+         coordinator process's (each thread's `/proc/PID/task/TID/schedstat`, in nanoseconds; `/proc/PID/status`); latencies are round trips seen by \
          the simulated workers. The machine's two cores are shared by the coordinator, the simulated \
          workers and the client, so throughput here is what this machine reaches, not the coordinator's \
          ceiling; the ceiling follows from its CPU per ray.",
@@ -406,7 +409,7 @@ fn row(sc: &Scenario, o: &Outcome) -> Vec<String> {
         num(o.tasks, 0),
         num(o.wall, 2),
         num(o.rays / o.wall / 1e6, 2),
-        num(o.cpu, 2),
+        num(o.cpu, 3),
         num(o.cpu / o.rays * 1e6, 3),
         num(o.bytes_per_ray, 1),
         format!("{}/{}", num(o.hb_p50, 1), num(o.hb_p99, 1)),
@@ -435,8 +438,57 @@ fn objects(scene: &Path) -> anyhow::Result<u64> {
         .context("sray info gave no object count")
 }
 
-/// A process's CPU seconds (user and system) and resident bytes now and
-/// at its peak.
+/// A process's CPU time so far, by thread: nanoseconds on a CPU from
+/// `/proc/PID/task/TID/schedstat`, exact where `/proc/PID/stat` counts
+/// 10 ms ticks (a job whose coordinator runs 40 ms would read 0.03 to
+/// 0.05 s). Empty where the kernel keeps no such counts.
+#[derive(Default)]
+struct CpuClock {
+    by_thread: std::collections::HashMap<u64, u64>,
+    /// `/proc/PID/stat`'s user and system seconds (whole ticks).
+    ticks: f64,
+}
+
+impl CpuClock {
+    fn read(pid: u32) -> CpuClock {
+        let mut by_thread = std::collections::HashMap::new();
+        if let Ok(dir) = std::fs::read_dir(format!("/proc/{pid}/task")) {
+            for e in dir.flatten() {
+                let Some(tid) = e.file_name().to_str().and_then(|t| t.parse().ok()) else {
+                    continue;
+                };
+                let ns = std::fs::read_to_string(e.path().join("schedstat"))
+                    .ok()
+                    .and_then(|s| s.split_whitespace().next()?.parse().ok());
+                if let Some(ns) = ns {
+                    by_thread.insert(tid, ns);
+                }
+            }
+        }
+        CpuClock {
+            by_thread,
+            ticks: cpu_seconds(pid),
+        }
+    }
+
+    /// CPU seconds from `self` to `later`: each thread's time since
+    /// `self` (all of it for threads started since). A thread that ended
+    /// in between loses what it ran after `self`: the coordinator's
+    /// threads that end are the blocking pool's idle ones.
+    fn seconds_to(&self, later: &CpuClock) -> f64 {
+        if later.by_thread.is_empty() {
+            return later.ticks - self.ticks;
+        }
+        later
+            .by_thread
+            .iter()
+            .map(|(t, ns)| ns.saturating_sub(self.by_thread.get(t).copied().unwrap_or(0)))
+            .sum::<u64>() as f64
+            / 1e9
+    }
+}
+
+/// A process's CPU seconds (user and system), in whole 10 ms ticks.
 fn cpu_seconds(pid: u32) -> f64 {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
     // Fields after the command's closing parenthesis; utime and stime are
@@ -579,9 +631,9 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
     }
     std::thread::sleep(Duration::from_secs(2));
     stats.reset_latencies();
-    let c0 = cpu_seconds(pid);
+    let c0 = CpuClock::read(pid);
     std::thread::sleep(Duration::from_secs_f64(IDLE_SECONDS));
-    o.idle_cpu_per_worker = (cpu_seconds(pid) - c0) / IDLE_SECONDS / sc.workers as f64;
+    o.idle_cpu_per_worker = c0.seconds_to(&CpuClock::read(pid)) / IDLE_SECONDS / sc.workers as f64;
     o.rss_idle = memory(pid, "VmRSS:");
 
     let stats_file = dir.path().join("job.json");
@@ -607,14 +659,14 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
     if sc.shard_rays > 0 {
         args.extend(["--shard-rays".into(), shard]);
     }
-    let c0 = cpu_seconds(pid);
+    let c0 = CpuClock::read(pid);
     let t0 = Instant::now();
     let client = Command::new(exec::sray_exe()?)
         .args(&args)
         .env("SRAY_JOBS_DIR", dir.path().join("tickets"))
         .output()?;
     o.wall = t0.elapsed().as_secs_f64();
-    o.cpu = cpu_seconds(pid) - c0;
+    o.cpu = c0.seconds_to(&CpuClock::read(pid));
     o.hwm = memory(pid, "VmHWM:");
     stats.stop.store(true, Ordering::Relaxed);
     if !client.status.success() {
