@@ -76,7 +76,11 @@ fn only() -> impl Fn(&str) -> bool {
     move |label| only.split('|').any(|o| label.contains(o))
 }
 
-fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
+/// The setups; `real_rate`: a real worker's rays a second, the pace of
+/// the simulated workers where the coordinator sizes the shards (which
+/// it does from the workers' measured rate: workers that answer at once
+/// would make it cut every round into a few large shards).
+fn scenarios(ctx: &Ctx, real_rate: f64) -> Vec<Scenario> {
     let (few, many, side) = if ctx.quick {
         (20, 200, 256)
     } else {
@@ -140,14 +144,14 @@ fn scenarios(ctx: &Ctx) -> Vec<Scenario> {
             65_536,
             0.0,
         ))),
-        sc("records travel, sized shards", many, false, 0, 0.0),
-        sc("records at workers, sized shards", many, true, 0, 0.0),
+        sc("records travel, sized shards", many, false, 0, real_rate),
+        sc("records at workers, sized shards", many, true, 0, real_rate),
     ];
     all.into_iter().filter(|s| only(s.label)).collect()
 }
 
 pub(super) fn plan(ctx: &Ctx) -> Plan {
-    let n = scenarios(ctx).len() + 2;
+    let n = scenarios(ctx, 0.0).len() + 2;
     Plan {
         steps: n,
         seconds: n as f64 * if ctx.quick { 15.0 } else { 60.0 },
@@ -182,7 +186,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
 
     let mut rows = Vec::new();
     let mut out = Vec::new();
-    for sc in scenarios(ctx) {
+    for sc in scenarios(ctx, worker_rate) {
         ctx.step(&format!("{} simulated workers, {}", sc.workers, sc.label));
         let o = scenario(ctx, &sc, &scene, objects)
             .with_context(|| format!("{} workers, {}", sc.workers, sc.label))?;
@@ -192,7 +196,9 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     // CPU per ray, per task and per job, by mode: three runs (large and
     // small shards, and large shards on a frame of a quarter the rays),
     // CPU = a·rays + b·tasks + c.
-    let fit = |keep: bool, colour_kept: bool| -> Option<(f64, f64, f64)> {
+    // Also the first run's (65,536-ray shards, the whole frame) CPU per
+    // ray, all of the job's: tasks, pixels and the job itself included.
+    let fit = |keep: bool, colour_kept: bool| -> Option<((f64, f64, f64), f64)> {
         let runs: Vec<&Outcome> = out
             .iter()
             .filter(|(s, _)| s.keep == keep && s.colour_kept == colour_kept && s.shard_rays > 0)
@@ -201,11 +207,12 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         let [x, y, z] = runs.as_slice() else {
             return None;
         };
-        solve3([
+        let f = solve3([
             [x.rays, x.tasks, 1.0, x.cpu],
             [y.rays, y.tasks, 1.0, y.cpu],
             [z.rays, z.tasks, 1.0, z.cpu],
-        ])
+        ])?;
+        Some((f, x.cpu / x.rays))
     };
     let (travel, keep, colour_kept) = (fit(false, false), fit(true, false), fit(true, true));
     // A paced run: 100 (20) workers at a rate this machine can feed,
@@ -280,7 +287,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
     // workers measured (both stages and verification samples).
     let sized = |keep: bool| {
         out.iter()
-            .filter(|(s, _)| s.keep == keep && !s.colour_kept && s.shard_rays == 0 && s.rate == 0.0)
+            .filter(|(s, _)| s.keep == keep && !s.colour_kept && s.label.contains("sized"))
             .map(|(_, o)| o.tasks / o.rays)
             .next_back()
     };
@@ -307,17 +314,22 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
             None,
         ),
     ] {
-        let Some((a, b, c)) = fitted else { continue };
-        let ceiling = 1.0 / (a + b * 2.0 / 65_536.0);
+        let Some(((a, b, c), per_ray)) = fitted else {
+            continue;
+        };
+        // Whole jobs in 65,536-ray shards: every task (later rounds cut
+        // smaller shards, and each shard is two tasks), pixel and job.
+        let ceiling = 1.0 / per_ray;
         let mut n = format!(
             "{name}: {} µs of coordinator CPU per ray, {} µs per task and {} ms per job (fitted to the \
-             three runs of fixed shards); one core carries {} M rays/s in shards of 65,536 rays",
+             three runs of fixed shards); one core carries {} M rays/s of such jobs in shards of 65,536 \
+             rays (the whole job's CPU per ray)",
             num(a * 1e6, 4),
             num(b * 1e6, 0),
             num(c * 1e3, 0),
             num(ceiling / 1e6, 1)
         );
-        let cores = load * (a + b * 2.0 / 65_536.0);
+        let cores = load * per_ray;
         n.push_str(&format!(
             "; 100 such workers cost it {} cores in shards of 65,536 rays",
             num(cores, 2)
@@ -338,7 +350,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
         notes.push(n);
         model.insert(key.into(), m);
     }
-    if let (Some((a, b, _)), Some(po)) = (keep, &po) {
+    if let (Some(((a, b, _), _)), Some(po)) = (keep, &po) {
         let tpr = po.tasks / po.rays;
         let predicted = paced.workers as f64 * paced.rate * (a + b * tpr);
         notes.push(format!(

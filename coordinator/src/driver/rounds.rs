@@ -110,8 +110,13 @@ pub(super) async fn drive(
         let mut frame = frame;
         while n > 0 {
             tot.rays_per_round.push(n);
-            let (workers, min_memory) = shared.fleet();
-            let per = shard_size(job, n, Fleet { workers, min_memory }, keep);
+            let (workers, min_memory, worker_rate) = shared.fleet();
+            let fleet = Fleet {
+                workers,
+                min_memory,
+                worker_rate,
+            };
+            let per = shard_size(job, n, fleet, keep);
             // The eye rays are made by the workers; later rounds' rays are
             // at the coordinator, or only at the workers that spawned them.
             let eye = rays.is_none() && segments.is_empty();

@@ -48,6 +48,9 @@ pub(super) struct Fleet {
     pub(super) workers: usize,
     /// The smallest `--memory` among them.
     pub(super) min_memory: u64,
+    /// Rays a worker traces per second of its busy time (both stages),
+    /// measured from completed tasks; `None` until then.
+    pub(super) worker_rate: Option<f64>,
 }
 
 /// Rays per shard in a round of `n` rays: the job's size, or (the job left
@@ -92,15 +95,47 @@ const WORKER_BYTES_PER_RAY: u64 = 256;
 /// [`shard_size`] for several workers: about two shards per worker (every
 /// worker busy, and room to even out stragglers), but no smaller than the
 /// database makes worth a scan (so that more workers never multiply the
-/// scans beyond need) and no larger than the smallest worker holds in a
-/// pass (three quarters of its memory are its tracer's).
+/// scans beyond need), nor than keeps the coordinator from being what a
+/// round waits for (see [`coordinator_bound`]), and no larger than the
+/// smallest worker holds in a pass (three quarters of its memory are its
+/// tracer's).
 pub(super) fn cluster_shard_size(n: u64, fleet: Fleet, db_bytes: u64) -> u64 {
     let target = n.div_ceil(2 * fleet.workers.max(1) as u64);
-    let floor = CLUSTER_LEAST.max(db_bytes / DB_BYTES_PER_SHARD_RAY);
+    let floor = CLUSTER_LEAST
+        .max(db_bytes / DB_BYTES_PER_SHARD_RAY)
+        .max(coordinator_bound(n, fleet.worker_rate));
     let cap = AUTO_SHARD_MAX
         .min(fleet.min_memory / 4 * 3 / WORKER_BYTES_PER_RAY)
         .max(CLUSTER_LEAST);
     target.max(floor).min(cap)
+}
+
+/// The coordinator's CPU seconds a task costs it beyond the task's rays:
+/// two RPCs' worth and their bookkeeping. `sray bench load` (release
+/// builds, one call a task, 100 simulated workers) measures 48-113 µs
+/// a task, by machine load and by whether colour is sent; this is near
+/// the top, as sizing shards a little too large costs less than a
+/// coordinator that holds up every round.
+const TASK_SECONDS: f64 = 100e-6;
+
+/// The shard size below which the coordinator's work on a round's tasks
+/// outlasts the workers' tracing of them: a round of `n` rays in shards
+/// of `s` (each worker with a shard at most) takes the workers about
+/// `s / r` seconds (r: a worker's rays a second, both stages) and the
+/// coordinator `2 (n / s) t` (t: [`TASK_SECONDS`], two tasks a shard, one
+/// core), the two equal at `s = sqrt(2 n r t)`. Below it more, smaller
+/// shards put more workers to work but make the round longer: with 1,000
+/// workers of 2 M rays a second and a round of a million rays, 4,096-ray
+/// shards keep 244 workers busy for 2 ms and the coordinator for 49 ms;
+/// 20,000-ray shards keep 50 busy for 10 ms and the coordinator for
+/// 10 ms. (The coordinator's work per ray, on colour and on records that
+/// travel, is the same whatever the shards.) 0 until `r` is measured.
+fn coordinator_bound(n: u64, worker_rate: Option<f64>) -> u64 {
+    worker_rate.map_or(0, |r| {
+        (2.0 * n as f64 * r * TASK_SECONDS)
+            .sqrt()
+            .min(u64::MAX as f64) as u64
+    })
 }
 
 /// [`shard_size`] for one worker: at least `least` rays, and the round in
@@ -167,6 +202,7 @@ mod tests {
         let fleet = |workers| Fleet {
             workers,
             min_memory: 1 << 30,
+            worker_rate: None,
         };
         // A small database: two shards per worker.
         assert_eq!(cluster_shard_size(263_169, fleet(2), 1 << 20), 65_793);
@@ -178,9 +214,38 @@ mod tests {
         let small = Fleet {
             workers: 16,
             min_memory: 64 << 20,
+            worker_rate: None,
         };
         assert_eq!(cluster_shard_size(263_169, small, 100 << 20), 196_608);
         assert_eq!(cluster_shard_size(16 << 20, fleet(4), 0), AUTO_SHARD_MAX);
+    }
+
+    #[test]
+    fn shards_are_no_smaller_than_keeps_the_coordinator_ahead() {
+        let paced = |workers, worker_rate| Fleet {
+            workers,
+            min_memory: 1 << 30,
+            worker_rate,
+        };
+        // 1,000 workers of 2 M rays a second: the coordinator would hold
+        // up rounds of shards below sqrt(2 n r t).
+        assert_eq!(
+            cluster_shard_size(1_000_000, paced(1000, Some(2e6)), 0),
+            20_000
+        );
+        // Slow workers (20,000 rays a second): every worker busy, as
+        // before.
+        assert_eq!(
+            cluster_shard_size(1_000_000, paced(16, Some(2e4)), 0),
+            31_250
+        );
+        // Nothing measured yet (the first tasks): as before.
+        assert_eq!(cluster_shard_size(1_000_000, paced(1000, None), 0), 4_096);
+        // Within the cap, however fast the workers.
+        assert_eq!(
+            cluster_shard_size(1_000_000, paced(1000, Some(1e12)), 0),
+            AUTO_SHARD_MAX
+        );
     }
 
     #[test]

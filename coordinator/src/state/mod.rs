@@ -22,7 +22,8 @@
 //!
 //! [`Shared`] is here; its methods are in the rooms of their jobs:
 //! `registry.rs` (workers), `queue.rs` (tasks in, tasks out to workers),
-//! `outcomes.rs` (how an attempt ends), `quarantine.rs`, `stragglers.rs`
+//! `outcomes.rs` (how an attempt ends), `pace.rs` (how fast workers
+//! trace), `quarantine.rs`, `stragglers.rs`
 //! (backup attempts, tasks waiting too long) and `monitor.rs` (the
 //! housekeeping loop); `inner.rs` holds what the lock guards.
 
@@ -30,6 +31,7 @@ mod counters;
 mod inner;
 pub mod monitor;
 mod outcomes;
+mod pace;
 mod quarantine;
 mod queue;
 mod registry;

@@ -46,6 +46,10 @@ impl Shared {
         };
         task.fetch_add(1, Ordering::Relaxed);
         rays.fetch_add(t.task.ray_count, Ordering::Relaxed);
+        let (intersect, ray_count) = (
+            t.task.stage == v1::Stage::Intersect as i32,
+            t.task.ray_count,
+        );
         if t.task.verification {
             c.tasks_verification.fetch_add(1, Ordering::Relaxed);
         }
@@ -60,6 +64,8 @@ impl Shared {
             seconds = t.took.map_or(0.0, |d| d.as_secs_f64()),
             "task completed"
         );
+        g.pace.record(intersect, ray_count, output.summary.seconds);
+        let t = g.tasks.get_mut(&r.task_id).expect("checked");
         let ev = TaskEvent::Done {
             task: r.task_id,
             shard: t.shard,
