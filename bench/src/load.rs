@@ -51,6 +51,8 @@ struct Scenario {
 struct Outcome {
     rays: f64,
     tasks: f64,
+    /// Shards of each round (the job's statistics).
+    shards_per_round: serde_json::Value,
     wall: f64,
     cpu: f64,
     /// CPU seconds per worker-second, idle (heartbeats, waiting polls).
@@ -253,7 +255,8 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
          records of the right kinds, counts and sizes after `rays / rate` seconds (at once with rate \
          0): a ray tree measured on balls 4 (each round's rays spawn 3.03, 0.20, 0.55, 0.62, 0.44 \
          rays), three in five rays adding colour. Clients are real `sray render` processes ({side}x{side}, \
-         one job at a time, verification at its default 2 % where records travel). CPU and memory are the \
+         one job at a time, verification at its default 2 % where records travel; where the coordinator sizes \
+         the shards, one unmeasured job first). CPU and memory are the \
          coordinator process's (each thread's `/proc/PID/task/TID/schedstat`, in nanoseconds; `/proc/PID/status`); latencies are round trips seen by \
          the simulated workers. The machine's two cores are shared by the coordinator, the simulated \
          workers and the client, so throughput here is what this machine reaches, not the coordinator's \
@@ -382,6 +385,7 @@ pub(super) fn run(ctx: &Ctx, r: &mut Report) -> anyhow::Result<()> {
                 "rate": s.rate,
                 "rays": o.rays,
                 "tasks": o.tasks,
+                "shards_per_round": o.shards_per_round,
                 "wall_s": o.wall,
                 "cpu_s": o.cpu,
                 "idle_cpu_per_worker": o.idle_cpu_per_worker,
@@ -406,7 +410,7 @@ fn row(sc: &Scenario, o: &Outcome) -> Vec<String> {
             "{}{}",
             sc.label,
             if sc.rate > 0.0 {
-                format!(" ({} rays/s each)", sc.rate)
+                format!(" ({} rays/s each)", num(sc.rate, 0))
             } else {
                 String::new()
             }
@@ -671,12 +675,29 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
     if sc.shard_rays > 0 {
         args.extend(["--shard-rays".into(), shard]);
     }
+    let job = || {
+        Command::new(exec::sray_exe()?)
+            .args(&args)
+            .env("SRAY_JOBS_DIR", dir.path().join("tickets"))
+            .output()
+            .context("cannot run the client")
+    };
+    if sc.shard_rays == 0 {
+        // Shards sized by the coordinator: a job first, unmeasured, as a
+        // coordinator in service has run one (it sizes shards from the
+        // workers' rate, measured from the tasks they complete).
+        let warm = job()?;
+        if !warm.status.success() {
+            bail!(
+                "the first job failed: {}",
+                String::from_utf8_lossy(&warm.stderr)
+            );
+        }
+        stats.reset_latencies();
+    }
     let c0 = CpuClock::read(pid);
     let t0 = Instant::now();
-    let client = Command::new(exec::sray_exe()?)
-        .args(&args)
-        .env("SRAY_JOBS_DIR", dir.path().join("tickets"))
-        .output()?;
+    let client = job()?;
     o.wall = t0.elapsed().as_secs_f64();
     o.cpu = c0.seconds_to(&CpuClock::read(pid));
     o.hwm = memory(pid, "VmHWM:");
@@ -692,6 +713,7 @@ fn scenario(ctx: &Ctx, sc: &Scenario, scene: &Path, objects: u64) -> anyhow::Res
     o.tasks =
         js["tasks"].as_f64().unwrap_or(0.0) + js["verification"]["samples"].as_f64().unwrap_or(0.0);
     o.bytes_per_ray = js["bytes_per_ray"].as_f64().unwrap_or(f64::NAN);
+    o.shards_per_round = js["shards_per_round"].clone();
     {
         let hb = stats.heartbeat_ms.lock().unwrap();
         o.hb_p50 = sim::quantile(&hb, 0.5);
