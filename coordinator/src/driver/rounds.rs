@@ -110,7 +110,7 @@ pub(super) async fn drive(
         let mut frame = frame;
         while n > 0 {
             tot.rays_per_round.push(n);
-            let (workers, min_memory, worker_rate) = shared.fleet();
+            let (workers, min_memory, worker_rate) = shared.fleet(&job.hash);
             let fleet = Fleet {
                 workers,
                 min_memory,

@@ -166,8 +166,8 @@ pub(super) struct Inner {
     pub(super) workers_ever: u64,
     /// Tasks queued again (worker lost, failed, output redone), ever.
     pub(super) requeued_total: u64,
-    /// How fast workers trace, what a task costs here (shard sizing).
-    pub(super) pace: super::pace::Pace,
+    /// How fast workers trace, by scene (shard sizing).
+    pub(super) pace: super::pace::Paces,
     /// Job ids a job's recomputations run under (see
     /// `driver/recover.rs`), and the job's own.
     pub(super) aliases: HashMap<String, String>,

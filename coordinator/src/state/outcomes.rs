@@ -50,6 +50,7 @@ impl Shared {
             t.task.stage == v1::Stage::Intersect as i32,
             t.task.ray_count,
         );
+        let scene = t.task.scene.as_ref().map(|s| s.hash.clone());
         if t.task.verification {
             c.tasks_verification.fetch_add(1, Ordering::Relaxed);
         }
@@ -64,7 +65,10 @@ impl Shared {
             seconds = t.took.map_or(0.0, |d| d.as_secs_f64()),
             "task completed"
         );
-        g.pace.record(intersect, ray_count, output.summary.seconds);
+        if let Some(scene) = scene {
+            g.pace
+                .record(&scene, intersect, ray_count, output.summary.seconds);
+        }
         let t = g.tasks.get_mut(&r.task_id).expect("checked");
         let ev = TaskEvent::Done {
             task: r.task_id,

@@ -2,6 +2,15 @@
 //! coordinator weighs when it sizes shards for the cluster
 //! (`driver/shards.rs`). With many fast workers and small shards, the
 //! coordinator's work per task, not the workers', bounds a round.
+//!
+//! Kept by scene: the same workers trace a scene in memory at millions of
+//! rays a second and one read from disk at a twentieth of that, and a
+//! rate measured on one would size the other's shards wrongly.
+
+use std::collections::HashMap;
+
+/// Scenes whose rates are kept (one is forgotten to make room).
+const SCENES: usize = 64;
 
 /// Weight of what came before, per completed task: the estimate follows
 /// the last thousand tasks or so (a new scene, other workers).
@@ -37,9 +46,49 @@ impl Pace {
     }
 }
 
+/// [`Pace`] by scene hash.
+#[derive(Debug, Default)]
+pub(super) struct Paces(HashMap<String, Pace>);
+
+impl Paces {
+    /// Notes a completed task of the scene `scene` (see [`Pace::record`]).
+    pub(super) fn record(&mut self, scene: &str, intersect: bool, rays: u64, seconds: f64) {
+        if !self.0.contains_key(scene) {
+            if self.0.len() >= SCENES
+                && let Some(k) = self.0.keys().next().cloned()
+            {
+                self.0.remove(&k);
+            }
+            self.0.insert(scene.to_string(), Pace::default());
+        }
+        if let Some(p) = self.0.get_mut(scene) {
+            p.record(intersect, rays, seconds);
+        }
+    }
+
+    /// A worker's rays a second on scene `scene`, if measured.
+    pub(super) fn worker_rays_per_second(&self, scene: &str) -> Option<f64> {
+        self.0.get(scene)?.worker_rays_per_second()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rates_are_kept_by_scene() {
+        let mut p = Paces::default();
+        p.record("fast", true, 2000, 0.001);
+        p.record("slow", true, 100, 0.001);
+        assert_eq!(p.worker_rays_per_second("fast"), Some(2e6));
+        assert_eq!(p.worker_rays_per_second("slow"), Some(1e5));
+        assert_eq!(p.worker_rays_per_second("new"), None);
+        for i in 0..2 * SCENES {
+            p.record(&i.to_string(), true, 1, 1.0);
+        }
+        assert_eq!(p.0.len(), SCENES);
+    }
 
     #[test]
     fn a_workers_rate_from_completed_tasks() {

@@ -139,12 +139,12 @@ impl Shared {
     }
 
     /// Workers registered, the smallest `--memory` among them (0: none),
-    /// and the rays a worker traces per second of its busy time (`None`
-    /// until measured).
-    pub fn fleet(&self) -> (usize, u64, Option<f64>) {
+    /// and the rays a worker traces of scene `scene` per second of its
+    /// busy time (`None` until measured).
+    pub fn fleet(&self, scene: &str) -> (usize, u64, Option<f64>) {
         let g = self.lock();
         let min = g.workers.values().map(|w| w.memory).min().unwrap_or(0);
-        (g.workers.len(), min, g.pace.worker_rays_per_second())
+        (g.workers.len(), min, g.pace.worker_rays_per_second(scene))
     }
 
     /// Workers that may take a task that excludes `excluded` (sessions
