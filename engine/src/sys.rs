@@ -106,39 +106,26 @@ pub fn return_freed_memory_to_the_system() {}
 /// of per 4 KiB, and a TLB that covers them. Call it before the array is
 /// first written. A hint: nothing changes where the kernel declines, and
 /// arrays under 4 MiB are left alone.
-pub fn advise_huge_pages<T>(v: &mut [T]) {
-    advise_huge(v.as_mut_ptr() as usize, std::mem::size_of_val(v));
-}
-
-/// [`advise_huge_pages`] for all of `v`'s capacity, used or not: call it
-/// after reserving and before filling.
-pub fn advise_huge_capacity<T>(v: &mut Vec<T>) {
-    advise_huge(
-        v.as_mut_ptr() as usize,
-        v.capacity() * std::mem::size_of::<T>(),
-    );
-}
-
-/// The hint for the `bytes` bytes of memory of ours from `start`.
 #[cfg(target_os = "linux")]
-fn advise_huge(start: usize, bytes: usize) {
+pub fn advise_huge_pages<T>(v: &mut [T]) {
     const PAGE: usize = 4096;
+    let bytes = std::mem::size_of_val(v);
     if bytes < 4 << 20 {
         return;
     }
+    let start = v.as_mut_ptr() as usize;
     let (begin, end) = (start.next_multiple_of(PAGE), (start + bytes) / PAGE * PAGE);
     // SAFETY: madvise(2) with MADV_HUGEPAGE changes only how the kernel
     // backs the pages of `begin..end` (huge pages or small), never what
     // they hold or whether they are mapped, so no memory of ours is read,
     // written or freed. The range is page-aligned (as madvise requires)
-    // and lies within an allocation the caller borrows (a slice, or a
-    // vector's capacity), so it is memory of this process that stays
-    // mapped for the call. An error (EINVAL where huge pages are off)
-    // leaves everything as it was.
+    // and lies within `v`, which this function borrows, so it is memory
+    // of this process that stays mapped for the call. An error (EINVAL
+    // where huge pages are off) leaves everything as it was.
     unsafe {
         libc::madvise(begin as *mut libc::c_void, end - begin, libc::MADV_HUGEPAGE);
     }
 }
 
 #[cfg(not(target_os = "linux"))]
-fn advise_huge(_: usize, _: usize) {}
+pub fn advise_huge_pages<T>(_: &mut [T]) {}

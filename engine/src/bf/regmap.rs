@@ -146,11 +146,6 @@ impl RegMap {
         }
         self.starts.push(acc);
         self.slots.clear();
-        if self.slots.capacity() < acc as usize {
-            // Filled at random (each voxel's run): huge pages.
-            self.slots.reserve_exact(acc as usize);
-            crate::sys::advise_huge_capacity(&mut self.slots);
-        }
         self.slots.resize(acc as usize, 0);
         // Fill in registration order, each voxel's start serving as its
         // cursor, so each run keeps that order.

@@ -242,13 +242,7 @@ impl VoxelGrids {
         let mut grids: Vec<VoxelGrid> = specs
             .iter()
             .map(|spec| VoxelGrid {
-                // Read at random (an object's cells, a ray's walk): huge
-                // pages, asked for before the first write.
-                flags: {
-                    let mut f = vec![0u8; spec.cells()];
-                    crate::sys::advise_huge_pages(&mut f);
-                    f
-                },
+                flags: vec![0u8; spec.cells()],
                 busy: BusyBlocks::default(),
                 registered: vec![0; spec.cells().div_ceil(64)],
                 spec: spec.clone(),

@@ -300,11 +300,6 @@ impl<R: Elem> Slots<R> {
         for sh in self.shards.iter_mut() {
             sh.live = 0;
             sh.hot.clear();
-            // The slots are read at random (a voxel's rays, per object):
-            // huge pages, asked for before the first write.
-            reserve_huge(&mut sh.hot, per);
-            reserve_huge(&mut sh.q, per);
-            reserve_huge(&mut sh.cold, per);
             sh.hot.resize(per, empty_hot());
             sh.q.resize(per, q0);
             sh.cold.resize(per, empty_cold());
@@ -318,15 +313,6 @@ impl<R: Elem> Slots<R> {
                 sh.pending = Vec::new();
             }
         }
-    }
-}
-
-/// Room for `n` elements in `v`, backed by huge pages where it had to
-/// grow (see [`crate::sys::advise_huge_capacity`]).
-fn reserve_huge<T>(v: &mut Vec<T>, n: usize) {
-    if v.capacity() < n {
-        v.reserve_exact(n - v.len());
-        crate::sys::advise_huge_capacity(v);
     }
 }
 
