@@ -97,35 +97,3 @@ pub fn return_freed_memory_to_the_system() {
 
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 pub fn return_freed_memory_to_the_system() {}
-
-/// Asks the kernel to back the whole pages of `v` with transparent huge
-/// pages (2 MiB on x86-64), where it gives them only when asked
-/// (`/sys/kernel/mm/transparent_hugepage/enabled` at `madvise`, the usual
-/// default): for large arrays touched at random, such as a frame that
-/// colour is added to a slot at a time, one page fault per 2 MiB instead
-/// of per 4 KiB, and a TLB that covers them. Call it before the array is
-/// first written. A hint: nothing changes where the kernel declines, and
-/// arrays under 4 MiB are left alone.
-#[cfg(target_os = "linux")]
-pub fn advise_huge_pages<T>(v: &mut [T]) {
-    const PAGE: usize = 4096;
-    let bytes = std::mem::size_of_val(v);
-    if bytes < 4 << 20 {
-        return;
-    }
-    let start = v.as_mut_ptr() as usize;
-    let (begin, end) = (start.next_multiple_of(PAGE), (start + bytes) / PAGE * PAGE);
-    // SAFETY: madvise(2) with MADV_HUGEPAGE changes only how the kernel
-    // backs the pages of `begin..end` (huge pages or small), never what
-    // they hold or whether they are mapped, so no memory of ours is read,
-    // written or freed. The range is page-aligned (as madvise requires)
-    // and lies within `v`, which this function borrows, so it is memory
-    // of this process that stays mapped for the call. An error (EINVAL
-    // where huge pages are off) leaves everything as it was.
-    unsafe {
-        libc::madvise(begin as *mut libc::c_void, end - begin, libc::MADV_HUGEPAGE);
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-pub fn advise_huge_pages<T>(_: &mut [T]) {}

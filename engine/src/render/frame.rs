@@ -84,16 +84,11 @@ impl Frame {
     }
 
     pub fn with_sampling(width: u32, height: u32, sampling: Sampling) -> Frame {
-        // Zeroed by the system, not yet touched: huge pages from the
-        // first write on (a 1024x1024 frame is 25 MB of slots that
-        // colour reaches a slot at a time).
-        let mut slots = vec![[0; 3]; sampling.slots(width, height) as usize];
-        crate::sys::advise_huge_pages(&mut slots);
         Frame {
             width,
             height,
             sampling,
-            slots,
+            slots: vec![[0; 3]; sampling.slots(width, height) as usize],
             spilled: None,
         }
     }
