@@ -31,7 +31,9 @@ impl Shared {
         if live_attempt(&g, r).is_none() {
             return false;
         }
-        let t = g.tasks.get_mut(&r.task_id).expect("checked");
+        // The tasks and the workers' pace are apart under the lock.
+        let inner = &mut *g;
+        let t = inner.tasks.get_mut(&r.task_id).expect("checked");
         let a = &t.live[&r.attempt];
         t.took = Some(a.since.elapsed());
         let worker = a.worker.clone();
@@ -39,18 +41,22 @@ impl Shared {
         t.local_fault = None;
         t.blocked_since = None;
         let c = &self.counters;
-        let (task, rays) = if t.task.stage == v1::Stage::Intersect as i32 {
+        let intersect = t.task.stage == v1::Stage::Intersect as i32;
+        let (task, rays) = if intersect {
             (&c.tasks_intersect, &c.rays_intersected)
         } else {
             (&c.tasks_shade, &c.rays_shaded)
         };
         task.fetch_add(1, Ordering::Relaxed);
         rays.fetch_add(t.task.ray_count, Ordering::Relaxed);
-        let (intersect, ray_count) = (
-            t.task.stage == v1::Stage::Intersect as i32,
-            t.task.ray_count,
-        );
-        let scene = t.task.scene.as_ref().map(|s| s.hash.clone());
+        if let Some(scene) = &t.task.scene {
+            inner.pace.record(
+                &scene.hash,
+                intersect,
+                t.task.ray_count,
+                output.summary.seconds,
+            );
+        }
         if t.task.verification {
             c.tasks_verification.fetch_add(1, Ordering::Relaxed);
         }
@@ -65,11 +71,6 @@ impl Shared {
             seconds = t.took.map_or(0.0, |d| d.as_secs_f64()),
             "task completed"
         );
-        if let Some(scene) = scene {
-            g.pace
-                .record(&scene, intersect, ray_count, output.summary.seconds);
-        }
-        let t = g.tasks.get_mut(&r.task_id).expect("checked");
         let ev = TaskEvent::Done {
             task: r.task_id,
             shard: t.shard,

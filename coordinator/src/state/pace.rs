@@ -53,17 +53,17 @@ pub(super) struct Paces(HashMap<String, Pace>);
 impl Paces {
     /// Notes a completed task of the scene `scene` (see [`Pace::record`]).
     pub(super) fn record(&mut self, scene: &str, intersect: bool, rays: u64, seconds: f64) {
-        if !self.0.contains_key(scene) {
-            if self.0.len() >= SCENES
-                && let Some(k) = self.0.keys().next().cloned()
-            {
-                self.0.remove(&k);
-            }
-            self.0.insert(scene.to_string(), Pace::default());
-        }
         if let Some(p) = self.0.get_mut(scene) {
-            p.record(intersect, rays, seconds);
+            return p.record(intersect, rays, seconds);
         }
+        if self.0.len() >= SCENES
+            && let Some(k) = self.0.keys().next().cloned()
+        {
+            self.0.remove(&k);
+        }
+        let mut p = Pace::default();
+        p.record(intersect, rays, seconds);
+        self.0.insert(scene.to_string(), p);
     }
 
     /// A worker's rays a second on scene `scene`, if measured.

@@ -313,12 +313,16 @@ impl Shared {
         let id = mine.unwrap_or(first);
         let job = job.to_string();
         g.last_given.insert(job, now);
-        let q = match g.pinned_queue.get_mut(&tag.session) {
-            Some(q) if q.contains(&id) => q,
-            _ => &mut g.queue,
-        };
-        if let Some(i) = q.iter().position(|&x| x == id) {
-            q.remove(i);
+        let pinned = g.pinned_queue.get_mut(&tag.session);
+        match pinned.and_then(|q| Some((q.iter().position(|&x| x == id)?, q))) {
+            Some((i, q)) => {
+                q.remove(i);
+            }
+            None => {
+                if let Some(i) = g.queue.iter().position(|&x| x == id) {
+                    g.queue.remove(i);
+                }
+            }
         }
         let t = g.tasks.get_mut(&id).expect("picked");
         let attempt = t.next_attempt;
