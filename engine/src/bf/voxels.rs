@@ -7,7 +7,8 @@ use super::skip::CellBox;
 use crate::error::Error;
 use crate::grid::{GridSpec, GridStat, MAX_GROUPS, Partition, aggregate};
 use crate::progress::Progress;
-use crate::sdb::{Database, DbStats};
+use crate::scene::Aabb;
+use crate::sdb::{BoxRef, Database, DbStats};
 
 /// Some object's box overlaps the voxel.
 pub const OCCUPIED: u8 = 1;
@@ -193,36 +194,48 @@ impl BlockMarks {
         self.objects = [0; MAX_GROUPS];
         self.aggregates = [0; MAX_GROUPS];
         self.outside = None;
-        for o in block.objects() {
-            let gi = partition.group(&o.bbox);
+        // One pass over the records' boxes (their geometry is not
+        // decoded): each object's grid and voxel box, which the groups
+        // that may be aggregates take as they are (each is placed once).
+        let grid = |g: usize| specs.get(g);
+        let mut group = [BoxRef::EMPTY; aggregate::SIZE];
+        let mut placed: [aggregate::Placed; aggregate::SIZE] = [(0, None); aggregate::SIZE];
+        let mut n = 0;
+        let mut bounds = Aabb::EMPTY;
+        for b in block.boxes() {
+            let gi = partition.group(&b.bbox);
             let spec = &specs[gi];
-            if !spec.holds(&o.bbox) {
-                self.outside = Some(o.index as u64);
+            if !spec.holds(&b.bbox) {
+                self.outside = Some(b.index as u64);
                 return;
             }
             self.objects[gi] += 1;
-            let Some((lo, hi)) = spec.cell_range(&o.bbox) else {
+            let cells = spec.cell_range(&b.bbox);
+            if let Some((lo, hi)) = cells {
+                self.boxes[gi].add(lo, hi);
+                self.cells.push((gi as u8, lo, hi));
+            }
+            if !aggregates {
                 continue;
-            };
-            self.boxes[gi].add(lo, hi);
-            self.cells.push((gi as u8, lo, hi));
-        }
-        // The groups the passes will hold as aggregates (counted for the
-        // statistics; the passes find them again from the block).
-        if aggregates {
-            let mut placed = [(0, None); aggregate::SIZE];
-            let spec = |g: usize| specs.get(g);
-            let found = &mut self.aggregates;
-            aggregate::each_group(block, |group, bounds| {
-                if !aggregate::may_be(spec(partition.group(&group[0].bbox)), bounds) {
-                    return;
-                }
-                aggregate::place(group, partition, spec, &mut placed);
-                let placed = &placed[..group.len()];
-                if let Some((g, ..)) = aggregate::of_grids(group, placed, bounds, spec) {
-                    found[g] += 1;
-                }
-            });
+            }
+            // A group is the objects whose index divided by SIZE is the
+            // same; only a whole one may be an aggregate.
+            if b.index as usize % aggregate::SIZE == 0 {
+                n = 0;
+                bounds = Aabb::EMPTY;
+            }
+            group[n] = b;
+            placed[n] = (gi, cells);
+            bounds.union(&b.bbox);
+            n += 1;
+            // The groups the passes will hold as aggregates (counted for
+            // the statistics; the passes find them again from the block).
+            if n == aggregate::SIZE
+                && aggregate::may_be(grid(placed[0].0), &bounds)
+                && let Some((g, ..)) = aggregate::of_grids(&group, &placed, &bounds, grid)
+            {
+                self.aggregates[g] += 1;
+            }
         }
     }
 }

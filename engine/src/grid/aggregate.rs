@@ -124,13 +124,7 @@ pub fn of_grids<'a>(
 /// first and last group of a block not aligned to [`SIZE`] are short).
 pub fn each_group(block: &Block<'_>, mut f: impl FnMut(&[BoxRef], &Aabb)) {
     let mut boxes = block.boxes();
-    let mut group = [BoxRef {
-        at: 0,
-        index: 0,
-        rank: 0,
-        kind: ShapeKind::Sphere,
-        bbox: Aabb::EMPTY,
-    }; SIZE];
+    let mut group = [BoxRef::EMPTY; SIZE];
     // Up to the first multiple of SIZE, then by SIZE.
     let mut take = SIZE - (block.first_object % SIZE as u64) as usize;
     loop {

@@ -114,6 +114,17 @@ pub struct BoxRef {
     pub bbox: Aabb,
 }
 
+impl BoxRef {
+    /// A placeholder: no object, an empty box.
+    pub const EMPTY: BoxRef = BoxRef {
+        at: 0,
+        index: 0,
+        rank: 0,
+        kind: ShapeKind::Sphere,
+        bbox: Aabb::EMPTY,
+    };
+}
+
 pub struct BoxIter<'a> {
     words: &'a [u32],
     ids: &'a [u32],
