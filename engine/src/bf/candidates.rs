@@ -145,13 +145,14 @@ pub(super) fn candidates(
     out.clear();
     let spec = |g: usize| grids.grids.get(g).map(|v| &v.spec);
     // Each object's voxels in its own grid lie within its group's voxels
-    // in that grid: passing over a group whose box is near no registered
-    // voxel drops no candidate.
+    // in that grid: passing over a group whose box holds no registered
+    // voxel in any grid drops no candidate, and no aggregate a ray would
+    // walk.
     let near = |bounds: &Aabb| {
         grids.grids.iter().zip(region).any(|(grid, r)| {
             grid.spec
                 .cell_range(bounds)
-                .is_some_and(|(lo, hi)| r.overlaps(lo, hi))
+                .is_some_and(|(lo, hi)| r.overlaps(lo, hi) && may_be_registered(grid, lo, hi))
         })
     };
     let mut placed = [(0, None); aggregate::SIZE];
@@ -164,7 +165,9 @@ pub(super) fn candidates(
             let placed = &placed[..group.len()];
             match aggregate::of_grids(group, placed, bounds, spec) {
                 Some((g, lo, hi)) => {
-                    if region[g].overlaps(lo, hi) {
+                    // An aggregate no registered ray is stored in gets no
+                    // hierarchy.
+                    if region[g].overlaps(lo, hi) && may_be_registered(&grids.grids[g], lo, hi) {
                         add_aggregate(group, placed, g, lo, hi, out);
                     }
                 }
