@@ -220,7 +220,7 @@ impl BlockMarks {
             }
             // A group is the objects whose index divided by SIZE is the
             // same; only a whole one may be an aggregate.
-            if b.index as usize % aggregate::SIZE == 0 {
+            if (b.index as usize).is_multiple_of(aggregate::SIZE) {
                 n = 0;
                 bounds = Aabb::EMPTY;
             }
