@@ -84,16 +84,18 @@ pub(super) struct ByIdFill<'a> {
     pub(super) next: u64,
     /// Whether each ray of the window looked at meets no grid (reused).
     pub(super) sky: Vec<bool>,
-    /// The ids admitted this pass, in order: shard `k` loads
-    /// `ids[start[k]..start[k + 1]]` into its empty slots, in slot order.
+    /// The ids admitted this pass, in order.
     pub(super) ids: Vec<u64>,
-    pub(super) start: Vec<usize>,
+    /// The same ids dealt to the shards in turn (see the stream's fill in
+    /// [`super::intersect_rays`]): shard `k` loads `dealt[k]` into its
+    /// empty slots, in slot order.
+    pub(super) dealt: Vec<Vec<u64>>,
 }
 
 impl ByIdFill<'_> {
     /// Admits up to `free[k]` rays for shard `k`, in order: the next rays
-    /// that meet some grid, as the serial fill would have given them to
-    /// the empty slots of shard 0, then shard 1, ... Returns the number
+    /// that meet some grid, as the serial fill would have dealt them to
+    /// the shards' empty slots in turn. Returns the number
     /// of rays passed over because they meet no grid (misses at once).
     pub(super) fn admit(
         &mut self,
@@ -134,13 +136,20 @@ impl ByIdFill<'_> {
             }
             self.next += used as u64;
         }
-        self.start.clear();
-        let mut at = 0;
-        for &f in free {
-            self.start.push(at);
-            at = (at + f).min(self.ids.len());
+        self.dealt.resize_with(free.len(), Vec::new);
+        for d in &mut self.dealt {
+            d.clear();
         }
-        self.start.push(at);
+        // There are no more ids than free slots, so a shard with room is
+        // always found.
+        let mut k = 0;
+        for &id in &self.ids {
+            while self.dealt[k].len() == free[k] {
+                k = (k + 1) % free.len();
+            }
+            self.dealt[k].push(id);
+            k = (k + 1) % free.len();
+        }
         sky
     }
 }

@@ -394,7 +394,7 @@ pub fn intersect_rays<R: Elem>(
                 next: 0,
                 sky: Vec::new(),
                 ids: Vec::new(),
-                start: Vec::new(),
+                dealt: Vec::new(),
             });
             dense = Some((v, first));
             (&mut std::iter::empty(), &mut |_| Ok(()))
@@ -439,15 +439,26 @@ pub fn intersect_rays<R: Elem>(
         exhausted = true;
     }
     loop {
-        // From a stream: fill empty slots, in slot order. A ray that meets
-        // no grid's box (the sky around a model) is a miss at once and
-        // takes no slot. (Rays by id: the same, through `ByIdFill`.)
+        // From a stream: fill empty slots, dealt to the shards in turn
+        // (each shard's in slot order), so that every shard holds rays
+        // from the whole stretch of the stream admitted: neighbouring
+        // rays meet the same objects, and shards given halves of the
+        // stream (halves of the image) waited for each other at every
+        // batch of blocks. A ray that meets no grid's box (the sky around
+        // a model) is a miss at once and takes no slot. (Rays by id: the
+        // same, through `ByIdFill`.)
         if !exhausted {
-            'fill: for sh in shards.iter_mut() {
-                for i in 0..sh.hot.len() {
-                    if sh.hot[i].active {
+            let mut next_free = vec![0usize; shards.len()];
+            'fill: loop {
+                let mut dealt = false;
+                for (sh, at) in shards.iter_mut().zip(next_free.iter_mut()) {
+                    while *at < sh.hot.len() && sh.hot[*at].active {
+                        *at += 1;
+                    }
+                    if *at == sh.hot.len() {
                         continue;
                     }
+                    let i = *at;
                     loop {
                         match rays.next() {
                             Some(r) => {
@@ -474,6 +485,7 @@ pub fn intersect_rays<R: Elem>(
                                 stage(sh, i, id, &r, setup.eps);
                                 sh.pending.push(i as u32);
                                 active += 1;
+                                dealt = true;
                                 break;
                             }
                             None => {
@@ -482,6 +494,9 @@ pub fn intersect_rays<R: Elem>(
                             }
                         }
                     }
+                }
+                if !dealt {
+                    break;
                 }
             }
         }
@@ -516,7 +531,7 @@ pub fn intersect_rays<R: Elem>(
         let dense_cells = setup.dense_cells;
         let share = (setup.registrations / shards.len()).max(1) as u64;
         let eps = setup.eps;
-        let admitted = by_id.as_ref().map(|f| (f.ray, &f.ids[..], &f.start[..]));
+        let admitted = by_id.as_ref().map(|f| (f.ray, &f.dealt[..]));
         pool.install(|| {
             shards.par_iter_mut().enumerate().for_each(|(k, sh)| {
                 let pending = std::mem::take(&mut sh.pending);
@@ -525,8 +540,8 @@ pub fn intersect_rays<R: Elem>(
                 }
                 sh.pending = pending;
                 sh.pending.clear();
-                if let Some((ray, ids, start)) = admitted {
-                    let mut mine = ids[start[k]..start[k + 1]].iter();
+                if let Some((ray, dealt)) = admitted {
+                    let mut mine = dealt[k].iter();
                     for i in 0..sh.hot.len() {
                         if sh.hot[i].active {
                             continue;
