@@ -72,8 +72,15 @@ fn scan_aggregates<R: Elem>(
     carry: bool,
     walk: &ScanPass,
 ) {
-    // One aggregate's objects, decoded when its first ray meets it.
-    let mut objects: Vec<(ObjectRef<'_>, Option<Prepared>)> = Vec::new();
+    // One aggregate's objects, each decoded when a ray first tests it: a
+    // ray walking the hierarchy tests a few of its 64 objects (tetra12:
+    // 15 a walk), and decoding all of them when the first ray came took a
+    // fifth of tetra12's scan samples. `decoded` says which entries are this
+    // aggregate's; the others are left from earlier ones (clearing all 64
+    // for every aggregate cost more than the decoding saved).
+    let mut objects: Vec<Option<(ObjectRef<'_>, Option<Prepared>)>> = Vec::new();
+    let mut decoded: u64;
+    const _: () = assert!(crate::grid::aggregate::SIZE <= 64, "a bit per member");
     for a in &found.aggregates {
         let g = a.group as usize;
         if sh.regs[g].is_empty() {
@@ -85,7 +92,10 @@ fn scan_aggregates<R: Elem>(
         }
         let members = &found.members[a.first as usize..(a.first + a.len) as usize];
         let tag = aggregate_tag(a.index, walk.pass);
-        objects.clear();
+        if objects.len() < members.len() {
+            objects.resize_with(members.len(), || None);
+        }
+        decoded = 0;
         let Shard {
             regs,
             hot,
@@ -104,15 +114,6 @@ fn scan_aggregates<R: Elem>(
                 continue;
             }
             s.mailbox = tag;
-            if objects.is_empty() {
-                for m in members {
-                    // Records were checked when the block was read.
-                    let Some(o) = block.object_at(m.at, m.index, m.rank) else {
-                        return;
-                    };
-                    objects.push((o, o.shape.prepare()));
-                }
-            }
             counts.aggregate_walks += 1;
             let c = &mut cold[slot as usize];
             let q = &q[slot as usize];
@@ -136,7 +137,14 @@ fn scan_aggregates<R: Elem>(
                             counts.skipped_last_voxel += 1;
                             return Some(());
                         }
-                        let (ob, pr) = &objects[k];
+                        let object = &mut objects[k];
+                        if decoded >> k & 1 == 0 {
+                            // Records were checked when the block was read.
+                            let o = block.object_at(m.at, m.index, m.rank)?;
+                            *object = Some((o, o.shape.prepare()));
+                            decoded |= 1 << k;
+                        }
+                        let (ob, pr) = object.as_ref()?;
                         counts.tests.add(ob.shape.kind());
                         if let Some(t) = ob
                             .shape
