@@ -79,7 +79,6 @@ fn scan_aggregates<R: Elem>(
     // aggregate's; the others are left from earlier ones (clearing all 64
     // for every aggregate cost more than the decoding saved).
     let mut objects: Vec<Option<(ObjectRef<'_>, Option<Prepared>)>> = Vec::new();
-    let mut decoded: u64;
     const _: () = assert!(crate::grid::aggregate::SIZE <= 64, "a bit per member");
     for a in &found.aggregates {
         let g = a.group as usize;
@@ -95,7 +94,7 @@ fn scan_aggregates<R: Elem>(
         if objects.len() < members.len() {
             objects.resize_with(members.len(), || None);
         }
-        decoded = 0;
+        let mut decoded = 0u64;
         let Shard {
             regs,
             hot,
