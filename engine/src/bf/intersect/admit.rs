@@ -136,20 +136,46 @@ impl ByIdFill<'_> {
             }
             self.next += used as u64;
         }
-        self.dealt.resize_with(free.len(), Vec::new);
-        for d in &mut self.dealt {
-            d.clear();
-        }
-        // There are no more ids than free slots, so a shard with room is
-        // always found.
-        let mut k = 0;
-        for &id in &self.ids {
-            while self.dealt[k].len() == free[k] {
-                k = (k + 1) % free.len();
-            }
-            self.dealt[k].push(id);
+        deal(&self.ids, free, &mut self.dealt);
+        sky
+    }
+}
+
+/// Deals `ids` to the shards in turn, passing over a shard once it holds
+/// `free[k]` of them: `dealt[k]` gets shard `k`'s, in order. There must be
+/// no more ids than free slots.
+fn deal(ids: &[u64], free: &[usize], dealt: &mut Vec<Vec<u64>>) {
+    debug_assert!(ids.len() <= free.iter().sum());
+    dealt.resize_with(free.len(), Vec::new);
+    for d in dealt.iter_mut() {
+        d.clear();
+    }
+    let mut k = 0;
+    for &id in ids {
+        while dealt[k].len() == free[k] {
             k = (k + 1) % free.len();
         }
-        sky
+        dealt[k].push(id);
+        k = (k + 1) % free.len();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::deal;
+
+    /// Each shard gets every other ray of the stretch admitted, not a
+    /// half of it; a full shard is passed over, the others take the rest.
+    #[test]
+    fn rays_are_dealt_in_turn_to_the_shards_with_room() {
+        let mut dealt = Vec::new();
+        deal(&[10, 11, 12, 13, 14], &[3, 3], &mut dealt);
+        assert_eq!(dealt, vec![vec![10, 12, 14], vec![11, 13]]);
+        deal(&[0, 1, 2, 3, 4], &[1, 4], &mut dealt);
+        assert_eq!(dealt, vec![vec![0], vec![1, 2, 3, 4]]);
+        deal(&[5, 6, 7], &[0, 2, 1], &mut dealt);
+        assert_eq!(dealt, vec![vec![], vec![5, 7], vec![6]]);
+        deal(&[], &[2, 2], &mut dealt);
+        assert_eq!(dealt, vec![Vec::<u64>::new(), vec![]]);
     }
 }
