@@ -274,7 +274,7 @@ fn add_aggregate(
     out.ids.extend(first as u32..out.members.len() as u32);
     let tree = out
         .trees
-        .build_with(&out.ids, &out.member_boxes[..], &mut out.order);
+        .build_aggregate(&out.ids, &out.member_boxes[..], &mut out.order);
     out.aggregates.push(Aggregate {
         first: first as u32,
         len: (out.members.len() - first) as u32,

@@ -411,7 +411,7 @@ fn find_aggregates(
             group.len(),
             aggregate::pairs(spec, group.iter()),
         ) {
-            let entry = nested.build_with(ids, boxes, &mut order);
+            let entry = nested.build_aggregate(ids, boxes, &mut order);
             groups.push(Group {
                 first: ids[0],
                 entry,
