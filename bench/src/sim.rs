@@ -540,6 +540,7 @@ fn stats_json(task: &v1::Task) -> String {
             remaining_rays_per_pass: vec![n, n / 3, n / 20],
             store_numbers: vec![4.25, 3.5, 2.75],
             registrations: 6 * n,
+            registered_voxels: n,
             registered_rays: n + n / 3 + n / 20,
             intersection_tests: tests,
             tests_skipped_mailbox: n / 2,

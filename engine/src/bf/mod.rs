@@ -45,7 +45,7 @@ use crate::sdb::Database;
 use crate::simd::Elem;
 use crate::spill::{self, SpillDir};
 use crate::units::fmt_bytes;
-use intersect::{REGISTRATION_BYTES, slot_bytes};
+use intersect::{REGISTRATION_BYTES, VOXEL_BYTES, WORST_REGISTRATION_BYTES, slot_bytes};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -204,9 +204,10 @@ impl Budget {
         threads: usize,
     ) -> Result<Budget, Error> {
         let io = IO_BYTES + scan_buffers;
-        let overrun = threads.max(1) as u64 * store.overrun() * REGISTRATION_BYTES as u64;
+        let overrun = threads.max(1) as u64 * store.overrun() * WORST_REGISTRATION_BYTES as u64;
         let fixed = frame + cells + models + io + overrun + slack(total);
-        let slot_bytes = slot_bytes::<R>() as u64 + store.planned() * REGISTRATION_BYTES as u64;
+        let slot_bytes =
+            slot_bytes::<R>() as u64 + store.planned() * WORST_REGISTRATION_BYTES as u64;
         // Without resident rays or results, the slots may take all but the
         // result sorter's share.
         let min_shared = ((MIN_SLOTS * slot_bytes) as f64 / (1.0 - RESIDENT_RESULTS)).ceil() as u64;
@@ -287,10 +288,19 @@ impl Budget {
             .max(16)
     }
 
-    /// Ray slots while intersecting, and the registrations they may make
-    /// in a pass, given what else stays in memory and the registrations a
-    /// registering ray makes in a pass on average (`regs_per_ray`, at most
-    /// [`Budget::regs_per_slot`]).
+    /// Ray slots while intersecting, and the bytes their registrations
+    /// may take in a pass, given what else stays in memory, the
+    /// registrations a registering ray makes in a pass on average
+    /// (`regs_per_ray`, at most [`Budget::regs_per_slot`]) and the voxels
+    /// they are in per registration (`voxels_per_reg`, at most 1).
+    ///
+    /// A registration takes [`REGISTRATION_BYTES`], and each voxel
+    /// [`VOXEL_BYTES`] more. Planned as if each registration had a voxel
+    /// of its own, rings80's second round got 131 thousand slots of 1,404
+    /// bytes for 982 thousand rays, where its rays share a voxel between
+    /// 10 and 18 of them. The shards count what they use as they register,
+    /// so rays that share fewer voxels than planned only wait for the next
+    /// pass, as when they register more than planned.
     ///
     /// Planning every slot for the most a ray may register left most of
     /// the memory unused: mount11's rays make 1.3 registrations a pass
@@ -308,6 +318,7 @@ impl Budget {
         resident_rays: bool,
         resident_results: bool,
         regs_per_ray: f64,
+        voxels_per_reg: f64,
         streamed: bool,
         dense_index: bool,
     ) -> (u64, u64) {
@@ -327,9 +338,11 @@ impl Budget {
         } else {
             self.slot_base_bytes - intersect::streamed_extra_bytes() as u64
         };
-        let per = base as f64 + regs * REGISTRATION_BYTES as f64;
+        let per_reg =
+            REGISTRATION_BYTES as f64 + VOXEL_BYTES as f64 * voxels_per_reg.clamp(0.0, 1.0);
+        let per = base as f64 + regs * per_reg;
         let slots = (((self.shared as f64) * f / per) as u64).max(MIN_SLOTS);
-        (slots, (slots as f64 * regs).ceil() as u64)
+        (slots, (slots as f64 * regs * per_reg).ceil() as u64)
     }
 }
 
@@ -649,35 +662,46 @@ mod tests {
         let b = Budget::plan::<f64>(256 << 20, 513 * 513 * 24, 27_000_000, 0, 1 << 17, &store, 2)
             .unwrap();
         assert_eq!(b.regs_per_slot, 30);
-        let (few, few_regs) = b.slots(false, true, 1.5, false, true);
-        let (many, many_regs) = b.slots(false, true, 25.0, false, true);
-        let (most, most_regs) = b.slots(false, true, f64::INFINITY, false, true);
+        let worst = WORST_REGISTRATION_BYTES as u64;
+        let (few, few_regs) = b.slots(false, true, 1.5, 1.0, false, true);
+        let (many, many_regs) = b.slots(false, true, 25.0, 1.0, false, true);
+        let (most, most_regs) = b.slots(false, true, f64::INFINITY, 1.0, false, true);
         assert!(few > 2 * many, "{few} slots against {many}");
         assert!(many > most, "{many} slots against {most}");
-        assert_eq!(most_regs, most * 30);
-        assert_eq!(few_regs, (few as f64 * 1.5).ceil() as u64);
-        assert!(many_regs >= many * 25);
+        assert_eq!(most_regs, most * 30 * worst);
+        assert_eq!(few_regs, (few as f64 * 1.5 * worst as f64).ceil() as u64);
+        assert!(many_regs >= many * 25 * worst);
+        // Rays that share their voxels get more slots, with more
+        // registrations in the same bytes.
+        let (shared, shared_bytes) = b.slots(false, true, 25.0, 0.1, false, true);
+        assert!(2 * shared > 3 * many, "{shared} slots against {many}");
+        let per_reg = REGISTRATION_BYTES as f64 + 0.1 * VOXEL_BYTES as f64;
+        assert_eq!(shared_bytes, (shared as f64 * 25.0 * per_reg).ceil() as u64);
         // Planned for the most a ray may make, as before plans followed
         // what rays make.
         let before = (b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS)) as u64 / b.slot_bytes;
         assert!(most >= before, "{most} slots against {before}");
         // A streamed ray waits in the queue by its slot, which takes no
         // more than the id a ray admitted by id waits by.
-        let (streamed, _) = b.slots(false, true, 1.5, true, true);
+        let (streamed, _) = b.slots(false, true, 1.5, 1.0, true, true);
         assert!(streamed <= few);
         // A grid too large for a dense voxel index leaves its share.
-        let (sparse, _) = b.slots(false, true, 1.5, false, false);
+        let (sparse, _) = b.slots(false, true, 1.5, 1.0, false, false);
         assert!(sparse > few);
         // Everything fits in what the slots may take.
         let share = b.shared as f64 * (SLOTS_SHARE + RESIDENT_RAYS);
-        for (n, regs, streamed) in [(few, few_regs, false), (many, many_regs, false)] {
+        for (n, bytes, streamed) in [
+            (few, few_regs, false),
+            (many, many_regs, false),
+            (shared, shared_bytes, false),
+        ] {
             let base = b.slot_base_bytes
                 - if streamed {
                     0
                 } else {
                     intersect::streamed_extra_bytes() as u64
                 };
-            let bytes = n * base + regs * REGISTRATION_BYTES as u64;
+            let bytes = n * base + bytes;
             assert!(bytes as f64 <= share * 1.001, "{bytes} bytes of {share}");
         }
     }

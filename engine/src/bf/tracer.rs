@@ -27,6 +27,11 @@ use crate::simd::{Elem, Isa};
 
 /// Slots plan for this much more than the last round's rays registered.
 const REGS_MARGIN: f64 = 1.25;
+/// And for this many times the voxels per registration the last round's
+/// rays were in (a round's rays share fewer voxels than the last round's
+/// when they are its reflections: rings80's eye rays, one voxel for 18
+/// registrations; their reflections, one for 8 to 13).
+const VOXELS_MARGIN: f64 = 2.0;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
 use crate::scene::Material;
 use crate::sdb::Database;
@@ -175,6 +180,10 @@ pub struct Tracer<'db, R: Elem> {
     /// fewer than its rays make leaves slots idle (rings80's eye rays make
     /// 25 a pass, mount11's 1.3).
     regs_per_ray: f64,
+    /// Voxels per registration, as the last round found (with a margin;
+    /// 1 before the first): with the sample of a round's own rays, what
+    /// the next round's slots plan for.
+    voxels_per_reg: f64,
     /// Intersection passes read their blocks on a thread of their own.
     read_ahead: bool,
     /// The kernels' instruction set.
@@ -368,6 +377,7 @@ impl<'db, R: Elem> Tracer<'db, R> {
             models,
             slots: Slots::new(threads),
             regs_per_ray: f64::INFINITY,
+            voxels_per_reg: 1.0,
             dense_buf: Vec::new(),
             spare_rays: Vec::new(),
             set_buf: Vec::new(),
@@ -445,7 +455,8 @@ impl<'db, R: Elem> Tracer<'db, R> {
             ),
             RaySource::Stream(_) => None,
         };
-        let regs_per_ray = sampled.map_or(self.regs_per_ray, |m| REGS_MARGIN * m);
+        let regs_per_ray = sampled.map_or(self.regs_per_ray, |(m, _)| REGS_MARGIN * m);
+        let voxels_per_reg = sampled.map_or(1.0, |(_, v)| v).min(self.voxels_per_reg);
         let streamed = !(matches!(rays, RaySource::Indexed { .. }) && resident);
         let dense_cells = budget.dense_cells(self.threads);
         let dense_index = self
@@ -453,12 +464,18 @@ impl<'db, R: Elem> Tracer<'db, R> {
             .grids
             .iter()
             .any(|g| g.spec.cells() <= dense_cells);
-        let (mut slots_n, mut registrations) =
-            budget.slots(rays_resident, resident, regs_per_ray, streamed, dense_index);
+        let (mut slots_n, mut registration_bytes) = budget.slots(
+            rays_resident,
+            resident,
+            regs_per_ray,
+            voxels_per_reg,
+            streamed,
+            dense_index,
+        );
         if self.db.decoded_bytes() < CHEAP_SCAN_BYTES && slots_n > CACHE_SLOTS {
             // A pass over a small database costs little; a smaller ray set
             // keeps the scan's ray accesses in cache.
-            registrations = registrations * CACHE_SLOTS / slots_n;
+            registration_bytes = registration_bytes * CACHE_SLOTS / slots_n;
             slots_n = CACHE_SLOTS;
         }
         let mut setup = IntersectSetup {
@@ -469,7 +486,7 @@ impl<'db, R: Elem> Tracer<'db, R> {
             grids: &mut self.grids,
             store: self.store,
             slots: slots_n as usize,
-            registrations: registrations as usize,
+            registration_bytes: registration_bytes as usize,
             dense_cells,
             carry: self.shading == super::Shading::Carry,
             read_ahead: self.read_ahead,
@@ -522,6 +539,9 @@ impl<'db, R: Elem> Tracer<'db, R> {
             // a margin (a round's rays are much alike: eye rays, then
             // their shadow rays and reflections).
             self.regs_per_ray = REGS_MARGIN * ist.registrations as f64 / ist.registered_rays as f64;
+            self.voxels_per_reg = (VOXELS_MARGIN * ist.registered_voxels as f64
+                / ist.registrations.max(1) as f64)
+                .min(1.0);
         }
         st.tests_skipped_last_voxel += ist.tests_skipped_last_voxel;
         st.tests_skipped_mailbox += ist.tests_skipped_mailbox;

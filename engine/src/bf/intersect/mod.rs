@@ -68,7 +68,10 @@ pub use register::sample_registrations;
 use register::{extend, register};
 use scan::{ScanPass, pair_bytes, scan_block, test_pairs};
 use slot::{Cold, DONE, FRESH, Hot, JOIN, NONE16, WALKING, empty_cold, empty_hot, od64, ray64};
-pub use slot::{MAX_GRIDS, REGISTRATION_BYTES, slot_bytes, streamed_extra_bytes};
+pub use slot::{
+    MAX_GRIDS, REGISTRATION_BYTES, VOXEL_BYTES, WORST_REGISTRATION_BYTES, slot_bytes,
+    streamed_extra_bytes,
+};
 
 /// Counters of one pass.
 #[derive(Clone, Copy, Debug, Default)]
@@ -158,6 +161,9 @@ pub struct IntersectStats {
     /// Mean store number of the rays registered in each pass.
     pub store_numbers: Vec<f64>,
     pub registrations: u64,
+    /// Voxels rays were registered in, summed over the passes (once a
+    /// pass, however many shards registered rays there).
+    pub registered_voxels: u64,
     /// Rays that registered, summed over the passes (a ray counts once
     /// per pass it registers in).
     pub registered_rays: u64,
@@ -191,8 +197,9 @@ pub struct IntersectSetup<'a> {
     pub store: StorePlan,
     /// Ray slots in memory.
     pub slots: usize,
-    /// Registrations per pass, at most.
-    pub registrations: usize,
+    /// Bytes the registrations of a pass may take, at most (counted by
+    /// [`REGISTRATION_BYTES`] and [`VOXEL_BYTES`]).
+    pub registration_bytes: usize,
     /// Grids of at most this many voxels get a dense voxel index per shard.
     pub dense_cells: usize,
     pub eps: f64,
@@ -529,7 +536,7 @@ pub fn intersect_rays<R: Elem>(
         let grids = &*setup.grids;
         let store = setup.store;
         let dense_cells = setup.dense_cells;
-        let share = (setup.registrations / shards.len()).max(1) as u64;
+        let share = (setup.registration_bytes / shards.len()).max(1) as u64;
         let eps = setup.eps;
         let admitted = by_id.as_ref().map(|f| (f.ray, &f.dealt[..]));
         pool.install(|| {
@@ -551,7 +558,7 @@ pub fn intersect_rays<R: Elem>(
                         load(sh, i);
                     }
                 }
-                let expect = (share as usize).clamp(1024, 1 << 20);
+                let expect = (share as usize / WORST_REGISTRATION_BYTES).clamp(1024, 1 << 20);
                 for g in 0..ngrids {
                     let cells = grids.grids[g].spec.cells();
                     sh.regs[g].clear(expect, if cells <= dense_cells { cells } else { 0 });
@@ -562,7 +569,7 @@ pub fn intersect_rays<R: Elem>(
                 sh.registered = 0;
                 sh.left_out = false;
                 sh.cut = 0;
-                let mut used = 0u64;
+                let (mut used, mut regs_made) = (0u64, 0u64);
                 for i in 0..sh.hot.len() {
                     let h = &sh.hot[i];
                     if !h.active || h.blocked {
@@ -572,7 +579,6 @@ pub fn intersect_rays<R: Elem>(
                         sh.left_out = true;
                         continue;
                     }
-                    let before: usize = sh.regs.iter().map(RegMap::len).sum();
                     let (sum, walks) = register(
                         &mut sh.hot[i],
                         &sh.q[i],
@@ -586,7 +592,8 @@ pub fn intersect_rays<R: Elem>(
                     sh.store_sum += sum;
                     sh.store_walks += walks;
                     sh.registered += 1;
-                    used += (sh.regs.iter().map(RegMap::len).sum::<usize>() - before) as u64;
+                    used = sh.regs.iter().map(RegMap::used_bytes).sum::<usize>() as u64;
+                    regs_made = sh.regs.iter().map(RegMap::len).sum::<usize>() as u64;
                     if store.extends() {
                         sh.cut += sh.cold[i].walks[..ngrids]
                             .iter()
@@ -594,7 +601,7 @@ pub fn intersect_rays<R: Elem>(
                             .count() as u64;
                     }
                 }
-                sh.used = used;
+                sh.used = regs_made;
             })
         });
         // With the budget's store number: in a round's last pass (no ray
@@ -610,10 +617,13 @@ pub fn intersect_rays<R: Elem>(
         // the work counts do too.
         let waiting = total - finished - active;
         let extra = if store.extends() && waiting == 0 && !shards.iter().any(|sh| sh.left_out) {
+            // Counted as if each registration had a voxel of its own: the
+            // most they may take, and a count that does not depend on how
+            // the shards share the voxels (nor, so, on the threads).
             let used: u64 = shards.iter().map(|sh| sh.used).sum();
             let cut: u64 = shards.iter().map(|sh| sh.cut).sum();
-            let left = (setup.registrations as u64).saturating_sub(used);
-            (left / cut.max(1)).min(u32::MAX as u64) as u32
+            let left = (setup.registration_bytes / WORST_REGISTRATION_BYTES) as u64;
+            (left.saturating_sub(used) / cut.max(1)).min(u32::MAX as u64) as u32
         } else {
             0
         };
@@ -664,6 +674,7 @@ pub fn intersect_rays<R: Elem>(
                 region[g].union(&sh.region[g]);
                 let grid = &mut setup.grids.grids[g];
                 for &v in sh.regs[g].voxels() {
+                    st.registered_voxels += u64::from(!grid.is_registered(v as usize));
                     grid.set_registered(v as usize, true);
                     touched.mark(g, &grid.spec, v);
                 }

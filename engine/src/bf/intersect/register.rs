@@ -10,8 +10,10 @@ const SAMPLE_RAYS: u64 = 1024;
 
 /// The registrations rays `ray(0..len)` make in their first pass, on
 /// average, from up to [`SAMPLE_RAYS`] of them spread evenly over the
-/// round (rays that meet no grid take no slot and are not counted); `None`
-/// when no sampled ray meets a grid. What a round's slots are planned for
+/// round (rays that meet no grid take no slot and are not counted), and
+/// the voxels they are in per registration (an upper bound for the
+/// round's: its rays are denser than the sample and share more voxels);
+/// `None` when no sampled ray meets a grid. What a round's slots are planned for
 /// (see [`crate::bf::Budget::slots`]): the rays of one scene differ by tens
 /// of times (mount11's eye rays make 1.3 a pass, rings80's 25), and a
 /// round's shadow rays are unlike its eye rays. Walking a thousand rays
@@ -22,23 +24,23 @@ pub fn sample_registrations<R: Elem>(
     grids: &VoxelGrids,
     store: &StorePlan,
     eps: f64,
-) -> Option<f64> {
+) -> Option<(f64, f64)> {
     let mut slots = Slots::<R>::new(1);
     slots.ensure(1, false);
     let sh = &mut slots.shards[0];
     let mut regs: [RegMap; MAX_GRIDS] = Default::default();
     let mut region = [NO_REGION; MAX_GRIDS];
+    for m in regs.iter_mut() {
+        m.clear(64, 0);
+    }
     let step = (len / SAMPLE_RAYS).max(1);
-    let (mut rays, mut total) = (0u64, 0u64);
+    let mut rays = 0u64;
     let mut i = step / 2;
     while i < len {
         let r = ray(i);
         i += step;
         if misses_every_grid(&r, grids, eps) {
             continue;
-        }
-        for m in regs.iter_mut() {
-            m.clear(64, 0);
         }
         stage(sh, 0, 0, &r, eps);
         load(sh, 0);
@@ -52,10 +54,16 @@ pub fn sample_registrations<R: Elem>(
             &mut regs,
             &mut region,
         );
-        total += regs.iter().map(RegMap::len).sum::<usize>() as u64;
         rays += 1;
     }
-    (rays > 0).then(|| total as f64 / rays as f64)
+    let total = regs.iter().map(RegMap::len).sum::<usize>();
+    let voxels = regs.iter().map(|m| m.voxels().len()).sum::<usize>();
+    (rays > 0).then(|| {
+        (
+            total as f64 / rays as f64,
+            voxels as f64 / total.max(1) as f64,
+        )
+    })
 }
 
 /// A ray given a slot, to be loaded into it by the shard's own thread.

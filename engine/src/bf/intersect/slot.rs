@@ -178,9 +178,7 @@ pub fn streamed_extra_bytes() -> usize {
     std::mem::size_of::<Pending>().saturating_sub(std::mem::size_of::<u64>())
 }
 
-/// Memory per registration: its key, its slot id, and its share of the
-/// voxel table.
-pub const REGISTRATION_BYTES: usize = 8 + 4 + 24;
+pub use crate::bf::regmap::{REGISTRATION_BYTES, VOXEL_BYTES, WORST_REGISTRATION_BYTES};
 
 #[cfg(test)]
 mod tests {
