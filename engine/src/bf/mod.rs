@@ -298,7 +298,7 @@ impl Budget {
     /// [`VOXEL_BYTES`] more. Planned as if each registration had a voxel
     /// of its own, rings80's second round got 131 thousand slots of 1,404
     /// bytes for 982 thousand rays, where its rays share a voxel between
-    /// 10 and 18 of them. The shards count what they use as they register,
+    /// 8 and 15 of them. The shards count what they use as they register,
     /// so rays that share fewer voxels than planned only wait for the next
     /// pass, as when they register more than planned.
     ///

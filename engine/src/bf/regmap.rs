@@ -38,8 +38,8 @@ pub const REGISTRATION_BYTES: usize = 8 + 4;
 /// two, at most half full: up to four entries of four bytes).
 pub const VOXEL_BYTES: usize = 4 + 4 + 16;
 /// The most a registration takes: one in a voxel of its own. A pass's
-/// rays share most of their voxels (rings80's: 18 registrations a voxel
-/// in its first pass), so planning every registration for this left
+/// rays share most of their voxels (rings80's first round: 18 to 32
+/// registrations a voxel), so planning every registration for this left
 /// two thirds of the registrations' memory unused.
 pub const WORST_REGISTRATION_BYTES: usize = REGISTRATION_BYTES + VOXEL_BYTES;
 

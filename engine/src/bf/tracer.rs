@@ -30,7 +30,7 @@ const REGS_MARGIN: f64 = 1.25;
 /// And for this many times the voxels per registration the last round's
 /// rays were in (a round's rays share fewer voxels than the last round's
 /// when they are its reflections: rings80's eye rays, one voxel for 18
-/// registrations; their reflections, one for 8 to 13).
+/// to 32 registrations; their reflections, one for 8 to 15).
 const VOXELS_MARGIN: f64 = 2.0;
 use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
 use crate::scene::Material;
