@@ -222,7 +222,7 @@ impl Hierarchies {
     /// order), so it is first halved in the order given: no curve codes
     /// and no sort, which were half of what building a pass's aggregates
     /// cost (tetra 15 under 2 GiB: a tenth of its passes' time, for the
-    /// same tests within 0.3 %). Only if its leaves' boxes add up to more
+    /// same tests within 1 %). Only if its leaves' boxes add up to more
     /// than [`COHERENT`] times the group's (in half-area, the cost a ray
     /// pays to reach a leaf) is the order taken as scattered and the
     /// group built along a Morton curve instead ([`Hierarchies::build_with`]).
