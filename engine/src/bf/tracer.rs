@@ -23,7 +23,12 @@ use crate::error::Error;
 use crate::hit::PrimId;
 use crate::models::Models;
 use crate::progress::Progress;
+use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
+use crate::scene::Material;
+use crate::sdb::Database;
 use crate::simd::{Elem, Isa};
+use crate::spill::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
+use std::time::Instant;
 
 /// Slots plan for this much more than the last round's rays registered.
 const REGS_MARGIN: f64 = 1.25;
@@ -32,11 +37,6 @@ const REGS_MARGIN: f64 = 1.25;
 /// when they are its reflections: rings80's eye rays, one voxel for 18
 /// to 32 registrations; their reflections, one for 8 to 15).
 const VOXELS_MARGIN: f64 = 2.0;
-use crate::render::{EyeRays, KindCounts, RayCounts, RenderOptions, ShadeScene, epsilon};
-use crate::scene::Material;
-use crate::sdb::Database;
-use crate::spill::{ExternalSorter, RecordFile, RecordReader, RecordWriter, Sorted, SpillDir};
-use std::time::Instant;
 
 /// Eye ray `i` (see [`EyeRays`]): its colour goes to frame slot
 /// `corner`, its key is its id.
