@@ -69,6 +69,15 @@ impl Candidate {
     }
 }
 
+/// An object of an aggregate: where its record is.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Member {
+    pub(super) at: u32,
+    pub(super) index: u32,
+    /// Its input id: its place in the tie order.
+    pub(super) rank: u32,
+}
+
 /// What a pass does with one block, worked out once for every shard (the
 /// blocks of a batch in parallel, before the shards test them): the
 /// objects some registered voxel may hold, and the aggregates among them
@@ -93,7 +102,7 @@ pub(super) struct Found {
     pub(super) singles: Vec<Candidate>,
     /// The aggregates' objects, each aggregate's together, and their boxes
     /// (what their hierarchies are built over).
-    pub(super) members: Vec<Candidate>,
+    pub(super) members: Vec<Member>,
     pub(super) member_boxes: Vec<Aabb>,
     pub(super) aggregates: Vec<Aggregate>,
     pub(super) trees: Hierarchies,
@@ -155,24 +164,20 @@ pub(super) fn candidates(
                 .is_some_and(|(lo, hi)| r.overlaps(lo, hi) && may_be_registered(grid, lo, hi))
         })
     };
-    let mut placed = [(0, None); aggregate::SIZE];
     aggregate::each_group(block, |group, bounds| {
         if !near(bounds) {
             return;
         }
-        if aggregates && aggregate::may_be(spec(grids.partition.group(&group[0].bbox)), bounds) {
-            aggregate::place(group, &grids.partition, spec, &mut placed);
-            let placed = &placed[..group.len()];
-            match aggregate::of_grids(group, placed, bounds, spec) {
-                Some((g, lo, hi)) => {
-                    // An aggregate no registered ray is stored in gets no
-                    // hierarchy.
-                    if region[g].overlaps(lo, hi) && may_be_registered(&grids.grids[g], lo, hi) {
-                        add_aggregate(group, placed, g, lo, hi, out);
-                    }
-                }
-                // Placed already: one by one.
-                None => push_placed(group, placed, grids, region, &mut out.singles),
+        if aggregates && group.len() == aggregate::SIZE && grids.is_aggregate(group[0].index) {
+            // Judged by the build ([`aggregate::of_grids`]): of its first
+            // object's grid, over its box's voxels there. An aggregate no
+            // registered ray is stored in gets no hierarchy.
+            let g = grids.partition.group(&group[0].bbox);
+            if let Some((lo, hi)) = spec(g).and_then(|s| s.cell_range(bounds))
+                && region[g].overlaps(lo, hi)
+                && may_be_registered(&grids.grids[g], lo, hi)
+            {
+                add_aggregate(group, g, lo, hi, out);
             }
             return;
         }
@@ -251,24 +256,19 @@ fn may_be_registered(grid: &VoxelGrid, lo: [u32; 3], hi: [u32; 3]) -> bool {
     false
 }
 
-/// Adds the group `boxes` (placed in the grids as `placed` says), an
-/// aggregate of grid `g` over voxels `lo..=hi`, to `out`, with its
-/// hierarchy.
-fn add_aggregate(
-    boxes: &[BoxRef],
-    placed: &[aggregate::Placed],
-    g: usize,
-    lo: [u32; 3],
-    hi: [u32; 3],
-    out: &mut Found,
-) {
+/// Adds the group `boxes`, an aggregate of grid `g` over voxels
+/// `lo..=hi`, to `out`, with its hierarchy. Its objects' own voxels are
+/// not worked out: the scan needs them only for a ray in its second pass
+/// or later (the last-voxel rule), and finds them from their boxes then.
+fn add_aggregate(boxes: &[BoxRef], g: usize, lo: [u32; 3], hi: [u32; 3], out: &mut Found) {
     let first = out.members.len();
-    for (b, &(_, cells)) in boxes.iter().zip(placed) {
-        // Within the group's box, so within the grid.
-        if let Some((blo, bhi)) = cells {
-            out.members.push(Candidate::new(b, g, blo, bhi));
-            out.member_boxes.push(b.bbox);
-        }
+    for b in boxes {
+        out.members.push(Member {
+            at: b.at,
+            index: b.index,
+            rank: b.rank,
+        });
+        out.member_boxes.push(b.bbox);
     }
     out.ids.clear();
     out.ids.extend(first as u32..out.members.len() as u32);

@@ -169,6 +169,7 @@ mod tests {
             }],
             partition: crate::grid::Partition::one(),
             blocks: Vec::new(),
+            aggregate_groups: Vec::new(),
         };
         let mut t = Touched::default();
         t.clear(&grids);

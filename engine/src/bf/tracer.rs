@@ -281,8 +281,9 @@ impl<'db, R: Elem> Tracer<'db, R> {
         }
         // The voxel flags, a pass's coarse cells (four bytes per 64
         // voxels), the busy blocks (a bit per 64 voxels), the registered
-        // voxels (a bit each), and per block its voxel boxes (one per grid) and its
-        // place in the file (which let passes skip it).
+        // voxels (a bit each), per block its voxel boxes (one per grid) and its
+        // place in the file (which let passes skip it), and a bit per group
+        // of objects.
         let voxels: u64 = specs.iter().map(|s| s.cells() as u64).sum();
         let cells = voxels
             + voxels / 16
@@ -296,7 +297,11 @@ impl<'db, R: Elem> Tracer<'db, R> {
                 .sum::<u64>()
             + specs.len() as u64 * 4096
             + db.block_count()
-                * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64);
+                * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64)
+            // Which groups of objects are aggregates: a bit each.
+            + 8 * db
+                .object_count()
+                .div_ceil(64 * crate::grid::aggregate::SIZE as u64);
         let store = StorePlan::new(bf.store, &specs);
         // Textures: held, or read through a cache, within the budget.
         let eps = epsilon(&db.bbox(), opts.precision);

@@ -145,6 +145,12 @@ pub struct VoxelGrids {
     /// Each block's voxel box in each grid (block-major, one box per
     /// grid): what a pass needs to know to leave the block unread.
     pub blocks: Vec<CellBox>,
+    /// A bit per group of [`aggregate::SIZE`] objects (by index): whether
+    /// it is an aggregate, as the build found it (empty when the passes
+    /// hold none). A pass reads it rather than judge the group again
+    /// from its objects' voxels, which it placed one by one in every scan
+    /// (mount11: a tenth of its samples).
+    pub(super) aggregate_groups: Vec<u64>,
 }
 
 /// The threads a grid build may use: a pool to place a batch of blocks'
@@ -165,6 +171,8 @@ struct BlockMarks {
     objects: [u64; MAX_GROUPS],
     /// Groups the passes will hold as aggregates, per grid.
     aggregates: [u64; MAX_GROUPS],
+    /// And their numbers (first object's index / [`aggregate::SIZE`]).
+    aggregate_groups: Vec<u32>,
     /// The first object that lies outside its grid.
     outside: Option<u64>,
 }
@@ -176,6 +184,7 @@ impl Default for BlockMarks {
             boxes: [CellBox::EMPTY; MAX_GROUPS],
             objects: [0; MAX_GROUPS],
             aggregates: [0; MAX_GROUPS],
+            aggregate_groups: Vec::new(),
             outside: None,
         }
     }
@@ -193,6 +202,7 @@ impl BlockMarks {
         self.boxes = [CellBox::EMPTY; MAX_GROUPS];
         self.objects = [0; MAX_GROUPS];
         self.aggregates = [0; MAX_GROUPS];
+        self.aggregate_groups.clear();
         self.outside = None;
         // One pass over the records' boxes (their geometry is not
         // decoded): each object's grid and voxel box, which the groups
@@ -235,6 +245,7 @@ impl BlockMarks {
                 && let Some((g, ..)) = aggregate::of_grids(&group, &placed, &bounds, grid)
             {
                 self.aggregates[g] += 1;
+                self.aggregate_groups.push(b.index / aggregate::SIZE as u32);
             }
         }
     }
@@ -271,6 +282,11 @@ impl VoxelGrids {
         // few bytes per object; the rest, decoding and placing the
         // objects, was nine tenths of the time on one core).
         let mut marks: Vec<BlockMarks> = Vec::new();
+        let mut aggregate_groups = if aggregates {
+            vec![0u64; db.object_count().div_ceil(64 * aggregate::SIZE as u64) as usize]
+        } else {
+            Vec::new()
+        };
         let stats = crate::sdb::scan_blocks::<()>(
             db.scan()?,
             work.read_ahead,
@@ -304,6 +320,9 @@ impl VoxelGrids {
                         grid.objects += m.objects[g];
                         grid.aggregates += m.aggregates[g];
                     }
+                    for &k in &m.aggregate_groups {
+                        aggregate_groups[k as usize / 64] |= 1 << (k % 64);
+                    }
                     progress.inc(block.object_count as u64);
                 }
                 Ok(())
@@ -318,8 +337,19 @@ impl VoxelGrids {
             grids,
             partition,
             blocks,
+            aggregate_groups,
         };
         Ok((grids, stats))
+    }
+
+    /// Whether the group of objects whose first has index `first` is an
+    /// aggregate (see [`crate::grid::aggregate::of_grids`]).
+    #[inline]
+    pub fn is_aggregate(&self, first: u32) -> bool {
+        let k = first as usize / aggregate::SIZE;
+        self.aggregate_groups
+            .get(k / 64)
+            .is_some_and(|w| w >> (k % 64) & 1 != 0)
     }
 
     /// The voxel boxes of block `index`, one per grid (`None` for a block
@@ -355,6 +385,7 @@ impl VoxelGrids {
             })
             .sum::<u64>()
             + (self.blocks.len() * std::mem::size_of::<CellBox>()) as u64
+            + 8 * self.aggregate_groups.len() as u64
     }
 }
 
@@ -381,6 +412,104 @@ fn mark_box(spec: &GridSpec, flags: &mut [u8], lo: [u32; 3], hi: [u32; 3]) {
 mod tests {
     use super::*;
     use crate::scene::Aabb;
+
+    /// The bit the build sets for a group is what the groups' own rule
+    /// ([`aggregate::of_grids`]) says of it, group by group: crowded
+    /// patches, a group spread over the scene, and groups cut by a
+    /// block's end (which a pass tests one by one).
+    #[test]
+    fn the_build_marks_the_groups_the_rule_makes_aggregates() {
+        use std::fmt::Write;
+        let mut nff = String::from(
+            "v\nfrom 0 0 -5\nat 0 0 0\nup 0 1 0\nangle 40\nhither 0.01\nresolution 8 8\n\
+             b 0 0 0\nl 0 5 -5\nf 1 1 1 1 0 0 0 1\n",
+        );
+        // Groups of tiny triangles, each crowded into a voxel or two (ten
+        // groups a patch), and every eleventh group spread across the
+        // scene.
+        let tri = |s: &mut String, c: [f64; 3], r: f64| {
+            writeln!(
+                s,
+                "p 3\n{} {} {}\n{} {} {}\n{} {} {}",
+                c[0],
+                c[1],
+                c[2],
+                c[0] + r,
+                c[1],
+                c[2],
+                c[0],
+                c[1] + r,
+                c[2]
+            )
+            .unwrap();
+        };
+        for g in 0..44 {
+            for i in 0..64 {
+                let c = if g % 11 == 5 {
+                    [(i % 8) as f64 * 0.5 - 2.0, (i / 8) as f64 * 0.5 - 2.0, 1.0]
+                } else {
+                    let p = (g / 10) as f64;
+                    [p - 1.0, (i % 7) as f64 * 0.01, (i % 5) as f64 * 0.01]
+                };
+                tri(&mut nff, c, 0.01);
+            }
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("groups.sdb");
+        // Records of their own, not runs: more blocks, whose ends cut
+        // groups.
+        let mut w = crate::sdb::DbWriter::create(&path, crate::sdb::Compression::None)
+            .unwrap()
+            .without_runs();
+        crate::nff::read_nff_from(
+            nff.as_bytes(),
+            std::path::Path::new("groups.nff"),
+            &mut w,
+            &crate::progress::NoProgress,
+        )
+        .unwrap();
+        w.finish().unwrap();
+        let db = crate::sdb::Database::open(&path).unwrap();
+        assert!(db.block_count() > 1);
+        let spec = GridSpec::new(&db.bbox(), [20, 20, 20]);
+        let threads = BuildThreads {
+            pool: None,
+            read_ahead: false,
+        };
+        let (grids, _) = VoxelGrids::build(
+            &db,
+            vec![spec.clone()],
+            Partition::one(),
+            true,
+            threads,
+            &crate::progress::NoProgress,
+        )
+        .unwrap();
+        let (mut held, mut not, mut cut) = (0, 0, 0);
+        let mut scan = db.scan().unwrap();
+        let mut placed = [(0, None); aggregate::SIZE];
+        while let Some(block) = scan.next_block().unwrap() {
+            aggregate::each_group(&block, |group, bounds| {
+                let first = group[0].index;
+                if group.len() < aggregate::SIZE {
+                    cut += 1;
+                    // A cut group's bit is its whole group's: never set.
+                    assert!(!grids.is_aggregate(first), "cut group at {first}");
+                    return;
+                }
+                aggregate::place(group, &grids.partition, |_| Some(&spec), &mut placed);
+                let rule = aggregate::of_grids(group, &placed, bounds, |_| Some(&spec)).is_some();
+                assert_eq!(grids.is_aggregate(first), rule, "group at {first}");
+                if rule {
+                    held += 1;
+                } else {
+                    not += 1;
+                }
+            });
+        }
+        assert_eq!(grids.grids[0].aggregates, held as u64);
+        assert!(held >= 20 && not >= 1 && cut >= 2, "{held} {not} {cut}");
+    }
 
     #[test]
     fn boxes_mark_occupancy_and_their_boundary_faces() {

@@ -130,7 +130,12 @@ fn scan_aggregates<R: Elem>(
                         let k = id as usize - a.first as usize;
                         let m = &members[k];
                         if prev[0] != NONE16
-                            && (0..3).all(|i| (m.lo[i]..=m.hi[i]).contains(&prev[i]))
+                            && grids.grids[g]
+                                .spec
+                                .cell_range(&found.member_boxes[id as usize])
+                                .is_some_and(|(lo, hi)| {
+                                    (0..3).all(|i| (lo[i]..=hi[i]).contains(&u32::from(prev[i])))
+                                })
                         {
                             // Tested in the previous pass (Fig. 5b).
                             counts.skipped_last_voxel += 1;
