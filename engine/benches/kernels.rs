@@ -38,6 +38,7 @@ fn rays<R: Elem>() -> RayLanes<R> {
         let t = Vec3::new(rng.next() * 2.4 - 1.2, rng.next() * 2.4 - 1.2, 0.0);
         g.push(o, t - o, 1e-6, f64::INFINITY);
     }
+    g.seal(Isa::detect());
     g
 }
 

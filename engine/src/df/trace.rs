@@ -228,9 +228,15 @@ fn trace_band<R: Elem>(
         side /= 2;
     }
     let rows = out.len() / row_len;
-    let origin = eye.camera.eye;
-    let mut rays = RayLanes::<R>::new();
-    let mut carry = Carry::EMPTY;
+    // The band's first row of slots in the whole frame's slot grid.
+    let row0 = (first / row_len) as u32;
+    let mut packet = EyePacket {
+        x: [0.0; LANES],
+        y: [0.0; LANES],
+        n: 0,
+        carry: Carry::EMPTY,
+        rays: RayLanes::<R>::new(),
+    };
     for by in (0..rows).step_by(side) {
         for bx in (0..row_len).step_by(side) {
             // The block's slots in Z order, so that the lanes of any
@@ -242,28 +248,52 @@ fn trace_band<R: Elem>(
                 if x >= row_len || y >= rows {
                     continue;
                 }
-                {
-                    let slot = y * row_len + x;
-                    let i0 = ((first + slot) * spp) as u64;
-                    for i in i0..i0 + spp as u64 {
-                        let (d, _) = eye.ray(i);
-                        let lane = rays.push(origin, d, 0.0, f64::INFINITY);
-                        carry.slot[lane] = slot as u32;
-                        carry.weight[lane] = 1.0;
-                        if rays.is_full() {
-                            sc.rays.eye_rays += rays.n as u64;
-                            trace_packet(s, sc, &rays, &carry, 1, out);
-                            rays.clear();
-                        }
+                let slot = y * row_len + x;
+                for i in 0..spp as u32 {
+                    let j = packet.n;
+                    (packet.x[j], packet.y[j]) = eye.point(x as u32, row0 + y as u32, i);
+                    packet.carry.slot[j] = slot as u32;
+                    packet.carry.weight[j] = 1.0;
+                    packet.n += 1;
+                    if packet.n == LANES {
+                        packet.trace(s, sc, eye, out);
                     }
                 }
             }
-            if rays.n > 0 {
-                sc.rays.eye_rays += rays.n as u64;
-                trace_packet(s, sc, &rays, &carry, 1, out);
-                rays.clear();
+            if packet.n > 0 {
+                packet.trace(s, sc, eye, out);
             }
         }
+    }
+}
+
+/// Eye rays gathered for a packet: the image points they pass through
+/// and where their colour goes.
+struct EyePacket<R> {
+    x: [f64; LANES],
+    y: [f64; LANES],
+    n: usize,
+    carry: Carry,
+    rays: RayLanes<R>,
+}
+
+impl<R: Elem> EyePacket<R> {
+    /// Makes the rays through the points gathered (their directions all
+    /// at once), traces them, and empties the packet.
+    fn trace(&mut self, s: &DfScene, sc: &mut Scratch<R>, eye: &EyeRays, out: &mut [[i64; 3]]) {
+        let mut d = [[0.0; LANES]; 3];
+        eye.camera
+            .directions_at(sc.isa, &self.x, &self.y, self.n, &mut d);
+        let rays = &mut self.rays;
+        rays.clear();
+        for j in 0..self.n {
+            let dir = Vec3::new(d[0][j], d[1][j], d[2][j]);
+            rays.push(eye.camera.eye, dir, 0.0, f64::INFINITY);
+        }
+        rays.seal(sc.isa);
+        sc.rays.eye_rays += self.n as u64;
+        trace_packet(s, sc, rays, &self.carry, 1, out);
+        self.n = 0;
     }
 }
 
@@ -407,6 +437,7 @@ fn trace_packet<R: Elem>(
                 next[i] += 1;
             }
         }
+        toward_light.seal(sc.isa);
         let slot = light as usize * max_depth + depth as usize - 1;
         let t0 = sc.profile.then(std::time::Instant::now);
         let lit = occluded_all(s, sc, toward_light, slot);
@@ -423,6 +454,7 @@ fn trace_packet<R: Elem>(
         (&mut *refract, &*refract_carry),
     ] {
         if next.n > 0 {
+            next.seal(sc.isa);
             trace_packet(s, sc, next, next_carry, depth + 1, out);
         }
     }

@@ -238,6 +238,7 @@ pub fn nearest<R: Elem>(
     best: &mut Hits<R>,
     apart: bool,
 ) {
+    debug_assert!(rays.is_sealed(), "rays tested before they are sealed");
     let isa = sc.isa;
     isa.run(Walk {
         s,
@@ -261,6 +262,7 @@ pub fn occluded<R: Elem>(
     tested: [u32; 2],
     apart: bool,
 ) -> (Lanes, u32) {
+    debug_assert!(rays.is_sealed(), "rays tested before they are sealed");
     let isa = sc.isa;
     let goal = isa.run(Walk {
         s,

@@ -1,7 +1,8 @@
 //! A group of up to [`LANES`] rays held one array per coordinate, in the
 //! precision of the tests: what the kernels test one primitive against.
 
-use crate::math::{Real, V3, Vec3, Vec3Ext};
+use crate::math::{Real, V3, Vec3};
+use crate::simd::{Isa, Job, Lanes as Simd};
 
 /// Most rays in a group (a depth-first packet of 8 x 8 eye rays; a
 /// breadth-first voxel's rays are tested 64 at a time).
@@ -93,6 +94,25 @@ pub struct RayLanes<R> {
     /// Whether every ray held has the same axes (`axes[0]`): the
     /// triangle kernel then needs no per-lane selection of coordinates.
     pub same_axes: bool,
+    /// Whether [`RayLanes::seal`] has run since the last push.
+    sealed: bool,
+}
+
+/// Lanes of one pass of [`RayLanes::seal`]'s vector loop: a multiple of
+/// every vector width, dividing [`LANES`].
+const CHUNK: usize = 16;
+const _: () = assert!(LANES % CHUNK == 0);
+
+/// [`RayLanes::seal`], compiled for each instruction set.
+struct Seal<'a, R>(&'a mut RayLanes<R>);
+
+impl<R: Real> Job for Seal<'_, R> {
+    type Out = ();
+
+    #[inline(always)]
+    fn run<L: Simd>(self) {
+        self.0.derive();
+    }
 }
 
 impl<R: Real> Default for RayLanes<R> {
@@ -126,6 +146,7 @@ impl<R: Real> RayLanes<R> {
             t_min64: [0.0; LANES],
             t_max64: [f64::INFINITY; LANES],
             same_axes: true,
+            sealed: true,
         }
     }
 
@@ -134,6 +155,7 @@ impl<R: Real> RayLanes<R> {
     pub fn clear(&mut self) {
         self.n = 0;
         self.same_axes = true;
+        self.sealed = true;
     }
 
     /// Whether no more rays fit.
@@ -153,61 +175,94 @@ impl<R: Real> RayLanes<R> {
     }
 
     /// Appends the ray `o + t d`, `t_min < t < t_max` (`d` not zero);
-    /// returns its lane.
+    /// returns its lane. Only the ray as given is stored: what the
+    /// kernels read is derived for all the group's rays at once by
+    /// [`RayLanes::seal`], which must come before any test.
     #[inline]
     pub fn push(&mut self, o: Vec3, d: Vec3, t_min: f64, t_max: f64) -> usize {
         let i = self.n;
         assert!(i < LANES, "a ray group holds {LANES} rays");
-        let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
-        self.set(i, o, d, inv, t_min, t_max);
+        for a in 0..3 {
+            self.o64[a][i] = o[a];
+            self.d64[a][i] = d[a];
+        }
+        self.t_min64[i] = t_min;
+        self.t_max64[i] = t_max;
         self.n += 1;
+        self.sealed = false;
         i
     }
 
-    /// Puts the ray in lane `i` (see [`RayLanes::push`]); `inv` = 1/d.
+    /// Whether what the kernels read has been derived for every ray
+    /// pushed.
     #[inline]
-    pub fn set(&mut self, i: usize, o: Vec3, d: Vec3, inv: Vec3, t_min: f64, t_max: f64) {
-        let (or, dr, ir): (V3<R>, V3<R>, V3<R>) = (o.cast(), d.cast(), inv.cast());
-        for a in 0..3 {
-            self.o[a][i] = or[a];
-            self.d[a][i] = dr[a];
-            self.inv[a][i] = if ir[a].is_finite() {
-                ir[a]
-            } else if ir[a] > R::ZERO {
-                R::MAX
-            } else {
-                -R::MAX
-            };
-            self.o64[a][i] = o[a];
-            self.d64[a][i] = d[a];
-            self.inv64[a][i] = inv[a];
+    pub fn is_sealed(&self) -> bool {
+        self.sealed
+    }
+
+    /// Derives, for every ray pushed, what the kernels read: each
+    /// prepared exactly as a single ray is for the scalar tests
+    /// ([`crate::intersect::RayQ::with_inverse`]), in loops over the lanes
+    /// compiled for the instruction set `isa` (the same operations lane by
+    /// lane on every width: see [`crate::simd`]).
+    pub fn seal(&mut self, isa: Isa) {
+        isa.run(Seal(self));
+    }
+
+    /// [`RayLanes::seal`]'s work: first what vectorises (reciprocals,
+    /// roundings to `R`, `d . d`), sixteen lanes at a time (lanes from
+    /// `n` to the next multiple of sixteen are computed too, from
+    /// whatever they hold, and never read), then the watertight test's
+    /// choice of axes, ray by ray.
+    #[inline(always)]
+    fn derive(&mut self) {
+        let n = self.n.min(LANES);
+        for c in (0..n).step_by(CHUNK) {
+            for i in c..c + CHUNK {
+                let mut dr = [R::ZERO; 3];
+                for a in 0..3 {
+                    let inv = 1.0 / self.d64[a][i];
+                    self.inv64[a][i] = inv;
+                    self.o[a][i] = R::from_f64(self.o64[a][i]);
+                    dr[a] = R::from_f64(self.d64[a][i]);
+                    self.d[a][i] = dr[a];
+                    let ir = R::from_f64(inv);
+                    self.inv[a][i] = if ir.is_finite() {
+                        ir
+                    } else if ir > R::ZERO {
+                        R::MAX
+                    } else {
+                        -R::MAX
+                    };
+                }
+                self.t_min[i] = R::from_f64(self.t_min64[i]);
+                self.t_max[i] = R::from_f64(self.t_max64[i]);
+                // `V3::dot`'s order.
+                let a = dr[0] * dr[0] + dr[1] * dr[1] + dr[2] * dr[2];
+                self.a[i] = a;
+                self.inv_a[i] = R::ONE / a;
+            }
         }
-        self.t_min[i] = R::from_f64(t_min);
-        self.t_max[i] = R::from_f64(t_max);
-        self.t_min64[i] = t_min;
-        self.t_max64[i] = t_max;
         // As `RayQ::with_inverse`, in the precision of the tests.
-        let kz = dr.max_axis();
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        if dr[kz] < R::ZERO {
-            std::mem::swap(&mut kx, &mut ky);
+        for i in 0..n {
+            let dr = V3::new(self.d[0][i], self.d[1][i], self.d[2][i]);
+            let kz = dr.max_axis();
+            let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+            if dr[kz] < R::ZERO {
+                std::mem::swap(&mut kx, &mut ky);
+            }
+            // The reciprocal as rounded, not made finite.
+            let sz = R::from_f64(self.inv64[kz][i]);
+            self.axes[i] = [kx as u8, ky as u8, kz as u8];
+            self.kx[i] = R::from_f64(kx as f64);
+            self.ky[i] = R::from_f64(ky as f64);
+            self.kz[i] = R::from_f64(kz as f64);
+            self.sx[i] = dr[kx] * sz;
+            self.sy[i] = dr[ky] * sz;
+            self.sz[i] = sz;
         }
-        let sz = ir[kz];
-        self.axes[i] = [kx as u8, ky as u8, kz as u8];
-        self.kx[i] = R::from_f64(kx as f64);
-        self.ky[i] = R::from_f64(ky as f64);
-        self.kz[i] = R::from_f64(kz as f64);
-        self.sx[i] = dr[kx] * sz;
-        self.sy[i] = dr[ky] * sz;
-        self.sz[i] = sz;
-        let a = dr.dot(dr);
-        self.a[i] = a;
-        self.inv_a[i] = R::ONE / a;
-        if i == 0 {
-            self.same_axes = true;
-        } else {
-            self.same_axes &= self.axes[i] == self.axes[0];
-        }
+        self.same_axes = self.axes[1..n.max(1)].iter().all(|&x| x == self.axes[0]);
+        self.sealed = true;
     }
 
     /// Puts ray `q`, prepared for the scalar tests, in lane `i`, with the

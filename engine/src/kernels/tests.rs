@@ -34,8 +34,15 @@ impl Rng {
 /// the awkward ones: directions with zero components, rays through the
 /// given points exactly, short intervals.
 fn rays<R: Real>(rng: &mut Rng, targets: &[[f32; 3]]) -> RayLanes<R> {
+    let mut g = unsealed::<R>(rng, targets, LANES);
+    g.seal(Isa::detect());
+    g
+}
+
+/// [`rays`]' first `n` rays, pushed and not sealed.
+fn unsealed<R: Real>(rng: &mut Rng, targets: &[[f32; 3]], n: usize) -> RayLanes<R> {
     let mut g = RayLanes::<R>::new();
-    for i in 0..LANES {
+    for i in 0..n {
         let o = Vec3::new(
             rng.range(-3.0, 3.0),
             rng.range(-3.0, 3.0),
@@ -69,6 +76,85 @@ fn rays<R: Real>(rng: &mut Rng, targets: &[[f32; 3]]) -> RayLanes<R> {
         g.push(o, d, lo, hi);
     }
     g
+}
+
+/// Every value [`RayLanes::seal`] derives for lane `i`, as bits.
+fn derived<R: Real>(g: &RayLanes<R>, i: usize) -> Vec<u64> {
+    let b = |x: R| x.to_f64().to_bits();
+    let mut v = vec![];
+    for a in 0..3 {
+        v.extend([
+            b(g.o[a][i]),
+            b(g.d[a][i]),
+            b(g.inv[a][i]),
+            g.inv64[a][i].to_bits(),
+        ]);
+    }
+    v.extend([g.t_min[i], g.t_max[i], g.kx[i], g.ky[i], g.kz[i]].map(b));
+    v.extend([g.sx[i], g.sy[i], g.sz[i], g.a[i], g.inv_a[i]].map(b));
+    v.extend(g.axes[i].map(u64::from));
+    v
+}
+
+/// Sealing a group derives, on every instruction set, the values of the
+/// scalar ray the tests take ([`RayQ::with_inverse`] of the ray rounded
+/// to `R`, with `1 / d` computed in `f64`), for full groups and for
+/// groups whose last vector is partly filled.
+fn seals_as_the_scalar_ray<R: Real>() {
+    for (seed, n) in [(3, LANES), (4, 37), (5, 1), (6, 16)] {
+        let want: Vec<Vec<u64>> = {
+            let g = unsealed::<R>(&mut Rng(seed), &[[0.5, 0.5, 0.5]], n);
+            (0..n)
+                .map(|i| {
+                    let (o, d) = (g.o(i), g.d(i));
+                    let inv = Vec3::new(1.0 / d.x, 1.0 / d.y, 1.0 / d.z);
+                    let q = RayQ::<R>::with_inverse(o.cast(), d.cast(), inv.cast());
+                    let b = |x: R| x.to_f64().to_bits();
+                    let finite = |x: R| {
+                        if x.is_finite() {
+                            x
+                        } else if x > R::ZERO {
+                            R::MAX
+                        } else {
+                            -R::MAX
+                        }
+                    };
+                    let mut v = vec![];
+                    for a in 0..3 {
+                        v.extend([b(q.o[a]), b(q.d[a]), b(finite(q.inv[a])), inv[a].to_bits()]);
+                    }
+                    let k = [q.kx, q.ky, q.kz].map(|k| R::from_f64(k as f64));
+                    v.extend([
+                        b(R::from_f64(g.t_min64[i])),
+                        b(R::from_f64(g.t_max64[i])),
+                        b(k[0]),
+                        b(k[1]),
+                        b(k[2]),
+                    ]);
+                    v.extend([q.sx, q.sy, q.sz(), q.a, q.inv_a].map(b));
+                    v.extend([q.kx, q.ky, q.kz].map(u64::from));
+                    v
+                })
+                .collect()
+        };
+        for isa in Isa::available_here() {
+            let mut g = unsealed::<R>(&mut Rng(seed), &[[0.5, 0.5, 0.5]], n);
+            assert!(!g.is_sealed());
+            g.seal(isa);
+            assert!(g.is_sealed());
+            for i in 0..n {
+                assert_eq!(derived(&g, i), want[i], "{isa}, {n} rays, lane {i}");
+            }
+            let same = (1..n).all(|i| want[i][want[i].len() - 3..] == want[0][want[0].len() - 3..]);
+            assert_eq!(g.same_axes, same, "{isa}, {n} rays");
+        }
+    }
+}
+
+#[test]
+fn sealing_derives_the_scalar_rays_on_every_width() {
+    seals_as_the_scalar_ray::<f32>();
+    seals_as_the_scalar_ray::<f64>();
 }
 
 fn limits<R: Real>(g: &RayLanes<R>) -> [R; LANES] {
@@ -153,6 +239,7 @@ fn triangles_match_with_rays_of_the_same_axes() {
             let d = Vec3::new(rng.range(-0.3, 0.3), rng.range(-0.3, 0.3), -1.0);
             g.push(o, d, 0.0, f64::INFINITY);
         }
+        g.seal(Isa::detect());
         assert!(g.same_axes);
         check(
             "triangle",

@@ -82,23 +82,32 @@ impl EyeRays {
     /// Direction of eye ray `i`, and the frame slot its colour goes to.
     #[inline]
     pub fn ray(&self, i: u64) -> (Vec3, u32) {
-        let cam = &self.camera;
+        let spp = self.sampling.per_slot() as u64;
+        let w = self
+            .sampling
+            .slot_grid(self.camera.width, self.camera.height)
+            .0 as u64;
+        let (slot, s) = (i / spp, (i % spp) as u32);
+        let (col, row) = ((slot % w) as u32, (slot / w) as u32);
+        let (x, y) = self.point(col, row, s);
+        (self.camera.direction_at(x, y), slot as u32)
+    }
+
+    /// The image point (in pixels from the top left corner) that sample
+    /// `s` of the frame slot in column `col` and row `row` of the slot
+    /// grid ([`Sampling::slot_grid`]) passes through: eye ray `(row * w +
+    /// col) * per_slot + s`'s, for slot rows of `w`.
+    #[inline]
+    pub fn point(&self, col: u32, row: u32, s: u32) -> (f64, f64) {
         match self.sampling {
-            Sampling::Corners => {
-                let w = cam.width as u64 + 1;
-                let (col, row) = (i % w, i / w);
-                (cam.direction_at(col as f64, row as f64), i as u32)
-            }
+            Sampling::Corners => (col as f64, row as f64),
             Sampling::Jittered { per_side } => {
-                let spp = (per_side * per_side) as u64;
-                let (pixel, s) = (i / spp, (i % spp) as u32);
-                let w = cam.width as u64;
-                let (x, y) = ((pixel % w) as f64, (pixel / w) as f64);
+                let pixel = row as u64 * self.camera.width as u64 + col as u64;
                 let (u, v) = jitter(pixel, s);
                 let k = per_side as f64;
-                let px = x + ((s % per_side) as f64 + u) / k;
-                let py = y + ((s / per_side) as f64 + v) / k;
-                (cam.direction_at(px, py), pixel as u32)
+                let px = col as f64 + ((s % per_side) as f64 + u) / k;
+                let py = row as f64 + ((s / per_side) as f64 + v) / k;
+                (px, py)
             }
         }
     }
