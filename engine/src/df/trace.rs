@@ -168,6 +168,16 @@ fn render_in<R: Elem>(
                     sc
                 },
                 |sc, (band, out)| {
+                    // The frame is zero already, but its pages are not
+                    // yet in memory: written first, each comes as a fresh
+                    // page on this thread. Read first (a colour added),
+                    // it would map the shared zero page, and the write
+                    // after would copy it and flush the mapping from
+                    // every other core's TLB: an interrupt to each, which
+                    // on a virtual machine cost a second thread all it
+                    // gained (the dragon's eye rays at 1024 x 1024 took
+                    // as long on two threads as on one).
+                    out.fill([0; 3]);
                     sc.shadow_cache.fill(NO_OBJECT);
                     trace_band::<R>(scene, sc, &eye, band * BAND * row_len, row_len, out);
                     progress.inc((out.len() / row_len) as u64);

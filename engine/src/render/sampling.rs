@@ -82,12 +82,14 @@ impl EyeRays {
     /// Direction of eye ray `i`, and the frame slot its colour goes to.
     #[inline]
     pub fn ray(&self, i: u64) -> (Vec3, u32) {
-        let spp = self.sampling.per_slot() as u64;
-        let w = self
-            .sampling
-            .slot_grid(self.camera.width, self.camera.height)
-            .0 as u64;
-        let (slot, s) = (i / spp, (i % spp) as u32);
+        let (w, slot, s) = match self.sampling {
+            // One ray a slot: no division by the samples.
+            Sampling::Corners => (self.camera.width as u64 + 1, i, 0),
+            Sampling::Jittered { per_side } => {
+                let spp = (per_side * per_side) as u64;
+                (self.camera.width as u64, i / spp, (i % spp) as u32)
+            }
+        };
         let (col, row) = ((slot % w) as u32, (slot / w) as u32);
         let (x, y) = self.point(col, row, s);
         (self.camera.direction_at(x, y), slot as u32)
