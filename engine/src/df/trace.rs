@@ -367,9 +367,12 @@ fn trace_packet<R: Elem>(
         let (slot, weight) = (carry.slot[i], carry.weight[i]);
         let (o, d) = (rays.o(i), rays.d(i));
         let hit = best.hit(i);
+        // `RayQ::from_vec3(o, d)`, with the reciprocals the seal computed
+        // in `f64` already.
+        let q = || RayQ::with_inverse(o.into(), d.into(), rays.inv(i).into());
         if let Some((surf, mat)) = hit
             .is_some()
-            .then(|| s.surface_of(hit.prim, &RayQ::from_vec3(o, d), hit.t))
+            .then(|| s.surface_of(hit.prim, &q(), hit.t))
             .flatten()
         {
             if depth == 1 {

@@ -101,7 +101,7 @@ pub struct RayLanes<R> {
 /// Lanes of one pass of [`RayLanes::seal`]'s vector loop: a multiple of
 /// every vector width, dividing [`LANES`].
 const CHUNK: usize = 16;
-const _: () = assert!(LANES % CHUNK == 0);
+const _: () = assert!(LANES.is_multiple_of(CHUNK));
 
 /// [`RayLanes::seal`], compiled for each instruction set.
 struct Seal<'a, R>(&'a mut RayLanes<R>);

@@ -23,7 +23,7 @@ pub struct Camera {
 /// Lanes of one pass of [`Camera::directions_at`]'s loop: a multiple of
 /// every vector width, dividing [`LANES`].
 const CHUNK: usize = 16;
-const _: () = assert!(LANES % CHUNK == 0);
+const _: () = assert!(LANES.is_multiple_of(CHUNK));
 
 /// [`Camera::directions_at`], compiled for each instruction set.
 struct Directions<'a> {
