@@ -299,9 +299,7 @@ impl<'db, R: Elem> Tracer<'db, R> {
             + db.block_count()
                 * (16 + specs.len() as u64 * std::mem::size_of::<super::skip::CellBox>() as u64)
             // Which groups of objects are aggregates: a bit each.
-            + 8 * db
-                .object_count()
-                .div_ceil(64 * crate::grid::aggregate::SIZE as u64);
+            + 8 * super::voxels::VoxelGrids::aggregate_words(db.object_count()) as u64;
         let store = StorePlan::new(bf.store, &specs);
         // Textures: held, or read through a cache, within the budget.
         let eps = epsilon(&db.bbox(), opts.precision);

@@ -283,7 +283,7 @@ impl VoxelGrids {
         // objects, was nine tenths of the time on one core).
         let mut marks: Vec<BlockMarks> = Vec::new();
         let mut aggregate_groups = if aggregates {
-            vec![0u64; db.object_count().div_ceil(64 * aggregate::SIZE as u64) as usize]
+            vec![0u64; Self::aggregate_words(db.object_count())]
         } else {
             Vec::new()
         };
@@ -340,6 +340,12 @@ impl VoxelGrids {
             aggregate_groups,
         };
         Ok((grids, stats))
+    }
+
+    /// Words of the bitmap of which groups of `objects` objects are
+    /// aggregates (a bit per group), for the build and the budget.
+    pub fn aggregate_words(objects: u64) -> usize {
+        objects.div_ceil(64 * aggregate::SIZE as u64) as usize
     }
 
     /// Whether the group of objects whose first has index `first` is an
