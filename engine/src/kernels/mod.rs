@@ -38,7 +38,7 @@ pub use batch::{BATCH, RayTriangles, TriangleBatch};
 pub use boxes::{BoxLanes, MayHitBox, widen};
 pub use cone::ConeLanes;
 pub use polygon::{Crossings, PlaneLanes};
-pub use rays::{LANES, Lanes, Need, RayLanes, each_lane};
+pub use rays::{CHUNK, LANES, Lanes, Need, RayLanes, each_lane};
 pub(crate) use shape::on_plane;
 pub use shape::{Found, ShapeLanes, shape_lanes};
 pub use sphere::SphereLanes;

@@ -98,9 +98,10 @@ pub struct RayLanes<R> {
     sealed: bool,
 }
 
-/// Lanes of one pass of [`RayLanes::seal`]'s vector loop: a multiple of
-/// every vector width, dividing [`LANES`].
-const CHUNK: usize = 16;
+/// Lanes of one pass of a loop over a group's lanes written for the
+/// compiler to vectorise ([`RayLanes::seal`], the camera's directions):
+/// a multiple of every vector width, dividing [`LANES`].
+pub const CHUNK: usize = 16;
 const _: () = assert!(LANES.is_multiple_of(CHUNK));
 
 /// [`RayLanes::seal`], compiled for each instruction set.

@@ -1,5 +1,5 @@
 use crate::error::Error;
-use crate::kernels::LANES;
+use crate::kernels::{CHUNK, LANES};
 use crate::math::Vec3;
 use crate::scene::View;
 use crate::simd::{Isa, Job, Lanes};
@@ -19,11 +19,6 @@ pub struct Camera {
     pub width: u32,
     pub height: u32,
 }
-
-/// Lanes of one pass of [`Camera::directions_at`]'s loop: a multiple of
-/// every vector width, dividing [`LANES`].
-const CHUNK: usize = 16;
-const _: () = assert!(LANES.is_multiple_of(CHUNK));
 
 /// [`Camera::directions_at`], compiled for each instruction set.
 struct Directions<'a> {
