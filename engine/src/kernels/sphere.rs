@@ -28,7 +28,7 @@ impl<R: Elem> Job for SphereLanes<'_, R> {
         }
         let mut hits = 0;
         for_chunks!(R::V<L>, self.m, |c, bits| {
-            let h = chunk::<R, R::V<L>>(self.s, r, self.rays, c, self.limit, self.t_out);
+            let h = chunk::<R, R::V<L>>(self.s, r, self.rays, c, bits, self.limit, self.t_out);
             hits |= (h & bits) << c;
         });
         hits
@@ -41,6 +41,7 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     r: R,
     rays: &RayLanes<R>,
     c: usize,
+    bits: u64,
     limit: &[R; LANES],
     t_out: &mut [R; LANES],
 ) -> u64 {
@@ -55,6 +56,12 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     let (a, inv_a): (V, V) = (ld(&rays.a, c), ld(&rays.inv_a, c));
     let f = sub_scaled3(&oc, &d, b * inv_a);
     let disc = a * (r2 - dot3(&f, &f));
+    // Most tests end here, before the square root and the division:
+    // every lane asked for misses the sphere or has it behind. (A lane
+    // that hits passes both, so the hits are the same.)
+    if disc.lt(z).or(behind).not().bits() & bits == 0 {
+        return 0;
+    }
     let sq = disc.sqrt();
     let q = V::select(b.ge(z), -(b + sq), sq - b);
     let q0 = q.eq(z);
