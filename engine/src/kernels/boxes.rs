@@ -102,28 +102,65 @@ pub(super) fn may_hit_box<R: Elem, V: Float<Elem = R>>(
     let mut t1 = ld::<V>(limit, c);
     let zero = V::splat(R::ZERO);
     let eps = V::splat(R::EPSILON * R::from_f32(16.0));
+    let d = [
+        ld::<V>(&rays.d[0], c),
+        ld::<V>(&rays.d[1], c),
+        ld::<V>(&rays.d[2], c),
+    ];
     // Lanes the scalar test has returned `false` for.
     let mut out = V::splat(R::ZERO).lt(zero);
-    for i in 0..3 {
+    if d[0].eq(zero).or(d[1].eq(zero)).or(d[2].eq(zero)).bits() & lane_mask::<V>() == 0 {
+        // No direction with a zero component among these lanes (nearly
+        // always): the same arithmetic without the zero direction's
+        // cases, which would select what is computed here anyway.
+        for i in 0..3 {
+            let (a, z) = slab::<R, V>(b, rays, c, i, eps);
+            t0 = t0.max(a);
+            t1 = t1.min(z);
+            out = out.or(t0.gt(t1));
+        }
+        return out.not().bits() & lane_mask::<V>();
+    }
+    for (i, &d) in d.iter().enumerate() {
         let (lo, hi) = (
             V::splat(R::from_f32(b.min[i])),
             V::splat(R::from_f32(b.max[i])),
         );
         let o = ld::<V>(&rays.o[i], c);
-        let flat = ld::<V>(&rays.d[i], c).eq(zero);
+        let flat = d.eq(zero);
         // A zero direction: out if the origin is outside the slab, and
         // the axis changes nothing.
         out = out.or(flat.and(o.lt(lo).or(o.gt(hi))));
-        let inv = ld::<V>(&rays.inv[i], c);
-        let (a0, z0) = ((lo - o) * inv, (hi - o) * inv);
-        let swap = a0.gt(z0);
-        let (a, z) = (V::select(swap, z0, a0), V::select(swap, a0, z0));
-        let slack = a.abs().max(z.abs()) * eps;
-        t0 = V::select(flat, t0, t0.max(a - slack));
-        t1 = V::select(flat, t1, t1.min(z + slack));
+        let (a, z) = slab::<R, V>(b, rays, c, i, eps);
+        t0 = V::select(flat, t0, t0.max(a));
+        t1 = V::select(flat, t1, t1.min(z));
         out = out.or(flat.not().and(t0.gt(t1)));
     }
     out.not().bits() & lane_mask::<V>()
+}
+
+/// The scalar pre-test's slab along axis `i` for the lanes from `c`
+/// (whose directions along it are not zero): the entry and exit distances, each moved
+/// out by its slack.
+#[inline(always)]
+fn slab<R: Elem, V: Float<Elem = R>>(
+    b: &crate::scene::Aabb,
+    rays: &RayLanes<R>,
+    c: usize,
+    i: usize,
+    eps: V,
+) -> (V, V) {
+    let (lo, hi) = (
+        V::splat(R::from_f32(b.min[i])),
+        V::splat(R::from_f32(b.max[i])),
+    );
+    let o = ld::<V>(&rays.o[i], c);
+    let inv = ld::<V>(&rays.inv[i], c);
+    let (a0, z0) = ((lo - o) * inv, (hi - o) * inv);
+    let swap = a0.gt(z0);
+    let (a, z) = (V::select(swap, z0, a0), V::select(swap, a0, z0));
+    let slack = a.abs().max(z.abs()) * eps;
+    (a - slack, z + slack)
 }
 
 /// `x` made a value of `R` no smaller (or, with `up` false, no larger):

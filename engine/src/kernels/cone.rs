@@ -31,7 +31,8 @@ impl<R: Elem> Job for ConeLanes<'_, R> {
         for_chunks!(R::V<L>, self.m, |c, bits| {
             let mut h = may_hit_box::<R, R::V<L>>(self.bbox, self.rays, c, self.limit);
             if h & bits != 0 {
-                h &= chunk::<R, R::V<L>>(self.frame, self.rays, c, self.limit, self.t_out);
+                h &=
+                    chunk::<R, R::V<L>>(self.frame, self.rays, c, h & bits, self.limit, self.t_out);
             }
             out |= (h & bits) << c;
         });
@@ -44,6 +45,7 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     f: &ConeFrame<f64>,
     rays: &RayLanes<R>,
     c: usize,
+    bits: u64,
     limit: &[R; LANES],
     t_out: &mut [R; LANES],
 ) -> u64 {
@@ -68,8 +70,15 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     let cc = dot3(&wp, &wp) - rr * rr;
     // A linear equation where a = 0 (no root where b = 0 too).
     let flat = a.eq(z);
-    let linear = -cc / (V::splat(R::TWO) * b);
     let disc = b * b - a * cc;
+    let none = flat.and(b.eq(z)).or(disc.lt(z).and_not(flat));
+    // Most tests that pass the box end here, before the square root and
+    // the divisions: no lane asked for has a root. (The lanes with a root
+    // are the same either way, so are the hits.)
+    if none.not().bits() & bits == 0 {
+        return 0;
+    }
+    let linear = -cc / (V::splat(R::TWO) * b);
     let sq = disc.sqrt();
     let q = V::select(b.ge(z), -(b + sq), sq - b);
     let q0 = q.eq(z);
@@ -82,7 +91,6 @@ fn chunk<R: Elem, V: Float<Elem = R>>(
     let inf = V::splat(R::INFINITY);
     let root0 = V::select(flat, linear, qa);
     let root1 = V::select(flat, inf, qb);
-    let none = flat.and(b.eq(z)).or(disc.lt(z).and_not(flat));
     let (lo, hi): (V, V) = (ld(&rays.t_min, c), ld(limit, c));
     let (ok0, ok1) = (
         on_surface(root0, lo, hi, wa, da, len, r0, k),

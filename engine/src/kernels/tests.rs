@@ -409,17 +409,21 @@ fn boxes<R: Elem>(rng: &mut Rng) {
             b.max[1] = b.min[1]; // flat
         }
         let g = rays::<R>(rng, &[b.min, b.max]);
-        // The exact pre-test, against the scalar one.
-        for isa in Isa::available_here() {
-            let got = isa.run(MayHitBox {
-                b: &b,
-                rays: &g,
-                m: g.all(),
-                limit: &g.t_max,
-            });
-            for i in 0..LANES {
-                let want = g.ray(i).may_hit_box(&b, g.t_min[i], g.t_max[i]);
-                assert_eq!(got >> i & 1 != 0, want, "may_hit_box, {isa}, lane {i}");
+        // The exact pre-test, against the scalar one: with directions
+        // with a zero component in every vector of lanes, and without
+        // any (the kernel's shorter path).
+        for h in [&g, &without_zero_components(&g)] {
+            for isa in Isa::available_here() {
+                let got = isa.run(MayHitBox {
+                    b: &b,
+                    rays: h,
+                    m: h.all(),
+                    limit: &h.t_max,
+                });
+                for i in 0..h.n {
+                    let want = h.ray(i).may_hit_box(&b, h.t_min[i], h.t_max[i]);
+                    assert_eq!(got >> i & 1 != 0, want, "may_hit_box, {isa}, lane {i}");
+                }
             }
         }
         // The culling test: the same on every instruction set, and
@@ -455,6 +459,20 @@ fn boxes<R: Elem>(rng: &mut Rng) {
             }
         }
     }
+}
+
+/// The rays of `g` whose directions have no zero component, sealed.
+fn without_zero_components<R: Real>(g: &RayLanes<R>) -> RayLanes<R> {
+    let mut h = RayLanes::new();
+    for i in 0..g.n {
+        let d = g.d(i);
+        if d.x != 0.0 && d.y != 0.0 && d.z != 0.0 {
+            h.push(g.o(i), d, g.t_min64[i], g.t_max64[i]);
+        }
+    }
+    assert!(h.n > LANES / 2);
+    h.seal(Isa::detect());
+    h
 }
 
 #[test]
