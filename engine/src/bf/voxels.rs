@@ -228,9 +228,8 @@ impl BlockMarks {
             if !aggregates {
                 continue;
             }
-            // A group is the objects whose index divided by SIZE is the
-            // same; only a whole one may be an aggregate.
-            if (b.index as usize).is_multiple_of(aggregate::SIZE) {
+            // Only a whole group may be an aggregate.
+            if aggregate::starts_group(b.index) {
                 n = 0;
                 bounds = Aabb::EMPTY;
             }

@@ -127,25 +127,37 @@ pub fn of_grids<'a>(
     Some((g, lo, hi))
 }
 
+/// Whether the object of index `index` begins a group: a group is the
+/// objects whose index divided by [`SIZE`] is the same (so that the
+/// groups of a database are the same however its blocks fall).
+#[inline(always)]
+pub fn starts_group(index: u32) -> bool {
+    (index as usize).is_multiple_of(SIZE)
+}
+
 /// Calls `f` with each group of the objects of `block`, in order, and its
-/// box: the objects whose index divided by [`SIZE`] is the same (so the
-/// first and last group of a block not aligned to [`SIZE`] are short).
-pub fn each_group(block: &Block<'_>, mut f: impl FnMut(&[BoxRef], &Aabb)) {
-    let mut boxes = block.boxes();
+/// box (see [`starts_group`]: the first and last group of a block not
+/// aligned to [`SIZE`] are short).
+pub fn each_group(block: &Block<'_>, f: impl FnMut(&[BoxRef], &Aabb)) {
+    groups_of(block.boxes(), f);
+}
+
+/// [`each_group`] of the objects `boxes`, consecutive in index order.
+fn groups_of(boxes: impl Iterator<Item = BoxRef>, mut f: impl FnMut(&[BoxRef], &Aabb)) {
     let mut group = [BoxRef::EMPTY; SIZE];
-    // Up to the first multiple of SIZE, then by SIZE.
-    let mut take = SIZE - (block.first_object % SIZE as u64) as usize;
-    loop {
-        let mut n = 0;
-        let mut bounds = Aabb::EMPTY;
-        for b in boxes.by_ref().take(std::mem::replace(&mut take, SIZE)) {
-            bounds.union(&b.bbox);
-            group[n] = b;
-            n += 1;
+    let mut n = 0;
+    let mut bounds = Aabb::EMPTY;
+    for b in boxes {
+        if starts_group(b.index) && n > 0 {
+            f(&group[..n], &bounds);
+            n = 0;
+            bounds = Aabb::EMPTY;
         }
-        if n == 0 {
-            return;
-        }
+        bounds.union(&b.bbox);
+        group[n] = b;
+        n += 1;
+    }
+    if n > 0 {
         f(&group[..n], &bounds);
     }
 }
@@ -171,6 +183,38 @@ mod tests {
 
     /// Sixty-four small objects in one voxel crowd it; the same objects
     /// spread one to a voxel do not; a group short of [`SIZE`] is none.
+    /// A run of objects that does not start at a multiple of [`SIZE`]
+    /// splits where the index does: a short first group, whole ones, and
+    /// a short last one, each with the union of its boxes.
+    #[test]
+    fn groups_follow_the_index_not_the_block() {
+        let objects = |first: u32, n: u32| {
+            (first..first + n).map(|i| BoxRef {
+                index: i,
+                bbox: cube([i as f32, 0.0, 0.0], 0.5),
+                ..BoxRef::EMPTY
+            })
+        };
+        let s = SIZE as u32;
+        let mut seen = vec![];
+        groups_of(objects(s + 7, 3 * s), |g, bounds| {
+            assert!(g.windows(2).all(|w| w[1].index == w[0].index + 1));
+            assert!(starts_group(g[0].index) || seen.is_empty());
+            let want = union(&g.iter().map(|b| b.bbox).collect::<Vec<_>>());
+            assert_eq!((bounds.min, bounds.max), (want.min, want.max));
+            seen.push((g[0].index, g.len()));
+        });
+        let sz = SIZE;
+        assert_eq!(
+            seen,
+            vec![(s + 7, sz - 7), (2 * s, sz), (3 * s, sz), (4 * s, 7)]
+        );
+        seen.clear();
+        groups_of(objects(0, 5), |g, _| seen.push((g[0].index, g.len())));
+        assert_eq!(seen, vec![(0, 5)]);
+        groups_of(objects(0, 0), |_, _| panic!("no objects, no group"));
+    }
+
     #[test]
     fn only_whole_groups_crowding_their_voxels_are_aggregates() {
         let spec = GridSpec::new(&cube([0.0; 3], 8.0), [16, 16, 16]);
