@@ -122,17 +122,12 @@ pub(super) fn register<R: Elem>(
             }
         };
         let limit = store.store(g, w.k);
-        let n = walk_storing(
-            &mut dda,
-            entry,
-            grid,
-            h.best.t,
-            limit,
-            &mut regs[g],
-            &mut region[g],
+        let mut to = Storing {
+            regs: &mut regs[g],
+            region: &mut region[g],
             slot,
-            w,
-        );
+        };
+        let n = walk_storing(&mut dda, entry, grid, h.best.t, limit, &mut to, w);
         if w.state != DONE {
             // Stopped in the voxel just stored in, `w.last`: where the
             // next pass starts its walk again.
@@ -172,17 +167,12 @@ pub(super) fn extend<R: Elem>(
         let Some((mut dda, entry)) = resume(&grid.spec, &r, w) else {
             continue;
         };
-        walk_storing(
-            &mut dda,
-            entry,
-            grid,
-            h.best.t,
-            extra,
-            &mut regs[g],
-            &mut region[g],
+        let mut to = Storing {
+            regs: &mut regs[g],
+            region: &mut region[g],
             slot,
-            w,
-        );
+        };
+        walk_storing(&mut dda, entry, grid, h.best.t, extra, &mut to, w);
         if w.state != DONE {
             debug_assert_eq!(w.last.map(u32::from), dda.voxel());
         }
@@ -206,9 +196,25 @@ fn resume(spec: &GridSpec, r: &Ray64, w: &mut Walk) -> Option<(Dda, Option<usize
     }
 }
 
+/// Where a walk stores ray `slot`: one grid's registrations, and the
+/// region of voxels its rays are in.
+struct Storing<'a> {
+    regs: &'a mut RegMap,
+    region: &'a mut Region,
+    slot: u32,
+}
+
+impl Storing<'_> {
+    /// Stores the ray in voxel `v`, of index `index` in its grid.
+    #[inline(always)]
+    fn put(&mut self, index: usize, v: [u32; 3]) {
+        self.regs.insert(index as u32, self.slot);
+        self.region.add(v);
+    }
+}
+
 /// [`store_along`], with the loop that skips empty blocks when the grid
 /// has them.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walk_storing(
     dda: &mut Dda,
@@ -216,25 +222,22 @@ fn walk_storing(
     grid: &VoxelGrid,
     best: f64,
     limit: u32,
-    regs: &mut RegMap,
-    region: &mut Region,
-    slot: u32,
+    to: &mut Storing,
     w: &mut Walk,
 ) -> u32 {
     if grid.busy.is_empty() {
-        store_along::<false>(dda, entry, grid, best, limit, regs, region, slot, w)
+        store_along::<false>(dda, entry, grid, best, limit, to, w)
     } else {
-        store_along::<true>(dda, entry, grid, best, limit, regs, region, slot, w)
+        store_along::<true>(dda, entry, grid, best, limit, to, w)
     }
 }
 
 /// The walk `dda` (entered through `entry`'s face, `None` at its first
-/// voxel) stores the ray `slot` in up to `limit` voxels; returns how many.
+/// voxel) stores the ray in up to `limit` voxels of `to`; returns how many.
 /// With `SKIP`, it crosses blocks with nothing in them in one move (see
 /// [`crate::bf::voxels::BusyBlocks`]); without, the loop is the plain
 /// voxel-by-voxel walk (two loops, not one with a test, which cost small
 /// grids' walks 4 % more instructions).
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn store_along<const SKIP: bool>(
     dda: &mut Dda,
@@ -242,9 +245,7 @@ fn store_along<const SKIP: bool>(
     grid: &VoxelGrid,
     best: f64,
     limit: u32,
-    regs: &mut RegMap,
-    region: &mut Region,
-    slot: u32,
+    to: &mut Storing,
     w: &mut Walk,
 ) -> u32 {
     let mut n = 0;
@@ -276,9 +277,8 @@ fn store_along<const SKIP: bool>(
                 Some(a) => f & entry_face(a, dda.steps_up(a)) != 0,
             };
         if stored {
-            regs.insert(dda.index as u32, slot);
             let v = dda.voxel();
-            region.add(v);
+            to.put(dda.index, v);
             w.last = [v[0] as u16, v[1] as u16, v[2] as u16];
             n += 1;
             if n == limit {
