@@ -181,8 +181,6 @@ mod tests {
         u
     }
 
-    /// Sixty-four small objects in one voxel crowd it; the same objects
-    /// spread one to a voxel do not; a group short of [`SIZE`] is none.
     /// A run of objects that does not start at a multiple of [`SIZE`]
     /// splits where the index does: a short first group, whole ones, and
     /// a short last one, each with the union of its boxes.
@@ -215,6 +213,8 @@ mod tests {
         groups_of(objects(0, 0), |_, _| panic!("no objects, no group"));
     }
 
+    /// Sixty-four small objects in one voxel crowd it; the same objects
+    /// spread one to a voxel do not; a group short of [`SIZE`] is none.
     #[test]
     fn only_whole_groups_crowding_their_voxels_are_aggregates() {
         let spec = GridSpec::new(&cube([0.0; 3], 8.0), [16, 16, 16]);

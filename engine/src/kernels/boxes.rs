@@ -139,9 +139,10 @@ pub(super) fn may_hit_box<R: Elem, V: Float<Elem = R>>(
     out.not().bits() & lane_mask::<V>()
 }
 
-/// The scalar pre-test's slab along axis `i` for the lanes from `c`
-/// (whose directions along it are not zero): the entry and exit distances, each moved
-/// out by its slack.
+/// The scalar pre-test's slab along axis `i` for the lanes from `c`: the
+/// entry and exit distances, each moved out by its slack (meaningless
+/// for a lane whose direction along `i` is zero, which the caller
+/// leaves out).
 #[inline(always)]
 fn slab<R: Elem, V: Float<Elem = R>>(
     b: &crate::scene::Aabb,

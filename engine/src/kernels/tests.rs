@@ -409,9 +409,10 @@ fn boxes<R: Elem>(rng: &mut Rng) {
             b.max[1] = b.min[1]; // flat
         }
         let g = rays::<R>(rng, &[b.min, b.max]);
-        // The exact pre-test, against the scalar one: with directions
-        // with a zero component in every vector of lanes, and without
-        // any (the kernel's shorter path).
+        // The exact pre-test, against the scalar one: on rays some of
+        // whose directions have a zero component (in most vectors of
+        // lanes, on every width), and on rays none of whose directions
+        // have one (the kernel's shorter path in every vector).
         for h in [&g, &without_zero_components(&g)] {
             for isa in Isa::available_here() {
                 let got = isa.run(MayHitBox {
