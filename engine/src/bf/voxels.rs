@@ -51,7 +51,6 @@ pub struct VoxelGrid {
 /// instructions, those and 16 x 16 x 16 blocks 10.86 G, both looked at on
 /// entry 10.73 G, 16 x 16 x 16 alone on entry 10.56 G.
 pub const BLOCK_SHIFT: u32 = 4;
-const _: () = assert!(BLOCK_SHIFT <= crate::grid::MAX_BLOCK_SHIFT);
 /// Grids of fewer voxels than this walk voxel by voxel, as before the
 /// blocks: their flags stay in a core's cache, walks through them are
 /// short, and the look on each block's entry cost more than it saved

@@ -1,13 +1,6 @@
 use super::GridSpec;
 use crate::math::Vec3;
 
-/// The largest block [`Dda::leave_block`] crosses: 2^4 = 16 voxels a side.
-pub const MAX_BLOCK_SHIFT: u32 = 4;
-
-/// Face distances [`Dda::leave_block`] keeps per axis: one per step across
-/// the largest block, and the one after.
-const STEPS: usize = (1 << MAX_BLOCK_SHIFT) + 1;
-
 /// The 3D-DDA walk of a ray through the voxels of a grid (Amanatides and
 /// Woo), in order of distance. Plain data, so a breadth-first tracer can
 /// keep it with the ray between passes.
@@ -131,20 +124,9 @@ impl Dda {
     /// the same additions in the same order as step by step.
     #[inline]
     pub fn leave_block(&mut self, shift: u32) -> Option<usize> {
-        assert!(
-            shift <= MAX_BLOCK_SHIFT,
-            "blocks of at most 2^{MAX_BLOCK_SHIFT} voxels a side"
-        );
-        // Each axis's face distances from `t_next` on: `ts[a][j]` after j
-        // additions of `t_delta`, each computed once. The walk's steps to
-        // the block's side are read off them rather than added up again,
-        // and how many steps the other axes take is a count of compares,
-        // not a loop whose end the processor would have to guess.
-        let mut ts = [[f64::INFINITY; STEPS]; 3];
         let mut k = [0i32; 3];
         let mut side = [f64::INFINITY; 3];
         for a in 0..3 {
-            ts[a][0] = self.t_next[a];
             if self.step[a] == 0 {
                 continue; // its distance stays infinite: it never steps
             }
@@ -154,15 +136,12 @@ impl Dda {
             } else {
                 c - ((c >> shift) << shift) + 1
             };
-            // At least 1 (the voxel is inside the grid), at most 2^shift.
             k[a] = to_side.min((self.out[a] - c) * self.step[a]);
-            let ka = k[a] as usize;
             let mut t = self.t_next[a];
-            for tj in &mut ts[a][1..=ka] {
+            for _ in 1..k[a] {
                 t += self.t_delta[a];
-                *tj = t;
             }
-            side[a] = ts[a][ka - 1];
+            side[a] = t;
         }
         let xy = (side[1] < side[0]) as usize;
         let e = if side[2] < side[xy] { 2 } else { xy };
@@ -172,21 +151,19 @@ impl Dda {
         }
         let mut index = self.index as isize;
         for a in 0..3 {
-            let n = if a == e {
-                k[e] as usize
+            let mut n = 0;
+            if a == e {
+                n = k[e];
+                for _ in 0..n {
+                    self.t_next[a] += self.t_delta[a];
+                }
             } else {
-                // The steps of `advance_axis` before the one along `e`:
-                // those at a face nearer than `t_e`, or as near on a lower
-                // axis. The distances only grow, and the one at the
-                // axis's own side does not come before `t_e` (`e` has the
-                // least, the lowest axis on a tie), so the count stops
-                // short of it; an axis that never steps counts none
-                // (infinity is never before `t_e`, which is below the walk's end).
-                let before = |t: &f64| *t < t_e || (*t == t_e && a < e);
-                ts[a][..STEPS - 1].iter().filter(|t| before(t)).count()
-            };
-            self.t_next[a] = ts[a][n];
-            self.cell[a] += n as i32 * self.step[a];
+                while self.t_next[a] < t_e || (self.t_next[a] == t_e && a < e) {
+                    self.t_next[a] += self.t_delta[a];
+                    n += 1;
+                }
+            }
+            self.cell[a] += n * self.step[a];
             index += n as isize * self.stride[a];
         }
         self.index = index as usize;

@@ -11,7 +11,7 @@ mod dda;
 pub(crate) mod nested;
 mod partition;
 
-pub use dda::{Dda, MAX_BLOCK_SHIFT};
+pub use dda::Dda;
 pub use partition::{GridStat, GroupPlan, MAX_GROUPS, Partition, choose_resolution, plan_groups};
 
 use crate::math::Vec3;
