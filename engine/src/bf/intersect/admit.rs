@@ -86,16 +86,15 @@ pub(super) struct ByIdFill<'a> {
     pub(super) sky: Vec<bool>,
     /// The ids admitted this pass, in order.
     pub(super) ids: Vec<u64>,
-    /// The same ids dealt to the shards in turn (see the stream's fill in
-    /// [`super::intersect_rays`]): shard `k` loads `dealt[k]` into its
-    /// empty slots, in slot order.
+    /// The same ids dealt to the shards in turn ([`Dealer`]): shard `k`
+    /// loads `dealt[k]` into its empty slots, in slot order.
     pub(super) dealt: Vec<Vec<u64>>,
 }
 
 impl ByIdFill<'_> {
     /// Admits up to `free[k]` rays for shard `k`, in order: the next rays
-    /// that meet some grid, as the serial fill would have dealt them to
-    /// the shards' empty slots in turn. Returns the number
+    /// that meet some grid, dealt to the shards' empty slots in turn as
+    /// a stream's fill deals them. Returns the number
     /// of rays passed over because they meet no grid (misses at once).
     pub(super) fn admit(
         &mut self,
@@ -141,28 +140,61 @@ impl ByIdFill<'_> {
     }
 }
 
-/// Deals `ids` to the shards in turn, passing over a shard once it holds
-/// `free[k]` of them: `dealt[k]` gets shard `k`'s, in order. There must be
-/// no more ids than free slots.
+/// Deals a pass's admitted rays to the shards in turn, passing over a
+/// shard once it holds as many as it has empty slots, so that every
+/// shard holds rays from the whole stretch admitted: neighbouring rays
+/// meet the same objects, and shards given halves of the stretch (halves
+/// of the image) would wait for each other at every batch of blocks. The
+/// one rule for both fills: a stream's, ray by ray as it is read (see
+/// [`super::intersect_rays`]), and [`ByIdFill`]'s, of ids admitted at once.
+pub(super) struct Dealer {
+    /// Empty slots left per shard.
+    free: Vec<usize>,
+    /// Empty slots left in all.
+    left: usize,
+    /// The shard whose turn it is.
+    k: usize,
+}
+
+impl Dealer {
+    pub(super) fn new(free: Vec<usize>) -> Dealer {
+        let left = free.iter().sum();
+        Dealer { free, left, k: 0 }
+    }
+
+    /// The shard the next ray goes to; `None` once every shard is full.
+    pub(super) fn next_shard(&mut self) -> Option<usize> {
+        if self.left == 0 {
+            return None;
+        }
+        while self.free[self.k] == 0 {
+            self.k = (self.k + 1) % self.free.len();
+        }
+        let k = self.k;
+        self.free[k] -= 1;
+        self.left -= 1;
+        self.k = (k + 1) % self.free.len();
+        Some(k)
+    }
+}
+
+/// Deals `ids` as [`Dealer`] does: `dealt[k]` gets shard `k`'s, in order.
+/// There must be no more ids than empty slots.
 fn deal(ids: &[u64], free: &[usize], dealt: &mut Vec<Vec<u64>>) {
-    debug_assert!(ids.len() <= free.iter().sum());
     dealt.resize_with(free.len(), Vec::new);
     for d in dealt.iter_mut() {
         d.clear();
     }
-    let mut k = 0;
+    let mut dealer = Dealer::new(free.to_vec());
     for &id in ids {
-        while dealt[k].len() == free[k] {
-            k = (k + 1) % free.len();
-        }
+        let k = dealer.next_shard().expect("no more ids than empty slots");
         dealt[k].push(id);
-        k = (k + 1) % free.len();
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use super::deal;
+    use super::{Dealer, deal};
 
     /// Each shard gets every other ray of the stretch admitted, not a
     /// half of it; a full shard is passed over, the others take the rest.
@@ -177,5 +209,16 @@ mod tests {
         assert_eq!(dealt, vec![vec![], vec![5, 7], vec![6]]);
         deal(&[], &[2, 2], &mut dealt);
         assert_eq!(dealt, vec![Vec::<u64>::new(), vec![]]);
+    }
+
+    /// A stream's fill asks the dealer shard by shard until every shard
+    /// is full: the shards with room in turn, then no more.
+    #[test]
+    fn the_dealer_runs_dry_when_every_shard_is_full() {
+        let mut dealer = Dealer::new(vec![1, 3, 0, 2]);
+        let turns: Vec<usize> = std::iter::from_fn(|| dealer.next_shard()).collect();
+        assert_eq!(turns, vec![0, 1, 3, 1, 3, 1]);
+        assert_eq!(dealer.next_shard(), None);
+        assert_eq!(Dealer::new(vec![0, 0]).next_shard(), None);
     }
 }

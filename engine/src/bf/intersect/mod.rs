@@ -62,7 +62,7 @@ mod complete;
 mod register;
 mod scan;
 mod slot;
-use admit::{ByIdFill, load, misses_every_grid, stage};
+use admit::{ByIdFill, Dealer, load, misses_every_grid, stage};
 use complete::{complete, put_results};
 pub use register::sample_registrations;
 use register::{extend, register};
@@ -349,6 +349,20 @@ pub enum ResultSink<'a> {
     Dense { v: &'a mut [Outcome], first: u64 },
 }
 
+/// Each shard's empty slots, where the next pass's rays go.
+fn empty_slots<R: Elem>(shards: &[Shard<R>]) -> Vec<usize> {
+    shards
+        .iter()
+        .map(|sh| {
+            debug_assert_eq!(
+                sh.hot.len() - sh.live,
+                sh.hot.iter().filter(|h| !h.active).count()
+            );
+            sh.hot.len() - sh.live
+        })
+        .collect()
+}
+
 /// Intersects the `total` rays of `source` (ids `0, 1, ...`), giving each
 /// ray's result to `sink`: to its callback in completion order, or into
 /// its place in a dense buffer.
@@ -447,69 +461,54 @@ pub fn intersect_rays<R: Elem>(
     }
     loop {
         // From a stream: fill empty slots, dealt to the shards in turn
-        // (each shard's in slot order), so that every shard holds rays
-        // from the whole stretch of the stream admitted: neighbouring
-        // rays meet the same objects, and shards given halves of the
-        // stream (halves of the image) waited for each other at every
-        // batch of blocks. A ray that meets no grid's box (the sky around
-        // a model) is a miss at once and takes no slot. (Rays by id: the
-        // same, through `ByIdFill`.)
+        // (each shard's in slot order). A ray that meets no grid's box
+        // (the sky around a model) is a miss at once and takes no slot.
+        // (Rays by id: the same, through `ByIdFill`.)
         if !exhausted {
+            let mut dealer = Dealer::new(empty_slots(shards));
             let mut next_free = vec![0usize; shards.len()];
-            'fill: loop {
-                let mut dealt = false;
-                for (sh, at) in shards.iter_mut().zip(next_free.iter_mut()) {
-                    while *at < sh.hot.len() && sh.hot[*at].active {
-                        *at += 1;
+            while let Some(k) = dealer.next_shard() {
+                // The stream's next ray that meets some grid.
+                let next = loop {
+                    let Some(r) = rays.next() else { break None };
+                    let r = r?;
+                    let id = next_id;
+                    next_id += 1;
+                    if !misses_every_grid(&r, setup.grids, setup.eps) {
+                        break Some((id, r));
                     }
-                    if *at == sh.hot.len() {
-                        continue;
+                    finished += 1;
+                    // Counted in batches: a progress update costs more
+                    // than such a ray.
+                    sky += 1;
+                    if sky == 1 << 16 {
+                        progress.inc(std::mem::take(&mut sky));
                     }
-                    let i = *at;
-                    loop {
-                        match rays.next() {
-                            Some(r) => {
-                                let r = r?;
-                                let id = next_id;
-                                next_id += 1;
-                                if misses_every_grid(&r, setup.grids, setup.eps) {
-                                    finished += 1;
-                                    // Counted in batches: a progress update
-                                    // costs more than such a ray.
-                                    sky += 1;
-                                    if sky == 1 << 16 {
-                                        progress.inc(std::mem::take(&mut sky));
-                                    }
-                                    emit(Outcome::bare(ResultRec {
-                                        ray: id,
-                                        prim: PrimId::NONE,
-                                        t: f64::INFINITY,
-                                    }))?;
-                                    continue;
-                                }
-                                // Loaded by the shard's thread before it
-                                // registers (below); taken from now on.
-                                stage(sh, i, id, &r, setup.eps);
-                                sh.pending.push(i as u32);
-                                active += 1;
-                                dealt = true;
-                                break;
-                            }
-                            None => {
-                                exhausted = true;
-                                break 'fill;
-                            }
-                        }
-                    }
-                }
-                if !dealt {
+                    emit(Outcome::bare(ResultRec {
+                        ray: id,
+                        prim: PrimId::NONE,
+                        t: f64::INFINITY,
+                    }))?;
+                };
+                let Some((id, r)) = next else {
+                    exhausted = true;
                     break;
+                };
+                let (sh, at) = (&mut shards[k], &mut next_free[k]);
+                // (The dealer gives a shard no more rays than it has
+                // empty slots.)
+                while sh.hot[*at].active {
+                    *at += 1;
                 }
+                // Loaded by the shard's thread before it registers
+                // (below); taken from now on.
+                stage(sh, *at, id, &r, setup.eps);
+                sh.pending.push(*at as u32);
+                active += 1;
             }
         }
         if let Some(fill) = by_id.as_mut() {
-            let free: Vec<usize> = shards.iter().map(|sh| sh.hot.len() - sh.live).collect();
-            let passed = fill.admit(&free, pool, setup.grids, setup.eps);
+            let passed = fill.admit(&empty_slots(shards), pool, setup.grids, setup.eps);
             finished += passed;
             sky += passed;
             active += fill.ids.len() as u64;
