@@ -101,7 +101,8 @@ impl<R: Real> RayQ<R> {
             }
             // The kernels' product (`kernels::boxes::may_hit_box`): one
             // rounding, by a constant, so both give the same bits even
-            // where `m * EPSILON` alone would be subnormal.
+            // where the larger distance times `EPSILON` would be
+            // subnormal.
             let slack = a.abs().max(z.abs()) * (R::EPSILON * R::from_f32(16.0));
             t0 = t0.max(a - slack);
             t1 = t1.min(z + slack);
