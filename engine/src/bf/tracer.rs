@@ -150,7 +150,8 @@ impl ResultReader {
 
 /// Read-ahead buffers may take at most this part of the memory budget
 /// (two batches of blocks: a few MiB for databases of about a thousand
-/// objects a block, so read-ahead runs from budgets of about 64 MiB).
+/// objects a block, so batches of 32 blocks run from budgets of about
+/// 96 MiB, and smaller batches below).
 const READ_AHEAD_SHARE: u64 = 16;
 
 /// The breadth-first stages over one database.
@@ -184,8 +185,9 @@ pub struct Tracer<'db, R: Elem> {
     /// 1 before the first): with the sample of a round's own rays, what
     /// the next round's slots plan for.
     voxels_per_reg: f64,
-    /// Intersection passes read their blocks on a thread of their own.
-    read_ahead: bool,
+    /// Blocks a batch when intersection passes read them on a thread of
+    /// their own (0: on the shards' thread).
+    read_ahead: usize,
     /// The kernels' instruction set.
     isa: Isa,
     // Buffers reused from call to call: allocating them afresh costs page
@@ -312,16 +314,19 @@ impl<'db, R: Elem> Tracer<'db, R> {
         ));
         // A reader thread needs a core beside the shards' and a few block
         // buffers: worth it when they are a small part of the budget.
-        let read_ahead =
-            threads > 1 && crate::sdb::read_ahead_bytes(db) * READ_AHEAD_SHARE <= bf.memory;
+        let read_ahead = if threads > 1 {
+            crate::sdb::read_ahead_batch(db, bf.memory / READ_AHEAD_SHARE)
+        } else {
+            0
+        };
         let budget = Budget::plan::<R>(
             bf.memory,
             super::FramePlan::new(frame_corners, bf.memory).bytes(frame_corners),
             cells,
             models_bytes + texture_bytes,
             db.scan_buffer_bytes() as u64
-                + if read_ahead {
-                    crate::sdb::read_ahead_bytes(db)
+                + if read_ahead > 0 {
+                    crate::sdb::read_ahead_bytes(db, read_ahead)
                 } else {
                     0
                 },

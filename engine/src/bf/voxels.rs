@@ -159,7 +159,8 @@ pub struct VoxelGrids {
 #[derive(Clone, Copy)]
 pub struct BuildThreads<'p> {
     pub pool: Option<&'p rayon::ThreadPool>,
-    pub read_ahead: bool,
+    /// Blocks a batch on the reader thread (0: no reader thread).
+    pub read_ahead: usize,
 }
 
 /// What one block's objects mark in the grids.
@@ -479,7 +480,7 @@ mod tests {
         let spec = GridSpec::new(&db.bbox(), [20, 20, 20]);
         let threads = BuildThreads {
             pool: None,
-            read_ahead: false,
+            read_ahead: 0,
         };
         let (grids, _) = VoxelGrids::build(
             &db,

@@ -19,15 +19,27 @@ use std::sync::mpsc;
 /// under 256 MiB: about 20 %; batches of 16: 4.7 and 6.0 %; of 32: 3.0
 /// and 3.5 %).
 pub const BATCH: usize = 32;
-/// Blocks read ahead of the batch in use: a second batch, so that the
-/// reader works on it while the caller works on this one.
-const AHEAD: usize = BATCH;
+/// The smallest batch worth a reader thread; smaller budgets read on the
+/// caller's thread.
+pub const MIN_BATCH: usize = 4;
 
-/// Memory a read-ahead scan of `db` holds beyond the scan's own buffers:
-/// the blocks in flight (read ahead, in use, being read), each with what
-/// was prepared from it (allowed half as much again).
-pub fn read_ahead_bytes(db: &super::Database) -> u64 {
-    ((AHEAD + BATCH + 1) * 3 * db.largest_block() / 2) as u64
+/// Memory a read-ahead scan of `db` in batches of `batch` blocks holds
+/// beyond the scan's own buffers: the blocks in flight (a batch in use, a
+/// batch read ahead, one being read), each with what was prepared from it
+/// (allowed half as much again).
+pub fn read_ahead_bytes(db: &super::Database, batch: usize) -> u64 {
+    ((2 * batch + 1) * 3 * db.largest_block() / 2) as u64
+}
+
+/// The largest batch, from [`MIN_BATCH`] to [`BATCH`] blocks, whose
+/// read-ahead fits in `bytes`, or 0 if none does. (A budget too small for
+/// batches of 32 gave each block to the shards alone, and two threads
+/// spent 40 % of mount11's samples under 96 MiB waking each other.)
+pub fn read_ahead_batch(db: &super::Database, bytes: u64) -> usize {
+    (MIN_BATCH..=BATCH)
+        .rev()
+        .find(|&b| read_ahead_bytes(db, b) <= bytes)
+        .unwrap_or(0)
 }
 
 /// A block the reader has read, with what it prepared from it.
@@ -59,19 +71,19 @@ pub type Prepared<'a, P> = (Block<'a>, &'a P);
 pub type Consume<'c, P> = dyn FnMut(&[Prepared<'_, P>]) -> Result<(), Error> + 'c;
 
 /// Runs `consume` on every block of `scan` that `skip` does not pass
-/// over, in file order, with what `prepare` made of it. With `ahead`,
-/// reading and `prepare` run on a thread of their own, a batch ahead of
-/// `consume`, which is given up to [`BATCH`] blocks at a time; without,
-/// all runs on the caller's thread, a block at a time. Returns the scan's
-/// counters, or the first error of either side.
+/// over, in file order, with what `prepare` made of it. With a `batch` of
+/// blocks (not 0), reading and `prepare` run on a thread of their own, a
+/// batch ahead of `consume`, which is given up to `batch` blocks at a
+/// time; with 0, all runs on the caller's thread, a block at a time.
+/// Returns the scan's counters, or the first error of either side.
 pub fn scan_blocks<P: Default + Send>(
     mut scan: Scan<'_>,
-    ahead: bool,
+    batch_blocks: usize,
     skip: &(dyn Fn(u64) -> bool + Sync),
     prepare: &(dyn Fn(&Block<'_>, &mut P) + Sync),
     consume: &mut Consume<'_, P>,
 ) -> Result<DbStats, Error> {
-    if !ahead {
+    if batch_blocks == 0 {
         let mut p = P::default();
         while let Some(block) = next_wanted(&mut scan, skip)? {
             prepare(&block, &mut p);
@@ -80,7 +92,7 @@ pub fn scan_blocks<P: Default + Send>(
         return Ok(scan.stats());
     }
     std::thread::scope(|s| {
-        let (tx, rx) = mpsc::sync_channel::<Result<Ahead<P>, Error>>(AHEAD);
+        let (tx, rx) = mpsc::sync_channel::<Result<Ahead<P>, Error>>(batch_blocks);
         let (back, spare) = mpsc::channel::<Ahead<P>>();
         let reader = std::thread::Builder::new()
             .name("sray-read-ahead".into())
@@ -122,12 +134,12 @@ pub fn scan_blocks<P: Default + Send>(
             })
             .map_err(|e| Error::Invalid(format!("cannot start a reader thread: {e}")))?;
         let mut outcome = Ok(());
-        let mut batch: Vec<Ahead<P>> = Vec::with_capacity(BATCH);
+        let mut batch: Vec<Ahead<P>> = Vec::with_capacity(batch_blocks);
         // The reader's error, returned once the blocks before it are used.
         let mut failed = None;
         while failed.is_none() {
             // A full batch, or what is left at the end of the scan.
-            while batch.len() < BATCH {
+            while batch.len() < batch_blocks {
                 match rx.recv() {
                     Ok(Ok(a)) => batch.push(a),
                     Ok(Err(e)) => {

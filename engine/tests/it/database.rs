@@ -326,7 +326,7 @@ fn read_ahead_scans_agree_with_plain_scans_and_stop_on_errors() {
         let path = write_tetra(dir.path(), c);
         let db = Database::open(&path).unwrap();
         assert!(db.block_count() >= 4, "{} blocks", db.block_count());
-        let run = |ahead: bool, skip: &(dyn Fn(u64) -> bool + Sync)| {
+        let run = |ahead: usize, skip: &(dyn Fn(u64) -> bool + Sync)| {
             let mut seen = Vec::new();
             let stats = scan_blocks::<u64>(
                 db.scan().unwrap(),
@@ -344,19 +344,21 @@ fn read_ahead_scans_agree_with_plain_scans_and_stop_on_errors() {
             (seen, stats.bytes_read, stats.blocks_skipped)
         };
         // The first scan learns the layout: nothing is skipped yet.
-        let all = run(false, &|i| i % 2 == 1);
+        let all = run(0, &|i| i % 2 == 1);
         assert_eq!(all.0.len() as u64, db.block_count());
         assert_eq!(all.2, 0);
-        assert_eq!(run(true, &|_| false), all);
         let odd = |i: u64| i % 2 == 1;
-        let plain = run(false, &odd);
-        let ahead = run(true, &odd);
-        assert_eq!(plain, ahead);
+        let plain = run(0, &odd);
+        // Batches of any size, smaller and larger than the blocks.
+        for batch in [1, 3, 32] {
+            assert_eq!(run(batch, &|_| false), all, "batches of {batch}");
+            assert_eq!(run(batch, &odd), plain, "batches of {batch}");
+        }
         assert!(plain.0.iter().all(|b| b.0 % 2 == 0));
         assert_eq!(plain.2, db.block_count() / 2);
         assert!(plain.1 < all.1);
         // The caller's error stops the scan and is returned.
-        for ahead in [false, true] {
+        for ahead in [0, 3, 32] {
             let mut n = 0;
             let e = scan_blocks::<()>(
                 db.scan().unwrap(),
@@ -386,7 +388,7 @@ fn read_ahead_scans_agree_with_plain_scans_and_stop_on_errors() {
         let mut n = 0u64;
         let e = scan_blocks::<()>(
             db.scan().unwrap(),
-            true,
+            3,
             &|_| false,
             &|_, _| {},
             &mut |batch| {

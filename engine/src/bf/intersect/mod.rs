@@ -213,8 +213,9 @@ pub struct IntersectSetup<'a> {
     /// shading needs no pass over the objects.
     pub carry: bool,
     /// Read (and decompress) each pass's blocks on a thread of their own,
-    /// a block ahead of the shards.
-    pub read_ahead: bool,
+    /// this many blocks a batch, a batch ahead of the shards (0: read on
+    /// the shards' thread).
+    pub read_ahead: usize,
     /// The kernels' instruction set.
     pub isa: Isa,
 }
