@@ -798,7 +798,7 @@ pub fn intersect_rays<R: Elem>(
 /// pool of one thread takes each from the caller, which waits, and the
 /// two threads woke each other for every block: a one-thread render of
 /// mount11 under 256 MiB spent 37 % of its samples in the kernel's
-/// scheduler and took four times as long as at two threads.
+/// scheduler and took three times as long as at two threads.
 fn each_on<T: Send>(pool: &rayon::ThreadPool, items: &mut [T], f: impl Fn(usize, &mut T) + Sync) {
     if pool.current_num_threads() == 1 {
         items.iter_mut().enumerate().for_each(|(i, t)| f(i, t));
