@@ -1,5 +1,6 @@
 //! The object database reader on arbitrary bytes: opening, scanning every
-//! block and intersecting every record it accepts, and loading the models
+//! block and intersecting every record it accepts, holding the objects as
+//! the depth-first tracer does, and loading the models
 //! of a version 5 file and testing each instance against its model, must
 //! end in a value or an error naming the block, never a panic or an
 //! unbounded allocation.
@@ -8,7 +9,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use sray_engine::intersect::RayQ;
+use sray_engine::intersect::{Ray, RayQ};
 use sray_engine::shapes::intersect;
 use sray_engine::math::Vec3;
 use sray_engine::models::{Models, Placement};
@@ -56,14 +57,26 @@ fuzz_target!(|data: &[u8]| {
             }
         }
     }
+    // The depth-first tracer's store takes the blocks' triangle runs as
+    // they are stored, checked as runs.
+    if let Ok(store) = sray_engine::objects::ObjectStore::load(&db, &NoProgress) {
+        store.each_bbox(&mut |_, _| {});
+    }
     // Models are small in the seeds; a mutated count must not ask for
     // more memory than the file backs.
     let Ok(models) = Models::load(&db, 1, false, &NoProgress) else { return };
     let mut tests = KindCounts::default();
     for pl in &placements {
-        if let Some((t, p)) = models.nearest(pl, &ray, o, d, 0.0, f64::INFINITY, &mut tests) {
+        let r = Ray {
+            q: &ray,
+            o,
+            d,
+            t_min: 0.0,
+            t_max: f64::INFINITY,
+        };
+        if let Some((t, p)) = models.nearest(pl, r, &mut tests) {
             let _ = models.surface(pl, p, &RayQ::from_vec3(o, d), t);
         }
-        let _ = models.blocks(pl, &ray, o, d, 0.0, f64::INFINITY, &mut tests);
+        let _ = models.blocks(pl, r, &mut tests);
     }
 });

@@ -41,7 +41,7 @@ pub use format::RECORD_HEADER_WORDS;
 pub use format::{
     AGGREGATE_SIZE, BLOCK_TARGET, Compression, MAGIC, MAX_BLOCK_RAW, MAX_LIGHTS, MAX_MATERIALS,
 };
-pub use packed::{MAX_RUN_VERTICES, PackCounts, RunGather};
+pub use packed::{Expand, MAX_RUN_VERTICES, PackCounts, RunGather, StoredRun};
 pub use read_ahead::{read_ahead_batch, read_ahead_bytes, scan_blocks};
 pub use scan::{DbStats, Scan};
 pub use spatial::SpatialSorter;

@@ -505,6 +505,11 @@ pub struct RunGather<const MOST: usize> {
     /// Whether textured triangles are gathered too (a writer's runs; the
     /// depth-first tracer holds them as records).
     textured: bool,
+    /// For each corner of the stored run being taken ([`Self::take_run`]),
+    /// its index among `corners` if `stamp` is `stored_stamp`: a stored
+    /// corner is looked up once, not once per face that names it.
+    stored: Box<[(u32, u16); MAX_RUN_VERTICES]>,
+    stored_stamp: u32,
 }
 
 impl<const MOST: usize> Default for RunGather<MOST> {
@@ -518,6 +523,8 @@ impl<const MOST: usize> Default for RunGather<MOST> {
             local: CornerIndex::new(),
             faces: Vec::new(),
             textured: false,
+            stored: Box::new([(0, 0); MAX_RUN_VERTICES]),
+            stored_stamp: 1,
         }
     }
 }
@@ -528,6 +535,16 @@ impl<const MOST: usize> RunGather<MOST> {
         self.corners.clear();
         self.local.clear();
         self.faces.clear();
+        self.forget_stored();
+    }
+
+    /// Forgets where the corners of a stored run are among `corners`.
+    fn forget_stored(&mut self) {
+        self.stored_stamp = self.stored_stamp.wrapping_add(1);
+        if self.stored_stamp == 0 {
+            self.stored.fill((0, 0));
+            self.stored_stamp = 1;
+        }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -608,6 +625,82 @@ impl<const MOST: usize> RunGather<MOST> {
         }
         self.faces.push(idx);
         true
+    }
+
+    /// Adds the faces of the stored run `run` from face `from` on, as
+    /// [`Self::take`] would add their records one by one (the same corners
+    /// in the same order, the same indices), until one does not fit: the
+    /// number of faces taken. A run of textured triangles is taken only
+    /// if they are gathered ([`Self::take`]'s rule). `from` is 0 for a new
+    /// stored run, else where the last call for the same run stopped.
+    ///
+    /// What `take` does per face, three lookups in a table of up to
+    /// 65,536 corners, is done here once per stored corner (at most 256,
+    /// for some 500 faces); each face's box needs no check, a run's faces
+    /// having the boxes their corners imply by construction.
+    pub fn take_run(&mut self, run: &StoredRun<'_>, from: usize) -> usize {
+        if from == 0 {
+            self.forget_stored();
+        }
+        let face = run.face;
+        if (matches!(face, Face::Textured(_)) && !self.textured)
+            || self.face.is_some_and(|f| f != face)
+            || (self.face.is_some() && run.material != self.material)
+        {
+            return 0;
+        }
+        let mut taken = 0;
+        for t in run.index[3 * from..].chunks_exact(3) {
+            // The face's corners not yet among `corners`: each looked up
+            // once, and counted once however many of the face's stored
+            // corners have its bits.
+            let mut found = [Ok(0); 3];
+            let mut new = 0;
+            for i in 0..3 {
+                let (stamp, k) = self.stored[t[i] as usize];
+                found[i] = if stamp == self.stored_stamp {
+                    Ok(k)
+                } else {
+                    self.local.find(&self.corners, &run.corners[t[i] as usize])
+                };
+                if found[i].is_err()
+                    && !(0..i).any(|j| {
+                        same_corner(&run.corners[t[j] as usize], &run.corners[t[i] as usize])
+                    })
+                {
+                    new += 1;
+                }
+            }
+            if self.corners.len() + new > MOST {
+                break;
+            }
+            self.local.reserve(&self.corners, new);
+            if self.face.is_none() {
+                self.face = Some(face);
+                self.material = run.material;
+                self.first = 0;
+            }
+            let mut idx = [0u16; 3];
+            for i in 0..3 {
+                let c = &run.corners[t[i] as usize];
+                idx[i] = match found[i] {
+                    Ok(k) => k,
+                    Err(_) => match self.local.find(&self.corners, c) {
+                        Ok(k) => k,
+                        Err(slot) => {
+                            let k = self.corners.len() as u16;
+                            self.local.insert(slot, k);
+                            self.corners.push(*c);
+                            k
+                        }
+                    },
+                };
+                self.stored[t[i] as usize] = (self.stored_stamp, idx[i]);
+            }
+            self.faces.push(idx);
+            taken += 1;
+        }
+        taken
     }
 }
 
@@ -743,23 +836,93 @@ pub fn is_plain(packed: &[u32], objects: u32, max_words: usize) -> bool {
     pos == packed.len() && seen == objects as u64
 }
 
-/// Expands a stored block (`packed`, holding `objects` objects) into its
-/// records, at most `max_words` of them; describes the first problem of a
-/// corrupt block. Nothing in `packed` can make it panic.
-pub fn unpack(
+/// A run of a stored block as [`expand`] reads it: its faces' kind and
+/// material, its distinct corners (their numbers the faces do not have
+/// are zeros, as [`RunGather`] holds them), and three indices into them
+/// per face (each checked to name one of the corners).
+pub struct StoredRun<'a> {
+    face: Face,
+    material: u32,
+    corners: &'a [Corner],
+    index: &'a [u8],
+}
+
+impl StoredRun<'_> {
+    /// Faces in the run.
+    pub fn faces(&self) -> usize {
+        self.index.len() / 3
+    }
+
+    /// Whether the faces are textured triangles (which the depth-first
+    /// tracer holds as records).
+    pub fn textured(&self) -> bool {
+        matches!(self.face, Face::Textured(_))
+    }
+
+    /// The faces' material.
+    pub fn material(&self) -> u32 {
+        self.material
+    }
+
+    /// Whether every number of every corner is finite (the faces' records
+    /// then have no other floats that are not).
+    pub fn finite(&self) -> bool {
+        let n = self.face.numbers();
+        self.corners
+            .iter()
+            .all(|c| c[..n].iter().all(|w| w & 0x7f80_0000 != 0x7f80_0000))
+    }
+
+    /// Words of each face's record.
+    pub fn record_words(&self) -> usize {
+        self.face.record_words()
+    }
+
+    /// Writes face `t`'s record, exactly as [`unpack`] expands it, into
+    /// `rec` (of [`Self::record_words`] words).
+    #[inline(always)]
+    pub fn write_record(&self, t: usize, rec: &mut [u32]) {
+        let i = &self.index[3 * t..3 * t + 3];
+        let c = [
+            &self.corners[i[0] as usize],
+            &self.corners[i[1] as usize],
+            &self.corners[i[2] as usize],
+        ];
+        write_record(rec, self.face, self.material, c);
+    }
+}
+
+/// What a stored block holds, in order, as [`expand`] hands it out.
+pub trait Expand {
+    /// `count` records stored as they are (their kinds and lengths
+    /// checked, nothing else).
+    fn records(&mut self, words: &[u32], count: u32) -> Result<(), String>;
+    /// A run of faces.
+    fn run(&mut self, run: &StoredRun<'_>) -> Result<(), String>;
+}
+
+/// Reads a stored block (`packed`, past its ids, holding `objects`
+/// objects whose records take at most `max_words`), handing its records
+/// and runs to `to` in order; the words its records take once expanded,
+/// or the first problem of a corrupt block. Nothing in `packed` can make
+/// it panic.
+#[inline(always)]
+pub fn expand(
     packed: &[u32],
     objects: u32,
     max_words: usize,
-    out: &mut Vec<u32>,
-) -> Result<(), String> {
-    out.clear();
+    to: &mut impl Expand,
+) -> Result<usize, String> {
     let mut pos = 0usize;
     let mut seen = 0u64;
+    let mut expanded = 0usize;
     let mut corners = [[0u32; CORNER_NUMBERS]; MAX_RUN_VERTICES];
-    // Records stored as they are are copied a stretch at a time, not one
-    // by one: mount's polygons are all such records, and a copy per record
+    // Numbers per corner that some run has written into `corners`.
+    let mut written = 0;
+    // Records stored as they are go out a stretch at a time, not one by
+    // one: mount's polygons are all such records, and a copy per record
     // (13 words) was 13 % of an out-of-core render's time.
-    let mut plain_from = 0usize;
+    let (mut plain_from, mut plain_seen) = (0usize, 0u64);
     while pos < packed.len() {
         let head = packed[pos];
         let Some(face) = Face::of_code(head & 0xff) else {
@@ -774,14 +937,17 @@ pub fn unpack(
             if pos + len > packed.len() {
                 return Err(format!("record {seen} is cut off"));
             }
-            if out.len() + (pos - plain_from) + len > max_words {
+            if expanded + len > max_words {
                 return Err("the block expands beyond its largest size".into());
             }
+            expanded += len;
             pos += len;
             seen += 1;
             continue;
         };
-        out.extend_from_slice(&packed[plain_from..pos]);
+        if pos > plain_from {
+            to.records(&packed[plain_from..pos], (seen - plain_seen) as u32)?;
+        }
         let n = (head >> 8) as usize;
         let numbers = face.numbers();
         let header = face.run_header_words();
@@ -808,8 +974,16 @@ pub fn unpack(
         let body = packed
             .get(start..start + corner_words + index_words)
             .ok_or_else(|| format!("the run at object {seen} is cut off"))?;
-        if out.len() + n * face.record_words() > max_words {
+        if expanded + n * face.record_words() > max_words {
             return Err("the block expands beyond its largest size".into());
+        }
+        let index: &[u8] = &bytemuck::cast_slice(&body[corner_words..])[..3 * n];
+        // The largest index, in a loop without an exit (it vectorizes,
+        // where `any` went byte by byte: a tenth of `unpack`).
+        if index.iter().fold(0, |m, &i| m.max(i)) as usize >= nv {
+            return Err(format!(
+                "the run at object {seen} names a corner it does not have"
+            ));
         }
         decode_corners(
             &body[..corner_words],
@@ -817,8 +991,62 @@ pub fn unpack(
             &base[..numbers],
             &width[..numbers],
         );
-        let index: &[u8] = bytemuck::cast_slice(&body[corner_words..]);
-        let words = face.record_words();
+        if numbers < written {
+            // A corner's numbers a face does not have are zeros (a
+            // patch's run before left normals here).
+            for c in &mut corners[..nv] {
+                c[numbers..written].fill(0);
+            }
+        }
+        written = written.max(numbers);
+        to.run(&StoredRun {
+            face,
+            material,
+            corners: &corners[..nv],
+            index,
+        })?;
+        expanded += n * face.record_words();
+        pos = start + corner_words + index_words;
+        seen += n as u64;
+        (plain_from, plain_seen) = (pos, seen);
+    }
+    if pos > plain_from {
+        to.records(&packed[plain_from..pos], (seen - plain_seen) as u32)?;
+    }
+    if seen != objects as u64 {
+        return Err(format!(
+            "the block holds {seen} objects, its header says {objects}"
+        ));
+    }
+    Ok(expanded)
+}
+
+/// Expands a stored block (`packed`, holding `objects` objects) into its
+/// records, at most `max_words` of them; describes the first problem of a
+/// corrupt block. Nothing in `packed` can make it panic.
+#[inline(never)]
+pub fn unpack(
+    packed: &[u32],
+    objects: u32,
+    max_words: usize,
+    out: &mut Vec<u32>,
+) -> Result<(), String> {
+    out.clear();
+    expand(packed, objects, max_words, &mut Records(out)).map(|_| ())
+}
+
+/// Records written out as [`unpack`] expands them.
+struct Records<'a>(&'a mut Vec<u32>);
+
+impl Expand for Records<'_> {
+    #[inline(always)]
+    fn records(&mut self, words: &[u32], _: u32) -> Result<(), String> {
+        self.0.extend_from_slice(words);
+        Ok(())
+    }
+
+    #[inline(always)]
+    fn run(&mut self, run: &StoredRun<'_>) -> Result<(), String> {
         // Each record is written where it goes. (Written on the stack word
         // by word and then copied in 16-byte moves, each load of the copy
         // spanned 4-byte stores still in the store buffer, which cannot
@@ -828,35 +1056,14 @@ pub fn unpack(
         // beside each other: the copy's 16-byte stores, read back by
         // 8-byte loads at other offsets, were not forwarded either (30 %
         // of this function's samples on mount11).
-        let at = out.len();
-        out.resize(at + n * words, 0);
-        for (t, rec) in index[..3 * n]
-            .chunks_exact(3)
-            .zip(out[at..].chunks_exact_mut(words))
-        {
-            if t.iter().any(|&i| i as usize >= nv) {
-                return Err(format!(
-                    "the run at object {seen} names a corner it does not have"
-                ));
-            }
-            let c = [
-                &corners[t[0] as usize],
-                &corners[t[1] as usize],
-                &corners[t[2] as usize],
-            ];
-            write_record(rec, face, material, c);
+        let words = run.record_words();
+        let at = self.0.len();
+        self.0.resize(at + run.faces() * words, 0);
+        for (t, rec) in self.0[at..].chunks_exact_mut(words).enumerate() {
+            run.write_record(t, rec);
         }
-        pos = start + corner_words + index_words;
-        plain_from = pos;
-        seen += n as u64;
+        Ok(())
     }
-    out.extend_from_slice(&packed[plain_from..pos]);
-    if seen != objects as u64 {
-        return Err(format!(
-            "the block holds {seen} objects, its header says {objects}"
-        ));
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -939,6 +1146,98 @@ mod tests {
                 // Normals as awkward as the vertices, and shared less.
                 Face::Patch => patch(out, material, v, [p(1), p(3), p(i % 4)]),
                 Face::Textured(mask) => textured(out, material, mask, i),
+            }
+        }
+    }
+
+    /// Collects what [`expand`] hands out, as records.
+    struct Collect(Vec<u32>);
+
+    impl Expand for Collect {
+        fn records(&mut self, words: &[u32], _: u32) -> Result<(), String> {
+            self.0.extend_from_slice(words);
+            Ok(())
+        }
+
+        fn run(&mut self, run: &StoredRun<'_>) -> Result<(), String> {
+            let at = self.0.len();
+            self.0.resize(at + run.faces() * run.record_words(), 0);
+            for (t, rec) in self.0[at..]
+                .chunks_exact_mut(run.record_words())
+                .enumerate()
+            {
+                run.write_record(t, rec);
+            }
+            Ok(())
+        }
+    }
+
+    /// A block's runs, handed out as runs and checked as such, are
+    /// refused exactly when their records would be: a material past the
+    /// scene's, a number that is not finite (in a triangle's, a patch's
+    /// or a textured triangle's run, after a patch's run has left normals
+    /// in the corners' table); what passes is the records `unpack` gives.
+    #[test]
+    fn runs_checked_as_runs_are_refused_as_their_records_are() {
+        use crate::sdb::validate::{Checked, validate_records};
+        let (materials, models) = (2, 0);
+        for case in 0..8usize {
+            let mut records = Vec::new();
+            strip_of(Face::Patch, 7, 0, &mut records);
+            strip_of(Face::Triangle, 9, (case % 3) as u32, &mut records);
+            sphere(&mut records, 1);
+            strip_of(Face::Textured(7), 5, 1, &mut records);
+            let objects = 7 + 9 + 1 + 5;
+            if case >= 3 {
+                // A NaN in one of the runs (box and corner alike).
+                // Its box is the one its corners give, so that the face
+                // stays in its run.
+                let first = [0, 7, 17][case % 3] + 1;
+                let mut pos = 0;
+                for _ in 0..first {
+                    let head = records[pos];
+                    let kind = ShapeKind::from_u8((head & 0xff) as u8).unwrap();
+                    pos += RECORD_HEADER_WORDS + kind.payload_words(head >> 8).unwrap();
+                }
+                records[pos + RECORD_HEADER_WORDS + 1 + 6 * (case % 2)] = f32::NAN.to_bits();
+                let face = Face::of_head(records[pos]).unwrap();
+                let c = read_corners(face, &records[pos + RECORD_HEADER_WORDS..]);
+                let b = face_box([&c[0], &c[1], &c[2]]);
+                records[pos + 2..pos + RECORD_HEADER_WORDS].copy_from_slice(&b);
+            }
+            let mut packed = Vec::new();
+            let mut packer = Packer::default();
+            packer.pack(&records, &mut packed);
+            assert_eq!(
+                packer.counts.run_triangles,
+                7 + 9 + 5,
+                "case {case}: all in runs"
+            );
+            let mut back = Vec::new();
+            let unpacked = unpack(&packed, objects, records.len(), &mut back);
+            let by_records = unpacked
+                .clone()
+                .and_then(|_| validate_records(&back, objects, materials, models));
+            let mut got = Collect(Vec::new());
+            let by_runs = expand(
+                &packed,
+                objects,
+                records.len(),
+                &mut Checked::new(&mut got, Some((materials, models))),
+            );
+            assert!(unpacked.is_ok(), "case {case}");
+            assert_eq!(
+                by_records.is_err(),
+                case % 3 == 2 || case >= 3,
+                "case {case}"
+            );
+            assert_eq!(
+                by_runs.is_ok(),
+                by_records.is_ok(),
+                "case {case}: {by_runs:?} {by_records:?}"
+            );
+            if by_runs.is_ok() {
+                assert_eq!(got.0, back, "case {case}");
             }
         }
     }

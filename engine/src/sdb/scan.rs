@@ -6,7 +6,7 @@
 use super::block::Block;
 use super::database::{BlockSpan, Database, VERIFY_CHECKSUMS};
 use super::format::*;
-use super::validate::validate_records;
+use super::validate::{Checked, validate_records};
 use crate::error::{Error, IoContext};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
@@ -201,6 +201,91 @@ impl Scan<'_> {
 
     /// The next block, or `None` after the last one.
     pub fn next_block(&mut self) -> Result<Option<Block<'_>>, Error> {
+        let Some(read) = self.read_block()? else {
+            return Ok(None);
+        };
+        let count = read.header.object_count;
+        if self.db.runs {
+            if super::packed::is_plain(&self.packed[read.at..], count, self.db.largest_block / 4) {
+                // Nothing to expand: the stored block is its records.
+                std::mem::swap(&mut self.packed, &mut self.words);
+                self.words_from = read.at;
+            } else {
+                super::packed::unpack(
+                    &self.packed[read.at..],
+                    count,
+                    self.db.largest_block / 4,
+                    &mut self.words,
+                )
+                .map_err(|m| self.err(m))?;
+                self.words_from = 0;
+            }
+        } else {
+            self.words_from = 0;
+        }
+        if self.verify {
+            validate_records(
+                &self.words[self.words_from..],
+                count,
+                self.db.scene.materials.len(),
+                self.db.models.len(),
+            )
+            .map_err(|m| self.err(m))?;
+        }
+        let (index, first) = self.account(&read, self.words.len() - self.words_from)?;
+        Ok(Some(Block::from_words(
+            index,
+            first,
+            count,
+            &self.words[self.words_from..],
+            &self.ids,
+        )))
+    }
+
+    /// The next block as it is stored, its records and triangle runs
+    /// handed to `to` in order, runs not expanded into records (checked
+    /// as [`Scan::next_block`] checks their records); `None` after the
+    /// last block, else its first object and number of objects. Its
+    /// objects' input ids are [`Scan::ids`].
+    pub fn next_block_with(
+        &mut self,
+        to: &mut impl super::packed::Expand,
+    ) -> Result<Option<(u64, u32)>, Error> {
+        let Some(read) = self.read_block()? else {
+            return Ok(None);
+        };
+        let count = read.header.object_count;
+        let materials = self.db.scene.materials.len();
+        let models = self.db.models.len();
+        let decoded = if self.db.runs {
+            let mut checked = Checked::new(to, self.verify.then_some((materials, models)));
+            super::packed::expand(
+                &self.packed[read.at..],
+                count,
+                self.db.largest_block / 4,
+                &mut checked,
+            )
+            .map_err(|m| self.err(m))?
+        } else {
+            if self.verify {
+                validate_records(&self.words, count, materials, models).map_err(|m| self.err(m))?;
+            }
+            to.records(&self.words, count).map_err(|m| self.err(m))?;
+            self.words.len()
+        };
+        let (_, first) = self.account(&read, decoded)?;
+        Ok(Some((first, count)))
+    }
+
+    /// The input ids of the objects of the block read last (version 6),
+    /// else empty.
+    pub fn ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// Reads the next block (its header checked, decompressed, its ids
+    /// decoded) into `packed` (version 4 on) or `words`.
+    fn read_block(&mut self) -> Result<Option<ReadBlock>, Error> {
         if self.next_index == self.db.block_count {
             if self.next_object != self.db.object_count || self.offset != self.db.blocks_end {
                 return Err(self.err(format!(
@@ -295,9 +380,9 @@ impl Scan<'_> {
         {
             return Err(self.err("blocks hold more objects than the header says"));
         }
-        if runs {
+        let at = if runs {
             self.packed.truncate(raw_len / 4);
-            let at = if self.db.ids {
+            if self.db.ids {
                 super::packed::unpack_ids(
                     &self.packed,
                     h.object_count,
@@ -307,40 +392,20 @@ impl Scan<'_> {
                 .map_err(|m| self.err(m))?
             } else {
                 0
-            };
-            if super::packed::is_plain(
-                &self.packed[at..],
-                h.object_count,
-                self.db.largest_block / 4,
-            ) {
-                // Nothing to expand: the stored block is its records.
-                std::mem::swap(&mut self.packed, &mut self.words);
-                self.words_from = at;
-            } else {
-                super::packed::unpack(
-                    &self.packed[at..],
-                    h.object_count,
-                    self.db.largest_block / 4,
-                    &mut self.words,
-                )
-                .map_err(|m| self.err(m))?;
-                self.words_from = 0;
             }
         } else {
             self.words.truncate(raw_len / 4);
-            self.words_from = 0;
-        }
-        if self.verify {
-            validate_records(
-                &self.words[self.words_from..],
-                h.object_count,
-                self.db.scene.materials.len(),
-                self.db.models.len(),
-            )
-            .map_err(|m| self.err(m))?;
-        }
-        self.stats.bytes_read += (BLOCK_HEADER_BYTES + stored_len) as u64;
-        self.decoded += (self.words.len() - self.words_from) as u64 * 4;
+            0
+        };
+        Ok(Some(ReadBlock { header: h, end, at }))
+    }
+
+    /// Counts the block `read`, whose records take `decoded` words, as
+    /// read: its index and first object.
+    fn account(&mut self, read: &ReadBlock, decoded: usize) -> Result<(u64, u64), Error> {
+        let (h, end) = (&read.header, read.end);
+        self.stats.bytes_read += BLOCK_HEADER_BYTES as u64 + h.stored_len as u64;
+        self.decoded += decoded as u64 * 4;
         self.stats.blocks_read += 1;
         self.offset = end;
         let index = self.next_index;
@@ -356,12 +421,14 @@ impl Scan<'_> {
         if self.next_object > self.db.object_count {
             return Err(self.err("blocks hold more objects than the header says"));
         }
-        Ok(Some(Block::from_words(
-            index,
-            first,
-            h.object_count,
-            &self.words[self.words_from..],
-            &self.ids,
-        )))
+        Ok((index, first))
     }
+}
+
+/// A block [`Scan::read_block`] has read: its header, the file offset
+/// after it, and where its records start in `packed` (past its ids).
+struct ReadBlock {
+    header: RawBlockHeader,
+    end: u64,
+    at: usize,
 }

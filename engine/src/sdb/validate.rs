@@ -100,3 +100,66 @@ fn validate_with_instances(words: &[u32], count: u32, models: usize) -> Result<(
     }
     Ok(())
 }
+
+/// What [`super::packed::expand`] hands out, checked on its way to `to`
+/// when `check` holds the scene's materials and models: what
+/// [`validate_records`] checks of the records it expands to.
+pub(super) struct Checked<'a, E> {
+    to: &'a mut E,
+    check: Option<(usize, usize)>,
+    /// Objects handed out so far.
+    seen: u32,
+    /// Textured triangles' records, checked as such.
+    scratch: Vec<u32>,
+}
+
+impl<'a, E> Checked<'a, E> {
+    pub(super) fn new(to: &'a mut E, check: Option<(usize, usize)>) -> Checked<'a, E> {
+        Checked {
+            to,
+            check,
+            seen: 0,
+            scratch: Vec::new(),
+        }
+    }
+}
+
+impl<E: super::packed::Expand> super::packed::Expand for Checked<'_, E> {
+    fn records(&mut self, words: &[u32], count: u32) -> Result<(), String> {
+        if let Some((materials, models)) = self.check {
+            validate_records(words, count, materials, models)?;
+        }
+        self.seen += count;
+        self.to.records(words, count)
+    }
+
+    fn run(&mut self, run: &super::packed::StoredRun<'_>) -> Result<(), String> {
+        if let Some((materials, models)) = self.check {
+            if run.textured() {
+                // Colours are integers: checked as records, as shapes.
+                let words = run.record_words();
+                self.scratch.clear();
+                self.scratch.resize(run.faces() * words, 0);
+                for (t, rec) in self.scratch.chunks_exact_mut(words).enumerate() {
+                    run.write_record(t, rec);
+                }
+                validate_records(&self.scratch, run.faces() as u32, materials, models)?;
+            } else {
+                // The records' other words are their kind and count, and
+                // a box of these corners: finite when they are.
+                if run.material() as usize >= materials {
+                    return Err(format!(
+                        "record {} refers to material {} of {materials}",
+                        self.seen,
+                        run.material()
+                    ));
+                }
+                if !run.finite() {
+                    return Err("a record has a non-finite number".into());
+                }
+            }
+        }
+        self.seen += run.faces() as u32;
+        self.to.run(run)
+    }
+}
