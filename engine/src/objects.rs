@@ -255,7 +255,8 @@ impl ObjectStore {
 
     /// Gives `f` every object's id and box, in id order (walking the
     /// segments rather than looking each id up).
-    pub fn each_bbox(&self, f: &mut dyn FnMut(u32, Aabb)) {
+    #[inline]
+    pub fn each_bbox(&self, mut f: impl FnMut(u32, Aabb)) {
         for (k, seg) in self.segments.iter().enumerate() {
             let Some(next) = self.segments.get(k + 1) else {
                 break;
@@ -625,7 +626,7 @@ mod tests {
                 }
             }
             let mut walked = 0;
-            store.each_bbox(&mut |id, b| {
+            store.each_bbox(|id, b: Aabb| {
                 assert_eq!(id, walked, "{name}: ids in order");
                 assert_eq!(
                     b.to_array().map(f32::to_bits),

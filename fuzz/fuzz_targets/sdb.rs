@@ -60,7 +60,7 @@ fuzz_target!(|data: &[u8]| {
     // The depth-first tracer's store takes the blocks' triangle runs as
     // they are stored, checked as runs.
     if let Ok(store) = sray_engine::objects::ObjectStore::load(&db, &NoProgress) {
-        store.each_bbox(&mut |_, _| {});
+        store.each_bbox(|_, _| {});
     }
     // Models are small in the seeds; a mutated count must not ask for
     // more memory than the file backs.

@@ -40,7 +40,7 @@ pub trait Boxes: Sync {
     }
 
     /// Gives `f` every object's id and box, in id order.
-    fn each(&self, f: &mut dyn FnMut(u32, Aabb)) {
+    fn each(&self, mut f: impl FnMut(u32, Aabb)) {
         for id in 0..self.count() as u32 {
             f(id, self.bbox(id));
         }
