@@ -382,9 +382,9 @@ struct Group {
 /// selects covers, the objects of `groups` aside, as `(id, voxel)`; then
 /// each group's voxels, with its entry (which follows the objects in
 /// every voxel's list). Generic, not through `dyn` calls: it runs three
-/// times over every object of a grid, and the calls (of this, of the
-/// walk over the objects and of `GridSpec::cell_range`) were a third of
-/// the dragon's preprocessing.
+/// times over every object of a grid, and making the calls (of this, of
+/// the walk over the objects and of `GridSpec::cell_range`) static cut
+/// the dragon's preprocessing by 13 % of its instructions (callgrind).
 #[inline]
 fn each_cover(
     boxes: &(impl Boxes + ?Sized),
