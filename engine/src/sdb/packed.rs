@@ -589,42 +589,63 @@ impl<const MOST: usize> RunGather<MOST> {
         if self.face.is_some_and(|f| f != face) || (self.face.is_some() && r[1] != self.material) {
             return false;
         }
-        // Each corner looked up once; a new one again only when it goes
-        // in (an earlier corner of the face may have taken its slot).
-        let mut found = [Ok(0), Ok(0), Ok(0)];
+        let c = [&corners[0], &corners[1], &corners[2]];
+        let found = [0, 1, 2].map(|i| self.local.find(&self.corners, c[i]));
+        self.add_face(face, r[1], pos, c, found).is_some()
+    }
+
+    /// Adds a face of kind `face` and `material` (the run's, if it has
+    /// faces) whose corners `c` were looked up among `corners` as `found`,
+    /// if its new corners fit: its three indices. `first` is the word
+    /// offset of its record, kept if it is the run's first face.
+    // Always inlined: called for each of a mesh's faces, and its caller's
+    // lookups are what it branches on (a call cost the dragon's load 8 %
+    // more instructions).
+    #[inline(always)]
+    fn add_face(
+        &mut self,
+        face: Face,
+        material: u32,
+        first: usize,
+        c: [&Corner; 3],
+        found: [Result<u16, usize>; 3],
+    ) -> Option<[u16; 3]> {
+        // A corner not found is new, once however many of the face's
+        // corners have its bits.
         let mut new = 0;
         for i in 0..3 {
-            found[i] = self.local.find(&self.corners, &corners[i]);
-            if found[i].is_err() && !corners[..i].iter().any(|c| same_corner(c, &corners[i])) {
+            if found[i].is_err() && !(0..i).any(|j| same_corner(c[j], c[i])) {
                 new += 1;
             }
         }
         if self.corners.len() + new > MOST {
-            return false;
+            return None;
         }
         self.local.reserve(&self.corners, new);
         if self.face.is_none() {
             self.face = Some(face);
-            self.material = r[1];
-            self.first = pos;
+            self.material = material;
+            self.first = first;
         }
+        // A new corner is looked up again when it goes in: an earlier
+        // corner of the face may have taken its slot.
         let mut idx = [0u16; 3];
         for i in 0..3 {
             idx[i] = match found[i] {
                 Ok(k) => k,
-                Err(_) => match self.local.find(&self.corners, &corners[i]) {
+                Err(_) => match self.local.find(&self.corners, c[i]) {
                     Ok(k) => k,
                     Err(slot) => {
                         let k = self.corners.len() as u16;
                         self.local.insert(slot, k);
-                        self.corners.push(corners[i]);
+                        self.corners.push(*c[i]);
                         k
                     }
                 },
             };
         }
         self.faces.push(idx);
-        true
+        Some(idx)
     }
 
     /// Adds the faces of the stored run `run` from face `from` on, as
@@ -651,53 +672,19 @@ impl<const MOST: usize> RunGather<MOST> {
         }
         let mut taken = 0;
         for t in run.index[3 * from..].chunks_exact(3) {
-            // The face's corners not yet among `corners`: each looked up
-            // once, and counted once however many of the face's stored
-            // corners have its bits.
-            let mut found = [Ok(0); 3];
-            let mut new = 0;
-            for i in 0..3 {
-                let (stamp, k) = self.stored[t[i] as usize];
-                found[i] = if stamp == self.stored_stamp {
-                    Ok(k)
-                } else {
-                    self.local.find(&self.corners, &run.corners[t[i] as usize])
-                };
-                if found[i].is_err()
-                    && !(0..i).any(|j| {
-                        same_corner(&run.corners[t[j] as usize], &run.corners[t[i] as usize])
-                    })
-                {
-                    new += 1;
-                }
-            }
-            if self.corners.len() + new > MOST {
+            let t = [t[0] as usize, t[1] as usize, t[2] as usize];
+            let c = [&run.corners[t[0]], &run.corners[t[1]], &run.corners[t[2]]];
+            let look = |i: usize| match self.stored[t[i]] {
+                (stamp, k) if stamp == self.stored_stamp => Ok(k),
+                _ => self.local.find(&self.corners, c[i]),
+            };
+            let found = [look(0), look(1), look(2)];
+            let Some(idx) = self.add_face(face, run.material, 0, c, found) else {
                 break;
-            }
-            self.local.reserve(&self.corners, new);
-            if self.face.is_none() {
-                self.face = Some(face);
-                self.material = run.material;
-                self.first = 0;
-            }
-            let mut idx = [0u16; 3];
+            };
             for i in 0..3 {
-                let c = &run.corners[t[i] as usize];
-                idx[i] = match found[i] {
-                    Ok(k) => k,
-                    Err(_) => match self.local.find(&self.corners, c) {
-                        Ok(k) => k,
-                        Err(slot) => {
-                            let k = self.corners.len() as u16;
-                            self.local.insert(slot, k);
-                            self.corners.push(*c);
-                            k
-                        }
-                    },
-                };
-                self.stored[t[i] as usize] = (self.stored_stamp, idx[i]);
+                self.stored[t[i]] = (self.stored_stamp, idx[i]);
             }
-            self.faces.push(idx);
             taken += 1;
         }
         taken
