@@ -253,16 +253,31 @@ impl ObjectStore {
         }
     }
 
-    /// Gives `f` every object's id and box, in id order (walking the
-    /// segments rather than looking each id up).
+    /// Gives `f` every object's id and box, in id order.
     #[inline]
-    pub fn each_bbox(&self, mut f: impl FnMut(u32, Aabb)) {
-        for (k, seg) in self.segments.iter().enumerate() {
+    pub fn each_bbox(&self, f: impl FnMut(u32, Aabb)) {
+        self.each_bbox_in(0..self.len() as u32, f)
+    }
+
+    /// Gives `f` the id and box of each object of `ids`, in id order
+    /// (walking the segments rather than looking each id up).
+    #[inline]
+    pub fn each_bbox_in(&self, ids: std::ops::Range<u32>, mut f: impl FnMut(u32, Aabb)) {
+        let end = ids.end.min(self.len() as u32);
+        // The segment holding the first id, and those after it.
+        let from = self
+            .segments
+            .partition_point(|s| s.first <= ids.start)
+            .saturating_sub(1);
+        for (k, seg) in self.segments.iter().enumerate().skip(from) {
             let Some(next) = self.segments.get(k + 1) else {
                 break;
             };
+            if seg.first >= end {
+                break;
+            }
             // The sentinel starts at u32::MAX, not at the end.
-            for id in seg.first..next.first.min(self.len() as u32) {
+            for id in seg.first.max(ids.start)..next.first.min(end) {
                 let b = match seg.form {
                     Form::Records => {
                         let r = seg.base + (id - seg.first);
@@ -694,6 +709,43 @@ mod tests {
         both::<7>(&v4, &v3);
         both::<300>(&v4, &v3);
         both::<RUN_CORNERS>(&v4, &v3);
+    }
+
+    /// The boxes of a stretch of ids are those of the whole walk, wherever
+    /// the stretch starts and ends among the segments (runs of 7 corners
+    /// make many, records among them).
+    #[test]
+    fn a_stretch_of_ids_gives_the_boxes_of_the_whole_walk() {
+        let dir = tempfile::tempdir().unwrap();
+        let db = write(dir.path(), "v4.sdb", true, Compression::None);
+        let store = ObjectStore::load_in_runs_of::<7>(&db, &NoProgress).unwrap();
+        let mut all = Vec::new();
+        store.each_bbox(|id, b| all.push((id, b)));
+        let n = store.len() as u32;
+        assert_eq!(all.len(), n as usize);
+        assert!(
+            store.segments.len() > 10,
+            "{} segments",
+            store.segments.len()
+        );
+        for (a, b) in [
+            (0, n),
+            (0, 0),
+            (1, 2),
+            (5, 17),
+            (n / 3, 2 * n / 3),
+            (n - 1, n),
+            (3, n + 5),
+        ] {
+            let mut got = Vec::new();
+            store.each_bbox_in(a..b, |id, b| got.push((id, b)));
+            let want: Vec<_> = all
+                .iter()
+                .filter(|(id, _)| (a..b).contains(id))
+                .copied()
+                .collect();
+            assert!(got == want, "ids {a}..{b}");
+        }
     }
 
     #[test]

@@ -129,8 +129,8 @@ impl Boxes for Padded<'_> {
         self.grow(self.objects.bbox(id))
     }
 
-    fn each(&self, mut f: impl FnMut(u32, Aabb)) {
-        self.objects.each_bbox(|id, b| f(id, self.grow(b)))
+    fn each_in(&self, ids: std::ops::Range<u32>, mut f: impl FnMut(u32, Aabb)) {
+        self.objects.each_bbox_in(ids, |id, b| f(id, self.grow(b)))
     }
 }
 

@@ -6,6 +6,9 @@ use crate::grid::nested::{Boxes, Entry, Hierarchies, MIN_OBJECTS, NESTED};
 use crate::objects::ObjectStore;
 use crate::scene::Aabb;
 use rayon::prelude::*;
+use std::sync::atomic::AtomicU32;
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::Relaxed;
 
 impl Boxes for ObjectStore {
     fn count(&self) -> usize {
@@ -17,8 +20,8 @@ impl Boxes for ObjectStore {
         ObjectStore::bbox(self, id)
     }
 
-    fn each(&self, f: impl FnMut(u32, Aabb)) {
-        self.each_bbox(f)
+    fn each_in(&self, ids: std::ops::Range<u32>, f: impl FnMut(u32, Aabb)) {
+        self.each_bbox_in(ids, f)
     }
 
     #[inline]
@@ -80,7 +83,7 @@ impl ObjectGrid {
         res: [u32; 3],
         pool: &rayon::ThreadPool,
         aggregates: bool,
-        member: impl Fn(usize) -> bool,
+        member: impl Fn(usize) -> bool + Sync,
     ) -> Result<ObjectGrid, Error> {
         let spec = GridSpec::new(bounds, res);
         let cells = spec.cells();
@@ -89,12 +92,36 @@ impl ObjectGrid {
         } else {
             Default::default()
         };
-        let mut occupied = vec![0u64; cells.div_ceil(64)];
-        let mut total: u64 = 0;
-        each_cover(boxes, &spec, &member, &groups, &mut |_, c| {
-            occupied[c >> 6] |= 1 << (c & 63);
-            total += 1;
-        });
+        // The objects in consecutive stretches of ids, one a thread: each
+        // pass covers them side by side. A voxel lists its objects in id
+        // order whatever the threads, the stretches' in turn (the
+        // groups' entries, after every object, with the last stretch).
+        let threads = pool.current_num_threads();
+        let parts = id_stretches(boxes.count(), threads);
+        let mut covers = Covers {
+            boxes,
+            spec: &spec,
+            parts: &parts,
+            member: &member,
+            groups: &groups,
+        };
+        // Mark: a bit per voxel an object covers.
+        let marks: Vec<AtomicU64> = (0..cells.div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
+        let total: u64 = per_part(pool, vec![(); parts.len()], |k, ()| {
+            let mut total = 0u64;
+            covers.of(k, &mut |_, c| {
+                let (word, bit) = (&marks[c >> 6], 1u64 << (c & 63));
+                // Most covers find their voxel marked: a load, no write.
+                if word.load(Relaxed) & bit == 0 {
+                    word.fetch_or(bit, Relaxed);
+                }
+                total += 1;
+            });
+            total
+        })
+        .into_iter()
+        .sum();
+        let occupied: Vec<u64> = marks.into_iter().map(AtomicU64::into_inner).collect();
         if total > u32::MAX as u64 {
             return Err(Error::Invalid(format!(
                 "the grid would list {total} object-voxel pairs; choose a coarser --grid-res"
@@ -113,57 +140,55 @@ impl ObjectGrid {
             let w = occupied[c >> 6];
             before[c >> 6] as usize + (w & ((1 << (c & 63)) - 1)).count_ones() as usize
         };
+        // Count: each stretch's objects per listing voxel. A count per
+        // listing voxel for each stretch: no more stretches than voxels
+        // list objects on average, so that the counts take no more room
+        // than the lists.
+        let parts = id_stretches(
+            boxes.count(),
+            threads.min(total as usize / listing.max(1) as usize),
+        );
+        covers.parts = &parts;
+        let mut counts: Vec<Vec<u32>> = per_part(pool, vec![(); parts.len()], |k, ()| {
+            let mut n = vec![0u32; listing as usize];
+            covers.of(k, &mut |_, c| n[rank(c)] += 1);
+            n
+        });
+        // Each listing voxel's start, and where each stretch's objects
+        // go in it: the counts become those places.
         let mut start = vec![0u32; listing as usize + 1];
-        each_cover(boxes, &spec, &member, &groups, &mut |_, c| {
-            start[rank(c)] += 1
-        });
-        // Exclusive prefix sum: counts become each listing voxel's start.
         let mut acc = 0u32;
-        for c in start.iter_mut() {
-            let k = *c;
-            *c = acc;
-            acc += k;
+        for (k, s) in start[..listing as usize].iter_mut().enumerate() {
+            *s = acc;
+            for n in counts.iter_mut() {
+                (n[k], acc) = (acc, acc + n[k]);
+            }
         }
-        let mut fill = start.clone();
+        start[listing as usize] = acc;
+        // Fill: each stretch writes its places, which no other writes.
         let mut items = vec![0u32; total as usize];
-        let (mut n, mut last) = (0u64, u32::MAX);
-        each_cover(boxes, &spec, &member, &groups, &mut |id, c| {
-            let k = rank(c);
-            items[fill[k] as usize] = id;
-            fill[k] += 1;
-            if id != last {
-                last = id;
-                n += if id & NESTED == 0 {
-                    1
-                } else {
-                    aggregate::SIZE as u64
-                };
-            }
-        });
-        drop(fill);
+        let shared = atomic(&mut items);
+        let n: u64 = per_part(pool, counts, |k, mut place| {
+            let (mut n, mut last) = (0u64, u32::MAX);
+            covers.of(k, &mut |id, c| {
+                let v = rank(c);
+                shared[place[v] as usize].store(id, Relaxed);
+                place[v] += 1;
+                if id != last {
+                    last = id;
+                    n += if id & NESTED == 0 {
+                        1
+                    } else {
+                        aggregate::SIZE as u64
+                    };
+                }
+            });
+            n
+        })
+        .into_iter()
+        .sum();
         if boxes.ranked() {
-            // Objects by input id; aggregates after them, as listed. Each
-            // object's input id is looked up once and sorted with it (input
-            // ids are distinct): looked up in every comparison, this sort
-            // was a tenth of the dragon's preprocessing.
-            let mut keys: Vec<u64> = Vec::new();
-            for w in start.windows(2) {
-                let list = &mut items[w[0] as usize..w[1] as usize];
-                let objects = list.partition_point(|&e| e & NESTED == 0);
-                if objects < 2 {
-                    continue;
-                }
-                keys.clear();
-                keys.extend(
-                    list[..objects]
-                        .iter()
-                        .map(|&id| (boxes.rank(id) as u64) << 32 | id as u64),
-                );
-                keys.sort_unstable();
-                for (e, &k) in list.iter_mut().zip(&keys) {
-                    *e = k as u32;
-                }
-            }
+            sort_by_rank(boxes, &start, &mut items, pool);
         }
         let mut grid = ObjectGrid {
             spec,
@@ -378,10 +403,38 @@ struct Group {
     hi: [u32; 3],
 }
 
-/// Gives `f` each voxel of `spec` that each of the objects `member`
-/// selects covers, the objects of `groups` aside, as `(id, voxel)`; then
-/// each group's voxels, with its entry (which follows the objects in
-/// every voxel's list). Generic, not through `dyn` calls: it runs three
+/// What a grid's passes cover, in stretches of ids side by side.
+struct Covers<'a, B: ?Sized, M> {
+    boxes: &'a B,
+    spec: &'a GridSpec,
+    parts: &'a [std::ops::Range<u32>],
+    member: &'a M,
+    groups: &'a [Group],
+}
+
+impl<B: Boxes + ?Sized, M: Fn(usize) -> bool> Covers<'_, B, M> {
+    /// [`each_cover`] of stretch `k`, the groups' entries with the last
+    /// stretch (they follow every object in a voxel's list).
+    #[inline]
+    fn of(&self, k: usize, f: &mut impl FnMut(u32, usize)) {
+        let groups_too = k + 1 == self.parts.len();
+        let ids = self.parts[k].clone();
+        each_cover(
+            self.boxes,
+            self.spec,
+            ids,
+            self.member,
+            self.groups,
+            groups_too,
+            f,
+        )
+    }
+}
+
+/// Gives `f` each voxel of `spec` that each of the objects of `ids` that
+/// `member` selects covers, the objects of `groups` aside, as `(id,
+/// voxel)`; then, if `with_groups`, each group's voxels, with its entry
+/// (which follows the objects in every voxel's list). Generic, not through `dyn` calls: it runs three
 /// times over every object of a grid, and making the calls (of this, of
 /// the walk over the objects and of `GridSpec::cell_range`) static cut
 /// the dragon's preprocessing by 13 % of its instructions (callgrind).
@@ -389,37 +442,148 @@ struct Group {
 fn each_cover(
     boxes: &(impl Boxes + ?Sized),
     spec: &GridSpec,
+    ids: std::ops::Range<u32>,
     member: &impl Fn(usize) -> bool,
     groups: &[Group],
+    with_groups: bool,
     f: &mut impl FnMut(u32, usize),
 ) {
-    let mut cover = |entry: u32, lo: [u32; 3], hi: [u32; 3]| {
-        for z in lo[2]..=hi[2] {
-            for y in lo[1]..=hi[1] {
-                let row = spec.index([lo[0], y, z]);
-                for x in 0..=(hi[0] - lo[0]) as usize {
-                    f(entry, row + x);
-                }
-            }
-        }
-    };
     // Groups come in id order: the one that may hold `id`.
     let grouped = |id: u32| {
         let k = groups.partition_point(|g| g.first + aggregate::SIZE as u32 <= id);
         groups.get(k).is_some_and(|g| g.first <= id)
     };
-    boxes.each(|id, b| {
+    boxes.each_in(ids, |id, b| {
         if !member(id as usize) || grouped(id) {
             return;
         }
         if let Some((lo, hi)) = spec.cell_range(&b) {
-            cover(id, lo, hi);
+            cover(spec, id, lo, hi, f);
         }
     });
-    for g in groups {
-        cover(g.entry, g.lo, g.hi);
+    if with_groups {
+        for g in groups {
+            cover(spec, g.entry, g.lo, g.hi, f);
+        }
     }
 }
+
+/// Gives `f` each voxel of `spec` from `lo` to `hi`, with `entry`. A
+/// function always inlined, not a closure: as a closure, called per
+/// object, it was left a call in some of the grid's passes.
+#[inline(always)]
+fn cover(spec: &GridSpec, entry: u32, lo: [u32; 3], hi: [u32; 3], f: &mut impl FnMut(u32, usize)) {
+    for z in lo[2]..=hi[2] {
+        for y in lo[1]..=hi[1] {
+            let row = spec.index([lo[0], y, z]);
+            for x in 0..=(hi[0] - lo[0]) as usize {
+                f(entry, row + x);
+            }
+        }
+    }
+}
+
+/// `f(k, state)` for each stretch `k` and its state, side by side on
+/// `pool`'s threads; on the caller's thread if there is one stretch (a
+/// hand-over to the pool's thread made a one-thread build slower).
+fn per_part<S: Send, T: Send>(
+    pool: &rayon::ThreadPool,
+    states: Vec<S>,
+    f: impl Fn(usize, S) -> T + Sync,
+) -> Vec<T> {
+    if states.len() == 1 {
+        return states.into_iter().map(|s| f(0, s)).collect();
+    }
+    pool.install(|| {
+        states
+            .into_par_iter()
+            .enumerate()
+            .map(|(k, s)| f(k, s))
+            .collect()
+    })
+}
+
+/// `v` as atomics, for threads that each write places of it no other
+/// thread writes. Not a `Vec` of atomics: that is written through once to
+/// make it, where `vec![0; n]` takes pages the system has zeroed.
+fn atomic(v: &mut [u32]) -> &[AtomicU32] {
+    const { assert!(align_of::<AtomicU32>() == align_of::<u32>()) };
+    // SAFETY: `AtomicU32` has the size and bit validity of `u32` (std's
+    // documentation) and, asserted above, its alignment, so `v`'s memory
+    // is a valid `[AtomicU32]` of the same length (what the unstable
+    // `AtomicU32::from_mut_slice` does). The shared borrow returned keeps
+    // `v` exclusively borrowed while it lives, so nothing reaches the
+    // memory other than through the atomics meanwhile.
+    unsafe { &*(v as *mut [u32] as *const [AtomicU32]) }
+}
+
+/// Ids `0..count` in at most `threads` consecutive stretches of about
+/// the same length (one, empty, if there are no objects).
+fn id_stretches(count: usize, threads: usize) -> Vec<std::ops::Range<u32>> {
+    // A stretch of fewer objects is not worth a thread's wake-up (the
+    // unit tests split even a few objects, to build as many threads do).
+    const LEAST: usize = if cfg!(test) { 1 } else { 1 << 14 };
+    let n = threads.min(count / LEAST).max(1);
+    (0..n)
+        .map(|k| (count * k / n) as u32..(count * (k + 1) / n) as u32)
+        .collect()
+}
+
+/// Sorts each listing voxel's objects (its entries before any aggregate)
+/// by input id: voxels in stretches of about [`SORT_STRETCH`] entries,
+/// side by side on `pool`'s threads.
+fn sort_by_rank(
+    boxes: &(impl Boxes + ?Sized),
+    start: &[u32],
+    items: &mut [u32],
+    pool: &rayon::ThreadPool,
+) {
+    // A stretch's voxels: their starts (the last one ends them), and
+    // their entries.
+    let sort = |keys: &mut Vec<u64>, (starts, list): (&[u32], &mut [u32])| {
+        let base = starts[0];
+        for w in starts.windows(2) {
+            let list = &mut list[(w[0] - base) as usize..(w[1] - base) as usize];
+            let objects = list.partition_point(|&e| e & NESTED == 0);
+            if objects < 2 {
+                continue;
+            }
+            // Each object's input id looked up once and sorted with it
+            // (input ids are distinct): looked up in every comparison,
+            // this sort was a tenth of the dragon's preprocessing.
+            keys.clear();
+            keys.extend(
+                list[..objects]
+                    .iter()
+                    .map(|&id| (boxes.rank(id) as u64) << 32 | id as u64),
+            );
+            keys.sort_unstable();
+            for (e, &k) in list.iter_mut().zip(keys.iter()) {
+                *e = k as u32;
+            }
+        }
+    };
+    if pool.current_num_threads() == 1 {
+        return sort(&mut Vec::new(), (start, items));
+    }
+    let mut stretches: Vec<(&[u32], &mut [u32])> = Vec::new();
+    let (mut rest, mut first) = (items, 0usize);
+    while first + 1 < start.len() {
+        let from = start[first];
+        let mut last = first + 1;
+        while last + 1 < start.len() && start[last] - from < SORT_STRETCH {
+            last += 1;
+        }
+        let (these, after) = std::mem::take(&mut rest).split_at_mut((start[last] - from) as usize);
+        stretches.push((&start[first..=last], these));
+        (rest, first) = (after, last);
+    }
+    pool.install(|| stretches.into_par_iter().for_each_init(Vec::new, sort));
+}
+
+/// Entries a stretch of voxels sorted by one thread holds, at least (a
+/// few in the unit tests, to sort in many stretches).
+const SORT_STRETCH: u32 = if cfg!(test) { 8 } else { 1 << 16 };
 
 /// The groups of [`aggregate::SIZE`] consecutive objects, all `member`s,
 /// that crowd their voxels of `spec`, in id order, and their hierarchies.
@@ -502,17 +666,91 @@ mod tests {
     }
 
     /// The grid of resolution `res` over the unit cube for `boxes`, with
-    /// aggregates if `aggregates`.
+    /// aggregates if `aggregates`, built on three threads (in three
+    /// stretches of ids).
     fn unit_grid(boxes: &[Aabb], res: [u32; 3], aggregates: bool) -> ObjectGrid {
+        built_on(3, boxes, res, aggregates, |_| true)
+    }
+
+    fn built_on(
+        threads: usize,
+        boxes: &(impl Boxes + ?Sized),
+        res: [u32; 3],
+        aggregates: bool,
+        member: impl Fn(usize) -> bool + Sync,
+    ) -> ObjectGrid {
         let bounds = Aabb {
             min: [0.0; 3],
             max: [1.0; 3],
         };
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
+            .num_threads(threads)
             .build()
             .unwrap();
-        ObjectGrid::build(boxes, &bounds, res, &pool, aggregates, |_| true).unwrap()
+        ObjectGrid::build(boxes, &bounds, res, &pool, aggregates, member).unwrap()
+    }
+
+    /// `boxes` in a spatial order: input ids a permutation of the ids.
+    struct Ranked<'a>(&'a [Aabb]);
+
+    impl Boxes for Ranked<'_> {
+        fn count(&self) -> usize {
+            self.0.len()
+        }
+
+        fn bbox(&self, id: u32) -> Aabb {
+            self.0[id as usize]
+        }
+
+        fn rank(&self, id: u32) -> u32 {
+            (id * 7 + 3) % self.0.len() as u32
+        }
+
+        fn ranked(&self) -> bool {
+            true
+        }
+    }
+
+    /// A grid is the same built on one thread or on several (its objects
+    /// covered in stretches of ids side by side, its lists sorted in
+    /// stretches of voxels), with aggregates or without, its objects in
+    /// id order or in a spatial order, of all objects or of some (as each
+    /// of several grids is).
+    #[test]
+    fn grids_built_on_many_threads_are_those_built_on_one() {
+        let boxes = scattered_and_crowded();
+        // Every third object left out.
+        let some = |id: usize| id % 3 != 1;
+        let fields = |g: &ObjectGrid| {
+            (
+                g.occupied.clone(),
+                g.before.clone(),
+                g.start.clone(),
+                g.items.clone(),
+                [g.objects, g.nested_voxels, g.nested_entries, g.aggregates],
+            )
+        };
+        let mut reordered = false;
+        // Coarse grids too: fill passes split only where voxels list
+        // several objects on average.
+        for res in [[1, 1, 1], [2, 3, 2], [4, 4, 4], [7, 9, 10], [13, 13, 13]] {
+            for aggregates in [false, true] {
+                let one = fields(&built_on(1, &boxes[..], res, aggregates, some));
+                let ranked = fields(&built_on(1, &Ranked(&boxes), res, aggregates, some));
+                reordered |= one.3 != ranked.3;
+                for threads in [2, 3, 5] {
+                    let case = format!("{res:?}, aggregates {aggregates}, {threads} threads");
+                    let many = built_on(threads, &boxes[..], res, aggregates, some);
+                    assert!(fields(&many) == one, "{case}");
+                    assert!(
+                        fields(&built_on(threads, &Ranked(&boxes), res, aggregates, some))
+                            == ranked,
+                        "{case}, ranked"
+                    );
+                }
+            }
+        }
+        assert!(reordered, "the spatial order changed no list");
     }
 
     /// The objects whose box overlaps voxel `index` of `spec`.

@@ -39,11 +39,16 @@ pub trait Boxes: Sync {
         false
     }
 
-    /// Gives `f` every object's id and box, in id order.
-    fn each(&self, mut f: impl FnMut(u32, Aabb)) {
-        for id in 0..self.count() as u32 {
+    /// Gives `f` the id and box of each object of `ids`, in id order.
+    fn each_in(&self, ids: std::ops::Range<u32>, mut f: impl FnMut(u32, Aabb)) {
+        for id in ids {
             f(id, self.bbox(id));
         }
+    }
+
+    /// Gives `f` every object's id and box, in id order.
+    fn each(&self, f: impl FnMut(u32, Aabb)) {
+        self.each_in(0..self.count() as u32, f)
     }
 }
 
