@@ -236,15 +236,22 @@ impl<'t> DfScene<'t> {
             records.push(held);
         }
         let plan = plan_groups(db.sizes(), db.density(), opts.multiple_grids);
-        // Each object's group, worked out once (each grid's build looks
-        // at every object twice).
-        let mut group: Vec<u8> = Vec::with_capacity(n);
-        objects.each_bbox(&mut |_, b| group.push(plan.partition.group(&b) as u8));
-        let mut grids = Vec::with_capacity(plan.bounds.len());
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(trace::thread_count(opts))
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
+        // The objects in stretches of ids, one a thread, for the passes
+        // over them all here as in the grids' builds.
+        let stretches = object_grid::id_stretches(n, pool.current_num_threads());
+        // Each object's group, worked out once (each grid's build looks
+        // at every object twice).
+        let group: Vec<u8> = object_grid::per_part(&pool, stretches.clone(), |_, ids| {
+            let mut group = Vec::with_capacity(ids.len());
+            objects.each_bbox_in(ids, |_, b| group.push(plan.partition.group(&b) as u8));
+            group
+        })
+        .concat();
+        let mut grids = Vec::with_capacity(plan.bounds.len());
         for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
             let res = match (g, opts.grid_res) {
                 (0, GridRes::Fixed(r)) => r,
@@ -259,13 +266,18 @@ impl<'t> DfScene<'t> {
                 |id| group[id] as usize == g,
             )?);
         }
-        let mut outside = None;
-        objects.each_bbox(&mut |id, b| {
-            if outside.is_none() && !grids[group[id as usize] as usize].spec.holds(&b) {
-                outside = Some(id);
-            }
+        // The first object outside its grid, if any (the first stretch's
+        // first one).
+        let outside = object_grid::per_part(&pool, stretches, |_, ids| {
+            let mut outside = None;
+            objects.each_bbox_in(ids, |id, b| {
+                if outside.is_none() && !grids[group[id as usize] as usize].spec.holds(&b) {
+                    outside = Some(id);
+                }
+            });
+            outside
         });
-        if let Some(id) = outside {
+        if let Some(id) = outside.into_iter().flatten().next() {
             return Err(crate::grid::outside_its_grid(db, id as u64));
         }
         let eps = epsilon(&db.bbox(), opts.precision);

@@ -486,7 +486,7 @@ fn cover(spec: &GridSpec, entry: u32, lo: [u32; 3], hi: [u32; 3], f: &mut impl F
 /// `f(k, state)` for each stretch `k` and its state, side by side on
 /// `pool`'s threads; on the caller's thread if there is one stretch (a
 /// hand-over to the pool's thread made a one-thread build slower).
-fn per_part<S: Send, T: Send>(
+pub(super) fn per_part<S: Send, T: Send>(
     pool: &rayon::ThreadPool,
     states: Vec<S>,
     f: impl Fn(usize, S) -> T + Sync,
@@ -519,7 +519,7 @@ fn atomic(v: &mut [u32]) -> &[AtomicU32] {
 
 /// Ids `0..count` in at most `threads` consecutive stretches of about
 /// the same length (one, empty, if there are no objects).
-fn id_stretches(count: usize, threads: usize) -> Vec<std::ops::Range<u32>> {
+pub(super) fn id_stretches(count: usize, threads: usize) -> Vec<std::ops::Range<u32>> {
     // A stretch of fewer objects is not worth a thread's wake-up (the
     // unit tests split even a few objects, to build as many threads do).
     const LEAST: usize = if cfg!(test) { 1 } else { 1 << 14 };
