@@ -434,10 +434,11 @@ impl<B: Boxes + ?Sized, M: Fn(usize) -> bool> Covers<'_, B, M> {
 /// Gives `f` each voxel of `spec` that each of the objects of `ids` that
 /// `member` selects covers, the objects of `groups` aside, as `(id,
 /// voxel)`; then, if `with_groups`, each group's voxels, with its entry
-/// (which follows the objects in every voxel's list). Generic, not through `dyn` calls: it runs three
-/// times over every object of a grid, and making the calls (of this, of
-/// the walk over the objects and of `GridSpec::cell_range`) static cut
-/// the dragon's preprocessing by 13 % of its instructions (callgrind).
+/// (which follows the objects in every voxel's list). Generic, not
+/// through `dyn` calls: it runs three times over every object of a grid,
+/// and making the calls (of this, of the walk over the objects and of
+/// `GridSpec::cell_range`) static cut the dragon's preprocessing by 13 %
+/// of its instructions (callgrind).
 #[inline]
 fn each_cover(
     boxes: &(impl Boxes + ?Sized),
