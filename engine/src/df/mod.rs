@@ -157,7 +157,7 @@ fn estimate_one(db: &Database) -> u64 {
     // objects, but for tiny scenes) and about three entries per object;
     // the hierarchies of crowded voxels (rare but for dense models in
     // coarse grids: about one 32-byte node per eight objects); a mailbox
-    // per thread.
+    // per thread; each object's voxels, packed, while a grid is built.
     ObjectStore::estimate_bytes(db)
         + size_of::<Held<'_>>() as u64 * (n - faces)
         + cells / 8
@@ -166,6 +166,7 @@ fn estimate_one(db: &Database) -> u64 {
         + 12 * n
         + 4 * n
         + 4 * n * crate::sys::cpus() as u64
+        + 4 * n
 }
 
 impl<'t> DfScene<'t> {
