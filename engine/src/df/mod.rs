@@ -241,17 +241,20 @@ impl<'t> DfScene<'t> {
             .num_threads(trace::thread_count(opts))
             .build()
             .map_err(|e| Error::Invalid(format!("cannot start threads: {e}")))?;
-        // The objects in stretches of ids, one a thread, for the passes
-        // over them all here as in the grids' builds.
-        let stretches = object_grid::id_stretches(n, pool.current_num_threads());
         // Each object's group, worked out once (each grid's build looks
-        // at every object twice).
-        let group: Vec<u8> = object_grid::per_part(&pool, stretches.clone(), |_, ids| {
-            let mut group = Vec::with_capacity(ids.len());
-            objects.each_bbox_in(ids, |_, b| group.push(plan.partition.group(&b) as u8));
-            group
-        })
-        .concat();
+        // at every object twice), in stretches of ids, one a thread; not
+        // needed where there is one grid.
+        let group: Vec<u8> = if plan.bounds.len() > 1 {
+            let stretches = object_grid::id_stretches(n, pool.current_num_threads());
+            object_grid::per_part(&pool, stretches, |_, ids| {
+                let mut group = Vec::with_capacity(ids.len());
+                objects.each_bbox_in(ids, |_, b| group.push(plan.partition.group(&b) as u8));
+                group
+            })
+            .concat()
+        } else {
+            Vec::new()
+        };
         let mut grids = Vec::with_capacity(plan.bounds.len());
         for (g, (bounds, &count)) in plan.bounds.iter().zip(&plan.counts).enumerate() {
             let res = match (g, opts.grid_res) {
@@ -264,21 +267,12 @@ impl<'t> DfScene<'t> {
                 res,
                 &pool,
                 opts.aggregates.depth_first(),
-                |id| group[id] as usize == g,
+                |id| group.is_empty() || group[id] as usize == g,
             )?);
         }
-        // The first object outside its grid, if any (the first stretch's
-        // first one).
-        let outside = object_grid::per_part(&pool, stretches, |_, ids| {
-            let mut outside = None;
-            objects.each_bbox_in(ids, |id, b| {
-                if outside.is_none() && !grids[group[id as usize] as usize].spec.holds(&b) {
-                    outside = Some(id);
-                }
-            });
-            outside
-        });
-        if let Some(id) = outside.into_iter().flatten().next() {
+        // The first object outside its grid, if any (each grid's build
+        // found its own first).
+        if let Some(id) = grids.iter().filter_map(|g| g.outside).min() {
             return Err(crate::grid::outside_its_grid(db, id as u64));
         }
         let eps = epsilon(&db.bbox(), opts.precision);

@@ -64,6 +64,10 @@ pub struct ObjectGrid {
     pub aggregates: u64,
     /// Coarser copies of `occupied`, for walks that skip empty space.
     pub pyramid: Pyramid,
+    /// The lowest id of the grid's objects whose box it does not hold
+    /// (a database whose summaries lie), found by the build's first pass
+    /// over the boxes rather than by a pass of its own.
+    pub outside: Option<u32>,
 }
 
 /// The share of listing voxels above which a grid is [`ObjectGrid::dense`]:
@@ -114,9 +118,9 @@ impl ObjectGrid {
         // for four bytes an object held while the grid is built.
         let marks: Vec<AtomicU64> = (0..cells.div_ceil(64)).map(|_| AtomicU64::new(0)).collect();
         let mut ranges = vec![NOT_LISTED; boxes.count()];
-        let total: u64 = per_part(pool, split_by(&mut ranges, &parts), |k, kept| {
+        let firsts = per_part(pool, split_by(&mut ranges, &parts), |k, kept| {
             let mut total = 0u64;
-            covers.first(k, kept, &mut |_, row, len| {
+            let outside = covers.first(k, kept, &mut |_, row, len| {
                 for c in row..row + len {
                     let (word, bit) = (&marks[c >> 6], 1u64 << (c & 63));
                     // Most covers find their voxel marked: a load, no
@@ -127,10 +131,11 @@ impl ObjectGrid {
                 }
                 total += len as u64;
             });
-            total
-        })
-        .into_iter()
-        .sum();
+            (total, outside)
+        });
+        let total: u64 = firsts.iter().map(|f| f.0).sum();
+        // The stretches come in id order.
+        let outside = firsts.iter().find_map(|f| f.1);
         let occupied: Vec<u64> = marks.into_iter().map(AtomicU64::into_inner).collect();
         if total > u32::MAX as u64 {
             return Err(Error::Invalid(format!(
@@ -229,6 +234,7 @@ impl ObjectGrid {
             nested_entries: 0,
             aggregates: groups.len() as u64,
             pyramid: Pyramid::default(),
+            outside,
         };
         grid.nest(boxes, pool)?;
         grid.pyramid = Pyramid::build(grid.spec.res, &grid.occupied);
@@ -445,12 +451,18 @@ struct Covers<'a, B: ?Sized, M> {
 impl<B: Boxes + ?Sized, M: Fn(usize) -> bool> Covers<'_, B, M> {
     /// [`each_cover`] of stretch `k`, the groups' entries with the last
     /// stretch (they follow every object in a voxel's list), keeping
-    /// each object's voxels in `kept` (the stretch's part of the ranges).
+    /// each object's voxels in `kept` (the stretch's part of the ranges);
+    /// the stretch's first object whose box the grid does not hold.
     #[inline]
-    fn first(&self, k: usize, kept: &mut [u32], f: &mut impl FnMut(u32, usize, usize)) {
+    fn first(
+        &self,
+        k: usize,
+        kept: &mut [u32],
+        f: &mut impl FnMut(u32, usize, usize),
+    ) -> Option<u32> {
         let ids = self.parts[k].clone();
         let base = ids.start;
-        each_cover(
+        let outside = each_cover(
             self.boxes,
             self.spec,
             ids,
@@ -462,6 +474,7 @@ impl<B: Boxes + ?Sized, M: Fn(usize) -> bool> Covers<'_, B, M> {
             },
         );
         self.groups_of(k, f);
+        outside
     }
 
     /// The covers of stretch `k` again, from the ranges the first pass
@@ -571,10 +584,11 @@ impl Packing {
 
 /// Gives `f` the voxel range `(id, lo, hi)` of `spec` that each of the
 /// objects of `ids` that `member` selects covers, the objects of
-/// `groups` aside. Generic, not through `dyn` calls: making the calls (of
-/// this, of the walk over the objects and of `GridSpec::cell_range`)
-/// static cut the dragon's preprocessing by 13 % of its instructions
-/// (callgrind), when the passes each ran it.
+/// `groups` aside; returns the first of those objects (groups' too)
+/// whose box `spec` does not hold. Generic, not through `dyn` calls:
+/// making the calls (of this, of the walk over the objects and of
+/// `GridSpec::cell_range`) static cut the dragon's preprocessing by 13 %
+/// of its instructions (callgrind), when the passes each ran it.
 #[inline]
 fn each_cover(
     boxes: &(impl Boxes + ?Sized),
@@ -583,20 +597,28 @@ fn each_cover(
     member: &impl Fn(usize) -> bool,
     groups: &[Group],
     f: &mut impl FnMut(u32, [u32; 3], [u32; 3]),
-) {
+) -> Option<u32> {
     // Groups come in id order: the one that may hold `id`.
     let grouped = |id: u32| {
         let k = groups.partition_point(|g| g.first + aggregate::SIZE as u32 <= id);
         groups.get(k).is_some_and(|g| g.first <= id)
     };
+    let mut outside = None;
     boxes.each_in(ids, |id, b| {
-        if !member(id as usize) || grouped(id) {
+        if !member(id as usize) {
+            return;
+        }
+        if outside.is_none() && !spec.holds(&b) {
+            outside = Some(id);
+        }
+        if grouped(id) {
             return;
         }
         if let Some((lo, hi)) = spec.cell_range(&b) {
             f(id, lo, hi);
         }
     });
+    outside
 }
 
 /// Gives `f` the voxels of `spec` from `lo` to `hi`, with `entry`, a
@@ -897,6 +919,31 @@ mod tests {
             }
         }
         assert!(reordered, "the spatial order changed no list");
+    }
+
+    /// A grid names the lowest id among its objects whose box it does
+    /// not hold, whatever the threads (the wide boxes stick out of the
+    /// unit cube; every third object, and the first hundred, are not the
+    /// grid's).
+    #[test]
+    fn a_grid_names_its_first_object_outside() {
+        let boxes = scattered_and_crowded();
+        // None of the first hundred either: the first stretches find none.
+        let some = |id: usize| id % 3 != 1 && id >= 100;
+        let spec = built_on(1, &boxes[..], [4, 4, 4], false, some).spec;
+        let want = (0..boxes.len()).find(|&id| some(id) && !spec.holds(&boxes[id]));
+        assert!(want.is_some());
+        for threads in [1, 2, 3, 5] {
+            for aggregates in [false, true] {
+                let g = built_on(threads, &boxes[..], [4, 4, 4], aggregates, some);
+                assert_eq!(g.outside.map(|id| id as usize), want, "{threads} threads");
+            }
+        }
+        let inside: Vec<Aabb> = boxes.iter().filter(|b| spec.holds(b)).copied().collect();
+        assert_eq!(
+            built_on(3, &inside[..], [4, 4, 4], true, |_| true).outside,
+            None
+        );
     }
 
     /// The objects whose box overlaps voxel `index` of `spec`.
