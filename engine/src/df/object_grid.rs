@@ -92,7 +92,7 @@ impl ObjectGrid {
         let spec = GridSpec::new(bounds, res);
         let cells = spec.cells();
         let (nested, groups) = if aggregates {
-            find_aggregates(boxes, &spec, &member)
+            find_aggregates(boxes, &spec, &member, pool)?
         } else {
             Default::default()
         };
@@ -747,11 +747,51 @@ fn sort_by_rank(
 const SORT_STRETCH: u32 = if cfg!(test) { 8 } else { 1 << 16 };
 
 /// The groups of [`aggregate::SIZE`] consecutive objects, all `member`s,
-/// that crowd their voxels of `spec`, in id order, and their hierarchies.
+/// that crowd their voxels of `spec`, in id order, and their hierarchies:
+/// found in stretches of whole groups side by side on `pool`'s threads,
+/// each stretch's hierarchies appended to the first's in turn (the very
+/// arrays one pass over the objects makes).
 fn find_aggregates(
     boxes: &(impl Boxes + ?Sized),
     spec: &GridSpec,
+    member: &(impl Fn(usize) -> bool + Sync),
+    pool: &rayon::ThreadPool,
+) -> Result<(Hierarchies, Vec<Group>), Error> {
+    let n = boxes.count();
+    let whole =
+        |id: u32| (id.div_ceil(aggregate::SIZE as u32) * aggregate::SIZE as u32).min(n as u32);
+    let parts: Vec<std::ops::Range<u32>> = id_stretches(n, pool.current_num_threads())
+        .into_iter()
+        .map(|r| whole(r.start)..whole(r.end))
+        .collect();
+    let mut found = per_part(pool, parts, |_, ids| {
+        aggregates_in(boxes, spec, member, ids)
+    })
+    .into_iter();
+    let (mut nested, mut groups) = found.next().unwrap_or_default();
+    for (h, more) in found {
+        let at = nested.append(h).ok_or_else(|| {
+            Error::Invalid(
+                "the aggregates' hierarchies need more than 2^31 nodes; \
+                 render with --aggregates off or a finer --grid-res"
+                    .into(),
+            )
+        })? & !NESTED;
+        groups.extend(more.into_iter().map(|g| Group {
+            entry: NESTED | (at + (g.entry & !NESTED)),
+            ..g
+        }));
+    }
+    Ok((nested, groups))
+}
+
+/// [`find_aggregates`] over the objects `ids_in` (whole groups), in one
+/// pass.
+fn aggregates_in(
+    boxes: &(impl Boxes + ?Sized),
+    spec: &GridSpec,
     member: &impl Fn(usize) -> bool,
+    ids_in: std::ops::Range<u32>,
 ) -> (Hierarchies, Vec<Group>) {
     let mut nested = Hierarchies::default();
     let mut groups = Vec::new();
@@ -778,7 +818,7 @@ fn find_aggregates(
         ids.clear();
         group.clear();
     };
-    boxes.each(&mut |id, b| {
+    boxes.each_in(ids_in, &mut |id, b| {
         if ids
             .first()
             .is_some_and(|&f| f as usize / aggregate::SIZE != id as usize / aggregate::SIZE)
