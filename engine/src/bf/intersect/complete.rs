@@ -1,111 +1,89 @@
 //! Completion: a ray whose result can no longer change (its best hit lies
 //! before the far side of the last voxel it was stored in, or it has left
 //! its grids) gives up its slot, and its result goes out: to the caller in
-//! completion order, or into its place among the round's results.
+//! completion order, or into its place among the round's results (written
+//! by the shard's own thread as it finishes the ray).
 
 use super::Shard;
-use super::slot::{DONE, JOIN, WALKING, ray64};
+use super::slot::{Cold, DONE, Hot, JOIN, WALKING, ray64};
 use crate::bf::records::{Outcome, ResultRec};
 use crate::bf::voxels::VoxelGrids;
 use crate::grid::Dda;
 use crate::simd::Elem;
-use rayon::prelude::*;
+use std::marker::PhantomData;
 
-/// Writes the finished rays' results into their places in `v` (ids count
-/// from 0; `first` is added), every thread a contiguous part of `v`: each
-/// shard first orders the indices of its finished hits by part (a
-/// counting sort, 4 bytes a hit), so that no part looks at another's (a
-/// sort of the results by id cost more than the writes). Misses are in
-/// `v` already.
-pub(super) fn put_results<R: Elem>(
-    shards: &mut [Shard<R>],
-    v: &mut [Outcome],
+/// A round's dense results (ids count from 0), written by every shard's
+/// thread at once as its rays finish: each at its own rays' places.
+/// Misses are in place already.
+pub(super) struct ResultPlaces<'a> {
+    at: *mut Outcome,
+    len: usize,
+    /// Added to the ids written.
     first: u64,
-    carry: bool,
-    pool: &rayon::ThreadPool,
-) {
-    let parts = pool.current_num_threads().max(1);
-    if parts == 1 {
-        for sh in shards.iter() {
-            for &slot in &sh.done {
-                put(v, 0, sh, slot, carry, first);
-            }
+    _v: PhantomData<&'a mut [Outcome]>,
+    /// The places written (checked in debug builds, the tests': a place
+    /// written twice breaks `put`'s contract).
+    #[cfg(debug_assertions)]
+    written: Vec<std::sync::atomic::AtomicBool>,
+}
+
+// SAFETY: a `ResultPlaces` only writes through `at`, through
+// `ResultPlaces::put`, whose contract is that no two threads write the
+// same place while it lives; sharing it between threads is then sharing
+// `&mut [Outcome]` split into disjoint parts, which is sound.
+unsafe impl Sync for ResultPlaces<'_> {}
+
+impl<'a> ResultPlaces<'a> {
+    pub(super) fn new(v: &'a mut [Outcome], first: u64) -> ResultPlaces<'a> {
+        ResultPlaces {
+            at: v.as_mut_ptr(),
+            len: v.len(),
+            first,
+            _v: PhantomData,
+            #[cfg(debug_assertions)]
+            written: (0..v.len()).map(|_| Default::default()).collect(),
         }
-        return;
     }
-    let part = v.len().div_ceil(parts).max(1);
-    pool.install(|| {
-        shards.par_iter_mut().for_each(|sh| {
-            let (done, order, bounds) = (&sh.done, &mut sh.order, &mut sh.bounds);
-            let (hot, cold) = (&sh.hot, &sh.cold);
-            // The id of the ray in `slot`, if it hit.
-            let hit = |slot: u32| {
-                let i = slot as usize;
-                (!hot[i].best.prim.is_none()).then_some(cold[i].id)
-            };
-            bounds.clear();
-            bounds.resize(parts + 1, 0);
-            for id in done.iter().filter_map(|&slot| hit(slot)) {
-                bounds[id as usize / part + 1] += 1;
-            }
-            for k in 0..parts {
-                bounds[k + 1] += bounds[k];
-            }
-            order.clear();
-            order.resize(bounds[parts], 0);
-            // bounds[k] serves as part k's cursor, ending at part k's end
-            // (the old bounds[k + 1]); shifted back by one afterwards.
-            for (j, &slot) in done.iter().enumerate() {
-                if let Some(id) = hit(slot) {
-                    let k = id as usize / part;
-                    order[bounds[k]] = j as u32;
-                    bounds[k] += 1;
-                }
-            }
-            for k in (0..parts).rev() {
-                bounds[k + 1] = bounds[k];
-            }
-            bounds[0] = 0;
-        });
-        let shards = &*shards;
-        v.par_chunks_mut(part).enumerate().for_each(|(k, dst)| {
-            for sh in shards {
-                for &j in &sh.order[sh.bounds[k]..sh.bounds[k + 1]] {
-                    put(
-                        dst,
-                        (k * part) as u64,
-                        sh,
-                        sh.done[j as usize],
-                        carry,
-                        first,
-                    );
-                }
-            }
-        });
-    });
+
+    /// Writes `o` at the place of its ray.
+    ///
+    /// # Safety
+    ///
+    /// No other thread may write that place while `self` lives. A ray id
+    /// is in one slot of one shard at a time, and a slot finishes its ray
+    /// once (it is then refilled only in the next pass's fill): the
+    /// shards' threads finishing the rays of one pass write distinct
+    /// places.
+    unsafe fn put(&self, mut o: Outcome) {
+        let i = o.res.ray as usize;
+        assert!(
+            i < self.len,
+            "ray {i} has no place among {} results",
+            self.len
+        );
+        #[cfg(debug_assertions)]
+        assert!(
+            !self.written[i].swap(true, std::sync::atomic::Ordering::Relaxed),
+            "ray {i}'s result written twice in one pass"
+        );
+        o.res.ray += self.first;
+        // SAFETY: `i` is in bounds (checked above), `at` points to `len`
+        // initialised `Outcome`s borrowed mutably for `'a` (so nothing
+        // else reads or writes them meanwhile), and by the caller's
+        // contract no other thread writes place `i` concurrently.
+        unsafe { self.at.add(i).write(o) };
+    }
 }
 
-/// Writes the result of the ray that finished in `slot` of `sh` at its
-/// place in `dst`, which starts at id `lo`, if it is a hit.
-#[inline]
-pub(super) fn put<R: Elem>(
-    dst: &mut [Outcome],
-    lo: u64,
-    sh: &Shard<R>,
-    slot: u32,
+/// Finishes the rays whose result is complete, freeing their slots; with
+/// `places`, writes the hits' results there (while the slots are in
+/// cache, on the shard's own thread).
+pub(super) fn complete<R: Elem>(
+    sh: &mut Shard<R>,
+    grids: &VoxelGrids,
+    places: Option<&ResultPlaces<'_>>,
     carry: bool,
-    first: u64,
 ) {
-    if !sh.hot[slot as usize].best.prim.is_none() {
-        let o = sh.outcome(slot, carry);
-        let at = (o.res.ray - lo) as usize;
-        dst[at] = o;
-        dst[at].res.ray += first;
-    }
-}
-
-/// Finishes the rays whose result is complete, freeing their slots.
-pub(super) fn complete<R: Elem>(sh: &mut Shard<R>, grids: &VoxelGrids) {
     let ngrids = grids.grids.len();
     for (i, ((h, c), q)) in sh
         .hot
@@ -141,6 +119,13 @@ pub(super) fn complete<R: Elem>(sh: &mut Shard<R>, grids: &VoxelGrids) {
         if done {
             sh.done.push(i as u32);
             h.active = false;
+            if let Some(places) = places
+                && !h.best.prim.is_none()
+            {
+                // SAFETY: this slot's ray finishes here, once (see
+                // `ResultPlaces::put`).
+                unsafe { places.put(outcome(h, c, carry)) };
+            }
         }
     }
 }
@@ -150,22 +135,28 @@ impl<R: Elem> Shard<R> {
     /// the slot is filled again), with its surface when `carry`.
     #[inline]
     pub(super) fn outcome(&self, slot: u32, carry: bool) -> Outcome {
-        let (h, c) = (&self.hot[slot as usize], &self.cold[slot as usize]);
-        let res = ResultRec {
-            ray: c.id,
-            prim: h.best.prim,
-            t: h.best.t,
-        };
-        if carry && !h.shadow && h.best.is_some() && c.material != JOIN {
-            Outcome {
-                res,
-                ng: c.ng.to_array(),
-                ns: c.ns.to_array(),
-                material: c.material,
-                has_surface: 1,
-            }
-        } else {
-            Outcome::bare(res)
+        outcome(&self.hot[slot as usize], &self.cold[slot as usize], carry)
+    }
+}
+
+/// The result of the ray whose slot holds `h` and `c`, with its surface
+/// when `carry`.
+#[inline]
+fn outcome<R: Elem>(h: &Hot<R>, c: &Cold<R>, carry: bool) -> Outcome {
+    let res = ResultRec {
+        ray: c.id,
+        prim: h.best.prim,
+        t: h.best.t,
+    };
+    if carry && !h.shadow && h.best.is_some() && c.material != JOIN {
+        Outcome {
+            res,
+            ng: c.ng.to_array(),
+            ns: c.ns.to_array(),
+            material: c.material,
+            has_surface: 1,
         }
+    } else {
+        Outcome::bare(res)
     }
 }

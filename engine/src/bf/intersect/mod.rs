@@ -63,7 +63,7 @@ mod register;
 mod scan;
 mod slot;
 use admit::{ByIdFill, Dealer, load, misses_every_grid, stage};
-use complete::{complete, put_results};
+use complete::{ResultPlaces, complete};
 pub use register::sample_registrations;
 use register::{extend, register};
 use scan::{ScanPass, pair_bytes, scan_block, test_pairs};
@@ -115,10 +115,6 @@ struct Shard<R: Elem> {
     /// from the slots (see [`Shard::outcome`]), which keep them until the
     /// next pass fills them again.
     done: Vec<u32>,
-    /// Indices of the finished hits in `done`, by part of the result
-    /// buffer, and where each part's begin (see [`put_results`]).
-    order: Vec<u32>,
-    bounds: Vec<usize>,
     /// Slots holding a ray.
     live: usize,
     /// Store numbers of the walks registered this pass, and their number.
@@ -243,8 +239,6 @@ impl<R: Elem> Slots<R> {
                     region: [NO_REGION; MAX_GRIDS],
                     counts: PassCounts::default(),
                     done: Vec::new(),
-                    order: Vec::new(),
-                    bounds: Vec::new(),
                     live: 0,
                     store_sum: 0,
                     store_walks: 0,
@@ -273,7 +267,6 @@ impl<R: Elem> Slots<R> {
                     + sh.q.capacity() * size_of::<RayQ<R>>()
                     + sh.cold.capacity() * size_of::<Cold<R>>()
                     + sh.done.capacity() * size_of::<u32>()
-                    + sh.order.capacity() * size_of::<u32>()
                     + sh.regs.iter().map(RegMap::bytes).sum::<usize>()
                     + sh.placed.capacity() * size_of::<(u32, u32, Placement)>()
                     + sh.pairs.capacity() * size_of::<Pair>()
@@ -290,7 +283,6 @@ impl<R: Elem> Slots<R> {
             sh.q = Vec::new();
             sh.cold = Vec::new();
             sh.done = Vec::new();
-            sh.order = Vec::new();
             sh.pending = Vec::new();
             sh.regs = Default::default();
             sh.placed = Vec::new();
@@ -401,8 +393,9 @@ pub fn intersect_rays<R: Elem>(
     let ngrids = setup.grids.grids.len();
     // Rays that can be had by id, with results that have a place each:
     // which rays a pass admits is worked out with every thread looking
-    // (`ByIdFill`), each shard loads its own, and results are written to
-    // their places by every thread (`put_results`). Else this thread
+    // (`ByIdFill`), each shard loads its own, and each shard's thread
+    // writes its finished rays' results to their places (`complete`,
+    // `ResultPlaces`). Else this thread
     // fills the slots in order from the stream and passes results on.
     let mut by_id: Option<ByIdFill<'_>> = None;
     let mut dense: Option<(&mut [Outcome], u64)> = None;
@@ -766,9 +759,16 @@ pub fn intersect_rays<R: Elem>(
 
         // Complete.
         let (carry, grids) = (setup.carry, &*setup.grids);
-        pool.install(|| shards.par_iter_mut().for_each(|sh| complete(sh, grids)));
-        if let Some((v, first)) = dense.as_mut() {
-            put_results(shards, v, *first, carry, pool);
+        {
+            let places = dense
+                .as_mut()
+                .map(|(v, first)| ResultPlaces::new(v, *first));
+            let places = places.as_ref();
+            pool.install(|| {
+                shards
+                    .par_iter_mut()
+                    .for_each(|sh| complete(sh, grids, places, carry))
+            });
         }
         for sh in shards.iter_mut() {
             st.intersection_tests += sh.counts.tests;

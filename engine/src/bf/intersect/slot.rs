@@ -158,16 +158,16 @@ pub(super) fn ray64<R: Elem>(q: &RayQ<R>, h: &Hot<R>, c: &Cold<R>) -> Ray64 {
 }
 
 /// Bytes one ray slot takes (with its place in the queue of rays loaded
-/// in parallel, see [`super::Shard::pending`], and in the pass's finished rays
-/// and their order, see [`super::put_results`]).
+/// in parallel, see [`super::Shard::pending`], and among the pass's
+/// finished rays).
 pub fn slot_bytes<R: Elem>() -> usize {
     std::mem::size_of::<Hot<R>>()
         + std::mem::size_of::<Cold<R>>()
         + std::mem::size_of::<RayQ<R>>()
         // Its place in the queue, or the id it was admitted by.
         + std::mem::size_of::<Pending>().max(std::mem::size_of::<u64>())
-        // Its place among the pass's finished rays, and in their order.
-        + 2 * std::mem::size_of::<u32>()
+        // Its place among the pass's finished rays.
+        + std::mem::size_of::<u32>()
 }
 
 /// Bytes of a slot's place in the queue of streamed rays (see
